@@ -1,0 +1,251 @@
+"""The topology spec: a TOML file describing the nested hierarchy of agents.
+
+```toml
+[robot]
+name = "chain4"
+base = [0.0, 0.0, 0.0]          # x, y, heading (deg) of the root joint in the world
+
+[defaults]                      # optional; applies to every [[agent]] that leaves a field out
+link_length = 3.0
+limits_deg = [-180.0, 180.0]
+
+[[agent]]
+id = "a1"                       # [A-Za-z0-9_-]+, unique
+parent = ""                     # "" or absent: the root (exactly one)
+link_length = 3.0               # the link this joint drives
+limits_deg = [-170.0, 170.0]    # joint limits
+initial_deg = 0.0               # joint angle at every epoch start
+offset = [0.0, 0.0, 0.0]        # joint placement relative to the parent's link end (x, y, heading deg)
+compound = false                # true: no DOF, only encapsulates children (the paper's grasp agent)
+
+[task]
+goal = [4.16, 6.18]             # default goal (x, y) for reaching
+```
+
+Trees, not only chains: an agent may have several children, and every leaf is an end effector.
+Agents are listed parents-first in `Topology.order`; angles are stored in radians.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+ID_RE = re.compile(r"^[A-Za-z0-9_-]{1,64}$")
+
+
+class TopologyError(ValueError):
+    """A topology file that does not fit the spec; the message names the file, the field and the fault."""
+
+    def __init__(self, source: str, where: str, what: str) -> None:
+        super().__init__(f"{source}: {where}: {what}")
+        self.source, self.where, self.what = source, where, what
+
+
+@dataclass(frozen=True)
+class AgentSpec:
+    id: str
+    parent: str | None
+    children: tuple[str, ...]
+    link_length: float
+    limits: tuple[float, float]  # radians
+    initial: float  # radians
+    offset: tuple[float, float, float]  # x, y, heading (radians) relative to the parent's link end
+    compound: bool
+
+    @property
+    def has_dof(self) -> bool:
+        return not self.compound
+
+    @property
+    def is_leaf(self) -> bool:
+        return not self.children
+
+
+@dataclass(frozen=True)
+class Topology:
+    name: str
+    agents: dict[str, AgentSpec]
+    order: tuple[str, ...]  # parents before children (breadth-first from the root)
+    root: str
+    base: tuple[float, float, float]  # x, y, heading (radians)
+    goal: tuple[float, float] | None
+    source: str = field(default="<memory>")
+
+    @property
+    def dof_agents(self) -> tuple[str, ...]:
+        return tuple(a for a in self.order if self.agents[a].has_dof)
+
+    @property
+    def end_effectors(self) -> tuple[str, ...]:
+        return tuple(a for a in self.order if self.agents[a].is_leaf)
+
+    @property
+    def reach(self) -> float:
+        """Longest root-to-leaf sum of link lengths and offsets: the radius of the task space."""
+
+        def longest(aid: str) -> float:
+            a = self.agents[aid]
+            below = max((longest(c) for c in a.children), default=0.0)
+            return math.hypot(a.offset[0], a.offset[1]) + a.link_length + below
+
+        return longest(self.root)
+
+    def depth(self, aid: str) -> int:
+        d, a = 0, self.agents[aid]
+        while a.parent is not None:
+            d, a = d + 1, self.agents[a.parent]
+        return d
+
+    def subtree_leaves(self, aid: str) -> tuple[str, ...]:
+        a = self.agents[aid]
+        if a.is_leaf:
+            return (aid,)
+        return tuple(leaf for c in a.children for leaf in self.subtree_leaves(c))
+
+    def initial_angles(self) -> dict[str, float]:
+        return {a: self.agents[a].initial for a in self.dof_agents}
+
+
+def _num(src: str, where: str, v: Any) -> float:
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+        raise TopologyError(src, where, f"expected a finite number, got {v!r}")
+    return float(v)
+
+
+def _vec(src: str, where: str, v: Any, n: int) -> tuple[float, ...]:
+    if not isinstance(v, list) or len(v) != n:
+        raise TopologyError(src, where, f"expected a list of {n} numbers, got {v!r}")
+    return tuple(_num(src, f"{where}[{i}]", x) for i, x in enumerate(v))
+
+
+_AGENT_KEYS = {"id", "parent", "link_length", "limits_deg", "initial_deg", "offset", "compound"}
+
+
+def parse_topology(data: dict[str, Any], source: str = "<memory>") -> Topology:
+    """Validate a parsed TOML document and build the Topology; errors name source and field."""
+    src = source
+    unknown = set(data) - {"robot", "defaults", "agent", "task"}
+    if unknown:
+        raise TopologyError(src, sorted(unknown)[0], "unknown table (expected robot, defaults, agent, task)")
+    robot = data.get("robot", {})
+    if not isinstance(robot, dict):
+        raise TopologyError(src, "robot", "must be a table")
+    name = robot.get("name", Path(source).stem)
+    if not isinstance(name, str) or not name:
+        raise TopologyError(src, "robot.name", f"expected a non-empty string, got {name!r}")
+    bx, by, bh = _vec(src, "robot.base", robot.get("base", [0.0, 0.0, 0.0]), 3)
+    defaults = data.get("defaults", {})
+    if not isinstance(defaults, dict):
+        raise TopologyError(src, "defaults", "must be a table")
+    bad = set(defaults) - (_AGENT_KEYS - {"id", "parent"})
+    if bad:
+        raise TopologyError(src, f"defaults.{sorted(bad)[0]}", "unknown field")
+
+    rows = data.get("agent")
+    if not isinstance(rows, list) or not rows:
+        raise TopologyError(src, "agent", "expected at least one [[agent]] table")
+    raw: dict[str, dict[str, Any]] = {}
+    parents: dict[str, str | None] = {}
+    for i, row in enumerate(rows):
+        at = f"agent[{i}]"
+        if not isinstance(row, dict):
+            raise TopologyError(src, at, "must be a table")
+        bad = set(row) - _AGENT_KEYS
+        if bad:
+            raise TopologyError(src, f"{at}.{sorted(bad)[0]}", "unknown field")
+        aid = row.get("id")
+        if not isinstance(aid, str) or not ID_RE.match(aid):
+            raise TopologyError(src, f"{at}.id", f"expected an id of letters, digits, '_' or '-', got {aid!r}")
+        if aid in raw:
+            raise TopologyError(src, f"{at}.id", f"duplicate agent id {aid!r}")
+        parent = row.get("parent", "")
+        if not isinstance(parent, str):
+            raise TopologyError(src, f"{at}.parent", f"expected a string, got {parent!r}")
+        raw[aid] = {**defaults, **row, "_at": at}
+        parents[aid] = parent or None
+
+    roots = [a for a, p in parents.items() if p is None]
+    if len(roots) != 1:
+        raise TopologyError(src, "agent.parent", f"expected exactly one root (no parent), found {roots}")
+    for aid, p in parents.items():
+        if p is not None and p not in raw:
+            raise TopologyError(src, f"{raw[aid]['_at']}.parent", f"unknown parent {p!r}")
+    children: dict[str, list[str]] = {a: [] for a in raw}
+    for aid, p in parents.items():
+        if p is not None:
+            children[p].append(aid)
+
+    order: list[str] = []
+    frontier = [roots[0]]
+    while frontier:
+        order.extend(frontier)
+        frontier = [c for a in frontier for c in children[a]]
+    if len(order) != len(raw):
+        cyc = sorted(set(raw) - set(order))
+        raise TopologyError(src, "agent.parent", f"agents {cyc} are not reachable from the root (a cycle?)")
+
+    agents: dict[str, AgentSpec] = {}
+    for aid in order:
+        r = raw[aid]
+        at = r["_at"]
+        compound = r.get("compound", False)
+        if not isinstance(compound, bool):
+            raise TopologyError(src, f"{at}.compound", f"expected true or false, got {compound!r}")
+        if compound and not children[aid]:
+            raise TopologyError(src, f"{at}.compound", "a compound agent must have children")
+        length = _num(src, f"{at}.link_length", r.get("link_length", 0.0 if compound else None))
+        if length < 0 or (not compound and length == 0):
+            raise TopologyError(src, f"{at}.link_length", f"must be > 0 for a joint agent, got {length}")
+        lo, hi = _vec(src, f"{at}.limits_deg", r.get("limits_deg", [-180.0, 180.0]), 2)
+        if not lo < hi:
+            raise TopologyError(src, f"{at}.limits_deg", f"lower limit {lo} must be below upper {hi}")
+        initial = _num(src, f"{at}.initial_deg", r.get("initial_deg", 0.0))
+        if not lo <= initial <= hi:
+            raise TopologyError(src, f"{at}.initial_deg", f"{initial} lies outside limits [{lo}, {hi}]")
+        ox, oy, oh = _vec(src, f"{at}.offset", r.get("offset", [0.0, 0.0, 0.0]), 3)
+        agents[aid] = AgentSpec(
+            id=aid,
+            parent=parents[aid],
+            children=tuple(children[aid]),
+            link_length=length,
+            limits=(math.radians(lo), math.radians(hi)),
+            initial=math.radians(initial),
+            offset=(ox, oy, math.radians(oh)),
+            compound=compound,
+        )
+
+    task = data.get("task", {})
+    if not isinstance(task, dict):
+        raise TopologyError(src, "task", "must be a table")
+    bad = set(task) - {"goal"}
+    if bad:
+        raise TopologyError(src, f"task.{sorted(bad)[0]}", "unknown field")
+    goal = _vec(src, "task.goal", task["goal"], 2) if "goal" in task else None
+
+    return Topology(
+        name=name,
+        agents=agents,
+        order=tuple(order),
+        root=roots[0],
+        base=(bx, by, math.radians(bh)),
+        goal=goal,  # type: ignore[arg-type]
+        source=src,
+    )
+
+
+def load_topology(path: str | Path) -> Topology:
+    path = Path(path)
+    try:
+        text = path.read_text()
+    except OSError as e:
+        raise TopologyError(str(path), "file", f"cannot read: {e.strerror}") from None
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as e:
+        raise TopologyError(str(path), "toml", str(e)) from None
+    return parse_topology(data, source=str(path))
