@@ -1,0 +1,167 @@
+"""The PyBullet robot world: a kinematic planar chain or tree loaded from a generated URDF.
+
+Joints are set kinematically (resetJointStatesMultiDof) -- discrete 1-degree increments need no dynamics,
+and stepSimulation would only converge asymptotically. Every call passes physicsClientId, so several
+Worlds coexist in one process.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import shutil
+import sys
+import tempfile
+from collections.abc import Iterator, Mapping
+from contextlib import contextmanager
+from pathlib import Path
+from types import TracebackType
+
+from kinswarm.protocol.topology import Topology
+from kinswarm.sim import urdf
+
+
+@contextmanager
+def _quiet_fd2() -> Iterator[None]:
+    """PyBullet's banner is printed by C code to file descriptor 2; only redirecting the fd silences it."""
+    sys.stderr.flush()
+    saved = os.dup(2)
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    try:
+        os.dup2(devnull, 2)
+        yield
+    finally:
+        os.dup2(saved, 2)
+        os.close(saved)
+        os.close(devnull)
+
+
+with _quiet_fd2():
+    import pybullet as pb
+
+Pose = tuple[float, float, float]
+
+
+class World:
+    """One PyBullet DIRECT client holding one fixed-base robot built from `topo`.
+
+    Joint angles are kept in a double-precision cache that mirrors what was last written to PyBullet
+    (reset and apply_increments are the only writers); tip poses are read back from PyBullet.
+    """
+
+    def __init__(self, topo: Topology, *, urdf_dir: Path | None = None, radius: float = 0.1) -> None:
+        self.topo = topo
+        self._tmpdir: str | None = None
+        self.client = -1
+        if urdf_dir is None:
+            self._tmpdir = tempfile.mkdtemp(prefix="kinswarm-urdf-")
+            urdf_dir = Path(self._tmpdir)
+        self.urdf_path = urdf.write_urdf(topo, urdf_dir, radius=radius)
+        with _quiet_fd2():
+            self.client = pb.connect(pb.DIRECT)
+        if self.client < 0:
+            raise RuntimeError("pybullet.connect(DIRECT) failed")
+        try:
+            bx, by, bh = topo.base
+            self.body = pb.loadURDF(
+                str(self.urdf_path),
+                basePosition=(bx, by, 0.0),
+                baseOrientation=pb.getQuaternionFromEuler((0.0, 0.0, bh)),
+                useFixedBase=True,
+                physicsClientId=self.client,
+            )
+            by_name = {}
+            for j in range(pb.getNumJoints(self.body, physicsClientId=self.client)):
+                by_name[pb.getJointInfo(self.body, j, physicsClientId=self.client)[1].decode()] = j
+            # Link index == index of the joint that creates it.
+            self.joint_index: dict[str, int] = {a: by_name[urdf.joint_name(a)] for a in topo.order}
+            self.agent_of_joint: dict[int, str] = {j: a for a, j in self.joint_index.items()}
+            self._dof = topo.dof_agents
+            self._dof_idx = [self.joint_index[a] for a in self._dof]
+            self._limits = {a: topo.agents[a].limits for a in self._dof}
+            self._leaves = topo.end_effectors
+            self._tip_idx = [by_name[urdf.tip_joint_name(leaf)] for leaf in self._leaves]
+            self._q: dict[str, float] = {}
+            self.reset()
+        except BaseException:
+            self.close()
+            raise
+
+    def reset(self, angles: Mapping[str, float] | None = None) -> None:
+        """Set every DOF joint to `angles` (all DOF agents, within limits); default topo.initial_angles()."""
+        angles = self.topo.initial_angles() if angles is None else angles
+        missing = set(self._dof) - set(angles)
+        unknown = set(angles) - set(self._dof)
+        if missing or unknown:
+            raise ValueError(f"reset angles: missing {sorted(missing)}, not DOF agents {sorted(unknown)}")
+        q = {}
+        for a in self._dof:
+            v = float(angles[a])
+            lo, hi = self._limits[a]
+            if not lo <= v <= hi:
+                raise ValueError(f"reset angle for {a!r}: {v} outside limits [{lo}, {hi}]")
+            q[a] = v
+        self._write(q)
+
+    def _write(self, q: dict[str, float]) -> None:
+        pb.resetJointStatesMultiDof(
+            self.body,
+            self._dof_idx,
+            targetValues=[[q[a]] for a in self._dof],
+            targetVelocities=[[0.0]] * len(self._dof),
+            physicsClientId=self.client,
+        )
+        self._q = q
+
+    def joint_positions(self) -> dict[str, float]:
+        """Current angle (rad) of every DOF agent."""
+        return dict(self._q)
+
+    def apply_increments(self, deltas: Mapping[str, float]) -> dict[str, float]:
+        """q += delta clipped to the joint limits; agents left out hold. Returns the increment actually
+        applied for every DOF agent (0.0 for those that held or sat at a limit)."""
+        unknown = set(deltas) - self._limits.keys()
+        if unknown:
+            raise KeyError(f"not DOF agents of {self.topo.name!r}: {sorted(unknown)}")
+        q = dict(self._q)
+        applied = dict.fromkeys(self._dof, 0.0)
+        for a, d in deltas.items():
+            d = float(d)
+            if not math.isfinite(d):
+                raise ValueError(f"increment for {a!r} is not finite: {d}")
+            lo, hi = self._limits[a]
+            new = min(max(q[a] + d, lo), hi)
+            applied[a] = new - q[a]
+            q[a] = new
+        self._write(q)
+        return applied
+
+    def tip_poses(self) -> dict[str, Pose]:
+        """(x, y, heading) of every end effector from PyBullet's link frames ([4], float32 precision).
+        The heading comes from a quaternion, so it is wrapped to (-pi, pi]."""
+        states = pb.getLinkStates(
+            self.body, self._tip_idx, computeForwardKinematics=1, physicsClientId=self.client
+        )
+        out: dict[str, Pose] = {}
+        for leaf, st in zip(self._leaves, states, strict=True):
+            (x, y, _), (qx, qy, qz, qw) = st[4], st[5]
+            out[leaf] = (x, y, math.atan2(2.0 * (qw * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz)))
+        return out
+
+    def close(self) -> None:
+        if self.client >= 0:
+            pb.disconnect(physicsClientId=self.client)
+            self.client = -1
+        if self._tmpdir is not None:
+            shutil.rmtree(self._tmpdir, ignore_errors=True)
+            self._tmpdir = None
+        elif getattr(self, "urdf_path", None) is not None:
+            self.urdf_path.unlink(missing_ok=True)
+
+    def __enter__(self) -> World:
+        return self
+
+    def __exit__(
+        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
+    ) -> None:
+        self.close()
