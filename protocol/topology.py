@@ -160,7 +160,7 @@ def parse_topology(data: dict[str, Any], source: str = "<memory>") -> Topology:
             raise TopologyError(src, f"{at}.{sorted(bad)[0]}", "unknown field")
         aid = row.get("id")
         if not isinstance(aid, str) or not ID_RE.match(aid):
-            raise TopologyError(src, f"{at}.id", f"expected an id of letters, digits, '_' or '-', got {aid!r}")
+            raise TopologyError(src, f"{at}.id", f"expected letters, digits, '_' or '-', got {aid!r}")
         if aid in raw:
             raise TopologyError(src, f"{at}.id", f"duplicate agent id {aid!r}")
         parent = row.get("parent", "")

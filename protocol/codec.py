@@ -1,0 +1,160 @@
+"""The one codec: msgpack maps, validated field by field against the message dataclasses.
+
+`decode` never lets garbage through: wrong version, run, kind, missing or extra fields, wrong types,
+non-finite numbers — each raises `DecodeError` with the reason, which the receiving actor logs before
+dropping the message. Learned state is only ever touched by values that passed here.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import types
+import typing
+from functools import cache
+from typing import Any, TypeVar, get_args, get_origin
+
+import msgpack
+
+from . import messages
+from .messages import MESSAGE_TYPES, SCHEMA_VERSION
+
+M = TypeVar("M")
+MAX_PAYLOAD = 1 << 20  # 1 MiB: nothing in the protocol comes near; a bigger payload is garbage or an attack
+_ENVELOPE = ("v", "kind", "run", "src")
+
+
+class DecodeError(ValueError):
+    """A payload that is not a valid message of the expected kind; str(e) is the reason."""
+
+
+def encode(msg: Any, run: str, src: str) -> bytes:
+    body = {"v": SCHEMA_VERSION, "kind": msg.KIND, "run": run, "src": src}
+    for f in dataclasses.fields(msg):
+        body[f.name] = getattr(msg, f.name)
+    return msgpack.packb(body, use_bin_type=True)
+
+
+Check = typing.Callable[[Any, str], Any]
+
+
+def _number(value: Any, where: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise DecodeError(f"{where}: expected a number, got {type(value).__name__}")
+    if not math.isfinite(value):
+        raise DecodeError(f"{where}: expected a finite number, got {value!r}")
+    return float(value)
+
+
+def _integer(value: Any, where: str) -> int:
+    if isinstance(value, bool) or not isinstance(value, int):
+        raise DecodeError(f"{where}: expected an integer, got {type(value).__name__}")
+    return value
+
+
+def _string(value: Any, where: str) -> str:
+    if not isinstance(value, str):
+        raise DecodeError(f"{where}: expected a string, got {type(value).__name__}")
+    return value
+
+
+@cache
+def _checker(tp: Any) -> Check:
+    """A validating converter for field type `tp`, built once per type (decode is on the step's hot path)."""
+    origin = get_origin(tp)
+    if tp is float:
+        return _number
+    if tp is int:
+        return _integer
+    if tp is str:
+        return _string
+    if origin in (types.UnionType, typing.Union):  # `float | None`
+        (inner,) = [a for a in get_args(tp) if a is not type(None)]
+        check_inner = _checker(inner)
+        return lambda v, where: None if v is None else check_inner(v, where)
+    if origin is tuple:
+        checks = [_checker(a) for a in get_args(tp)]
+        n = len(checks)
+        all_floats = all(a is float for a in get_args(tp))
+        _finite = math.isfinite
+
+        def check_tuple(value: Any, where: str) -> tuple:
+            if not isinstance(value, (list, tuple)) or len(value) != n:
+                raise DecodeError(f"{where}: expected a list of {n}, got {value!r:.60}")
+            if all_floats and all(type(v) is float and _finite(v) for v in value):
+                return tuple(value)  # the common case, without building a `where` per element
+            return tuple(c(v, f"{where}[{i}]") for i, (c, v) in enumerate(zip(checks, value, strict=True)))
+
+        return check_tuple
+    if origin is list:
+        check_item = _checker(get_args(tp)[0])
+
+        def check_list(value: Any, where: str) -> list:
+            if not isinstance(value, (list, tuple)):
+                raise DecodeError(f"{where}: expected a list, got {type(value).__name__}")
+            return [check_item(v, f"{where}[{i}]") for i, v in enumerate(value)]
+
+        return check_list
+    if origin is dict:
+        check_value = _checker(get_args(tp)[1])
+
+        def check_dict(value: Any, where: str) -> dict:
+            if not isinstance(value, dict):
+                raise DecodeError(f"{where}: expected a map, got {type(value).__name__}")
+            out = {}
+            for k, v in value.items():
+                if not isinstance(k, str):
+                    raise DecodeError(f"{where}: expected string keys, got {k!r:.40}")
+                out[k] = check_value(v, f"{where}.{k}")
+            return out
+
+        return check_dict
+    raise TypeError(f"unsupported field type {tp!r}")  # a bug in messages.py, not bad input
+
+
+@cache
+def _schema(cls: type) -> tuple[tuple[tuple[str, Check], ...], frozenset[str]]:
+    hints = {k: v for k, v in typing.get_type_hints(cls, vars(messages)).items() if k != "KIND"}
+    return tuple((k, _checker(v)) for k, v in hints.items()), frozenset(hints) | frozenset(_ENVELOPE)
+
+
+def decode(payload: bytes, expect: type[M], run: str) -> M:
+    """Decode and validate one message of type `expect` for run `run`."""
+    if len(payload) > MAX_PAYLOAD:
+        raise DecodeError(f"payload of {len(payload)} bytes exceeds {MAX_PAYLOAD}")
+    try:
+        body = msgpack.unpackb(payload, raw=False, strict_map_key=True)
+    except Exception as e:  # msgpack raises several unrelated types for garbage
+        raise DecodeError(f"not msgpack: {type(e).__name__}: {e}"[:200]) from None
+    if not isinstance(body, dict):
+        raise DecodeError(f"expected a map, got {type(body).__name__}")
+    if body.get("v") != SCHEMA_VERSION:
+        raise DecodeError(f"schema version {body.get('v')!r}, expected {SCHEMA_VERSION}")
+    kind = body.get("kind")
+    if kind != expect.KIND:  # type: ignore[attr-defined]
+        known = "" if kind in MESSAGE_TYPES else " (unknown kind)"
+        raise DecodeError(f"kind {kind!r}{known}, expected {expect.KIND!r}")  # type: ignore[attr-defined]
+    if body.get("run") != run:
+        raise DecodeError(f"run {body.get('run')!r}, expected {run!r}")
+    if not isinstance(body.get("src"), str):
+        raise DecodeError("src: expected a string")
+    checks, allowed = _schema(expect)
+    if len(body) != len(allowed) or not allowed.issuperset(body):
+        extra = sorted(str(k) for k in set(body) - allowed)
+        if extra:
+            raise DecodeError(f"unexpected field {extra[0]!r}")
+    fields = {}
+    for name, check in checks:
+        if name not in body:
+            raise DecodeError(f"missing field {name!r}")
+        fields[name] = check(body[name], name)
+    return expect(**fields)
+
+
+def sender(payload: bytes) -> str:
+    """Best-effort `src` of a payload, for log lines about messages that failed to decode."""
+    try:
+        body = msgpack.unpackb(payload, raw=False)
+        return str(body.get("src", "?"))[:64] if isinstance(body, dict) else "?"
+    except Exception:
+        return "?"

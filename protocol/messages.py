@@ -1,0 +1,130 @@
+"""Typed messages of the step protocol and of supervision (DESIGN §3).
+
+Every message travels as a msgpack map: the envelope `v` (schema version), `kind`, `run`, `src`,
+then the fields below. Frames and tips are (x, y, heading) in the world frame; angles in radians.
+The codec (`codec.py`) validates every field against these annotations.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import ClassVar
+
+SCHEMA_VERSION = 1
+
+Vec2 = tuple[float, float]
+Vec3 = tuple[float, float, float]
+
+
+@dataclass(frozen=True)
+class Obs:
+    """sim -> agent: its own encoder reading q_i after the joint actions of step-1."""
+
+    KIND: ClassVar[str] = "obs"
+    epoch: int
+    step: int
+    q: float
+
+
+@dataclass(frozen=True)
+class Task:
+    """sim -> root: the task observation at the start of the step (the root computes the reward from it)."""
+
+    KIND: ClassVar[str] = "task"
+    epoch: int
+    step: int
+    goal: Vec2
+    tips: dict[str, Vec3]
+
+
+@dataclass(frozen=True)
+class Down:
+    """parent -> child (top-down pass): the child's base frame, the goal, the reward r(step-1)."""
+
+    KIND: ClassVar[str] = "down"
+    epoch: int
+    step: int
+    base: Vec3
+    goal: Vec2
+    reward: float | None
+
+
+@dataclass(frozen=True)
+class Up:
+    """child -> parent (bottom-up pass): the subtree's end-effector tips and the child's own action.
+
+    `action` is the index in the agent's action set (0 decrease, 1 keep, 2 increase); -1 when the child
+    took none (a compound agent)."""
+
+    KIND: ClassVar[str] = "up"
+    epoch: int
+    step: int
+    tips: dict[str, Vec3]
+    action: int
+
+
+@dataclass(frozen=True)
+class Cmd:
+    """agent -> sim: the joint increment (radians) for this step."""
+
+    KIND: ClassVar[str] = "cmd"
+    epoch: int
+    step: int
+    delta: float
+
+
+@dataclass(frozen=True)
+class EpochStart:
+    """supervisor -> sim (ctl/epoch): run one epoch of `steps` lockstep steps towards `goal`."""
+
+    KIND: ClassVar[str] = "epoch"
+    epoch: int
+    steps: int
+    goal: Vec2
+
+
+@dataclass(frozen=True)
+class EpochDone:
+    """sim -> observers (metrics/epoch): errors after each step's joint actions."""
+
+    KIND: ClassVar[str] = "epoch_done"
+    epoch: int
+    steps: int
+    final_error: float
+    mean_error: float
+    errors: list[float]
+    final_angles: dict[str, float]
+    missed_cmds: int
+    seconds: float
+
+
+@dataclass(frozen=True)
+class Checkpoint:
+    """supervisor -> agents (ctl/checkpoint): write your learned state into `directory` now."""
+
+    KIND: ClassVar[str] = "checkpoint"
+    epoch: int
+    directory: str
+
+
+@dataclass(frozen=True)
+class Saved:
+    """agent -> supervisor (rep/agent/<id>): the checkpoint was written (or why not)."""
+
+    KIND: ClassVar[str] = "saved"
+    epoch: int
+    path: str
+    error: str
+
+
+@dataclass(frozen=True)
+class Stop:
+    """supervisor -> everyone (ctl/stop): leave cleanly."""
+
+    KIND: ClassVar[str] = "stop"
+    reason: str
+
+
+MESSAGE_TYPES: dict[str, type] = {
+    m.KIND: m for m in (Obs, Task, Down, Up, Cmd, EpochStart, EpochDone, Checkpoint, Saved, Stop)
+}
