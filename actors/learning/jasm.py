@@ -1,0 +1,69 @@
+"""Joint action selection mechanism, JASM (paper §4.2, Eqs. 7-9, Algorithm 2).
+
+Joint actions are indexed row-major over (own action, visible agent 1, visible agent 2, ...), so
+Q(s, .) reshaped to (n_actions,) * (1 + n_visible) has the agent's own action on axis 0.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+
+def probabilities(counts: np.ndarray) -> np.ndarray:
+    """P^i(alpha_k^j) = C^i(alpha_k^j) / sum_b C^i(b^j) (Eq. 7); counts shape (n_visible, n_actions)."""
+    counts = np.asarray(counts, dtype=np.float64)
+    return counts / counts.sum(axis=1, keepdims=True)
+
+
+def expected_values(q: np.ndarray, P: np.ndarray, n_actions: int = 3) -> np.ndarray:
+    """E(alpha_i) = sum_{alpha_-i} Q(s, alpha_i u alpha_-i) prod_j P(alpha_j) (Eq. 9).
+
+    q: Q(s, .) over joint actions, flat or shaped (n_actions,) * (1 + n_visible); P: (n_visible, n_actions).
+    """
+    n_visible = P.shape[0]
+    E = np.asarray(q, dtype=np.float64).reshape((n_actions,) * (1 + n_visible))
+    for j in range(n_visible - 1, -1, -1):
+        E = E @ P[j]  # contract the last visible agent's axis with its believed policy
+    return E
+
+
+def temperature(t: float, T_max: float, s: float) -> float:
+    """T(t) = 1 + T_max e^(-s t) (§4.2), t = step within the epoch."""
+    return 1.0 + T_max * math.exp(-s * t)
+
+
+def boltzmann(E: np.ndarray, T: float) -> np.ndarray:
+    """pi(alpha_i) = e^(E/T) / sum e^(E/T) (Eq. 8); the max is subtracted for numerical stability."""
+    z = (E - E.max()) / T
+    w = np.exp(z)
+    return w / w.sum()
+
+
+def explore_probability(T: float, T_max: float, epsilon: float) -> float:
+    """epsilon-decreasing: explore with probability epsilon (T(t) - 1) / (T_max - 1), clipped to [0, 1]."""
+    return min(max(epsilon * (T - 1.0) / (T_max - 1.0), 0.0), 1.0)
+
+
+def greedy(pi: np.ndarray, rng: np.random.Generator) -> int:
+    """argmax pi with random tie-breaking: Q starts at 0, so a fixed tie-break would always pick action 0."""
+    p = pi.tolist()
+    best = max(p)
+    ties = [a for a, v in enumerate(p) if v >= best - 1e-12 * abs(best)]
+    if len(ties) == 1:
+        return ties[0]
+    return ties[int(rng.integers(len(ties)))]
+
+
+def select_action(pi: np.ndarray, p_explore: float, rng: np.random.Generator, explore: bool = True) -> int:
+    """With probability p_explore sample from pi (Eq. 8), else take the best pi (ε-decreasing scheme)."""
+    if explore and p_explore > 0.0 and rng.random() < p_explore:
+        u = rng.random()
+        acc = 0.0
+        for a, p in enumerate(pi.tolist()):  # inverse-CDF draw; cheaper than rng.choice for 3 actions
+            acc += p
+            if u < acc:
+                return a
+        return len(pi) - 1
+    return greedy(pi, rng)

@@ -1,0 +1,155 @@
+"""One agent's brain: fuzzy Q-learning (Algorithm 1) with joint action selection (Algorithm 2)."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from . import jasm
+from .fuzzy import FuzzyPartition
+from .qlearning import SparseFuzzyQ
+from .settings import LearnerSettings
+
+STATE_DICT_VERSION = 1
+
+
+class Learner:
+    """Fuzzy joint-action Q-learner of one agent that sees n_visible agents (its children).
+
+    Call order within one step of the bottom-up pass: visible agents choose first, then this agent
+    calls step() with s(t), the reward r(t-1) of the previous joint action and the visible actions at t.
+    """
+
+    def __init__(self, settings: LearnerSettings, n_visible: int, seed: int | Sequence[int]) -> None:
+        if not (isinstance(n_visible, (int, np.integer)) and n_visible >= 0):
+            raise ValueError(f"n_visible must be an int >= 0, got {n_visible!r}")
+        self.settings = settings
+        self.n_visible = int(n_visible)
+        self.n_actions = settings.n_actions
+        self.n_joint = self.n_actions ** (1 + self.n_visible)
+        self.rng = np.random.default_rng(seed)
+        self.fuzzy = FuzzyPartition(settings)
+        self.q = SparseFuzzyQ(self.n_joint)
+        # Fictitious-play counts C^i(alpha_k^j) (Eq. 7), started at count_prior so P is defined.
+        self.counts = np.full((self.n_visible, self.n_actions), settings.count_prior)
+        self.epoch = 0
+        self.lr = settings.lr
+        self.t = 0
+        self._pending: tuple[np.ndarray, np.ndarray, int] | None = None
+
+    # -- epochs ---------------------------------------------------------------------------------
+    def start_epoch(self, epoch: int) -> None:
+        """New epoch: t = 0, lr = lr0 (1 - lr_decay)^epoch, pending dropped (no TD across resets)."""
+        if epoch < 0:
+            raise ValueError(f"epoch must be >= 0, got {epoch}")
+        self.epoch = int(epoch)
+        self.lr = self.settings.lr * (1.0 - self.settings.lr_decay) ** self.epoch
+        self.t = 0
+        self._pending = None
+
+    # -- one step -------------------------------------------------------------------------------
+    def joint_index(self, own: int, visible_actions: Sequence[int]) -> int:
+        """Row-major index of the joint action (own, visible...) in Q(s, .)."""
+        idx = own
+        for b in visible_actions:
+            idx = idx * self.n_actions + int(b)
+        return idx
+
+    def _bootstrap(self, q_next: np.ndarray, P: np.ndarray) -> float:
+        if self.settings.bootstrap == "joint_max":
+            return float(q_next.max())  # Eq. 5 as printed: max over joint actions
+        return float(jasm.expected_values(q_next, P, self.n_actions).max())  # max_a E(s', a), Eq. 9
+
+    def step(
+        self,
+        state: np.ndarray,
+        reward: float | None,
+        visible_actions: Sequence[int],
+        learn: bool = True,
+        explore: bool = True,
+    ) -> int:
+        """Learn from the previous transition, choose this agent's action a(t) (0 dec, 1 keep, 2 inc)."""
+        if len(visible_actions) != self.n_visible:
+            raise ValueError(f"expected {self.n_visible} visible actions, got {len(visible_actions)}")
+        st = self.settings
+        rules, O = self.fuzzy.activate(state)  # noqa: E741 -- the paper's O^i
+        P = jasm.probabilities(self.counts) if self.n_visible else np.zeros((0, self.n_actions))
+        w = O / O.sum()  # O^i / sum_i O^i: the weight of rule i in Eq. 2 and its gradient in Eq. 6
+        rows = self.q.lookup(rules)
+        q_now = self.q.q_rows(rows, w)  # Q(s(t), .), Eq. 2
+
+        # (a) TD update of the previous transition with s(t) as s' (Eqs. 5-6).
+        if learn and reward is not None and self._pending is not None:
+            p_rules, p_w, p_joint = self._pending
+            p_rows = self.q.touch(p_rules)  # creates phi = 0 rows, so Q(s, a) below is unchanged
+            q_sa = float(p_w @ self.q.phi[p_rows, p_joint])  # Q(s(t-1), a(t-1)), Eq. 2
+            boot = self._bootstrap(q_now, P)
+            delta = self.q.td_delta(q_sa, float(reward), boot, self.lr, st.gamma)  # Eq. 5
+            self.q.update_rows(p_rows, p_w, p_joint, delta)  # Eq. 6
+            if rows.min() < 0:
+                rows = self.q.lookup(rules)  # s(t) may share rules just created for s(t-1)
+            q_now = self.q.q_rows(rows, w)
+
+        # (b) JASM: E (Eq. 9), Boltzmann pi (Eq. 8), epsilon-decreasing choice.
+        E = jasm.expected_values(q_now, P, self.n_actions)
+        T = jasm.temperature(self.t, st.T_max, st.s)
+        pi = jasm.boltzmann(E, T)
+        a = jasm.select_action(pi, jasm.explore_probability(T, st.T_max, st.epsilon), self.rng, explore)
+
+        # (c) fictitious play: count what the visible agents did (Eq. 7 next time).
+        for j, b in enumerate(visible_actions):
+            self.counts[j, b] += 1.0
+
+        # (d) remember (s(t), joint action(t)) for the next update.
+        self._pending = (rules, w, self.joint_index(a, visible_actions))
+        self.t += 1
+        return a
+
+    # -- introspection / checkpoints ------------------------------------------------------------
+    @property
+    def rules_used(self) -> int:
+        """Number of phi rows allocated (rules touched by an update)."""
+        return self.q.rows
+
+    @property
+    def memory_bytes(self) -> int:
+        return self.q.memory_bytes + int(self.counts.nbytes)
+
+    def state_dict(self) -> dict[str, np.ndarray]:
+        keys, phi = self.q.export()
+        return {
+            "version": np.array(STATE_DICT_VERSION, dtype=np.int64),
+            "phi_keys": keys,
+            "phi": phi,
+            "counts": self.counts.copy(),
+            "lr": np.array(self.lr, dtype=np.float64),
+            "epoch": np.array(self.epoch, dtype=np.int64),
+        }
+
+    def load_state_dict(self, d: dict[str, np.ndarray]) -> None:
+        for name in ("phi_keys", "phi", "counts", "lr", "epoch"):
+            if name not in d:
+                raise ValueError(f"state dict is missing field {name!r}")
+        counts = np.asarray(d["counts"])
+        if counts.shape != self.counts.shape or not np.issubdtype(counts.dtype, np.floating):
+            raise ValueError(
+                f"counts must be float with shape {self.counts.shape}, got {counts.dtype} {counts.shape}"
+            )
+        if np.any(counts <= 0):
+            raise ValueError("counts must be > 0 (Eq. 7 divides by their sum)")
+        lr = np.asarray(d["lr"])
+        if lr.shape != () or not np.issubdtype(lr.dtype, np.floating) or not 0.0 < float(lr) <= 1.0:
+            raise ValueError(f"lr must be a float scalar in (0, 1], got {lr!r}")
+        epoch = np.asarray(d["epoch"])
+        if epoch.shape != () or not np.issubdtype(epoch.dtype, np.integer) or int(epoch) < 0:
+            raise ValueError(f"epoch must be a non-negative integer scalar, got {epoch!r}")
+        keys = np.asarray(d["phi_keys"])
+        if keys.size and (keys.min() < 0 or keys.max() >= self.fuzzy.n_rules):
+            raise ValueError(f"phi_keys must lie in [0, {self.fuzzy.n_rules})")
+        self.q.load(keys, np.asarray(d["phi"]))  # validates phi_keys / phi shapes and dtypes
+        self.counts = counts.astype(np.float64, copy=True)
+        self.lr = float(lr)
+        self.epoch = int(epoch)
+        self.t = 0
+        self._pending = None

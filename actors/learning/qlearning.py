@@ -1,0 +1,101 @@
+"""Sparse fuzzy Q-function (paper §4.1, Eqs. 2, 5, 6).
+
+phi^i is a vector over joint actions for rule i. Rows are created on first update, so memory grows with
+the rules the agent actually visits, never with the full grid.
+"""
+
+from __future__ import annotations
+
+from itertools import repeat
+
+import numpy as np
+
+
+class SparseFuzzyQ:
+    """phi storage: dict rule index -> row of a growable float64 array (rows, n_joint_actions)."""
+
+    def __init__(self, n_joint_actions: int, capacity: int = 1024) -> None:
+        if n_joint_actions < 1:
+            raise ValueError(f"n_joint_actions must be >= 1, got {n_joint_actions}")
+        self.n_joint_actions = int(n_joint_actions)
+        self.index: dict[int, int] = {}
+        self.phi = np.zeros((max(int(capacity), 1), self.n_joint_actions))
+
+    @property
+    def rows(self) -> int:
+        return len(self.index)
+
+    @property
+    def memory_bytes(self) -> int:
+        # dict entries (~100 B each with the two int objects) + the allocated phi array.
+        return int(self.phi.nbytes + 100 * len(self.index))
+
+    def lookup(self, rules: np.ndarray) -> np.ndarray:
+        """Rows of rules in phi, -1 for rules never touched (nothing is created)."""
+        rules_list = rules.tolist()
+        return np.array(list(map(self.index.get, rules_list, repeat(-1, len(rules_list)))), dtype=np.int64)
+
+    def touch(self, rules: np.ndarray) -> np.ndarray:
+        """Rows for rules, creating zero rows (phi = 0) for rules seen for the first time."""
+        rows = self.lookup(rules)
+        missing = np.flatnonzero(rows < 0)
+        if len(missing):
+            idx = self.index
+            need = len(idx) + len(missing)
+            if need > self.phi.shape[0]:
+                grown = np.zeros((max(need, 2 * self.phi.shape[0]), self.n_joint_actions))
+                grown[: len(idx)] = self.phi[: len(idx)]  # double the capacity
+                self.phi = grown
+            for n in missing.tolist():
+                rows[n] = idx[int(rules[n])] = len(idx)
+        return rows
+
+    def q_rows(self, rows: np.ndarray, w: np.ndarray) -> np.ndarray:
+        """Eq. 2 from rows already looked up (-1 = untouched rule, phi = 0) and w = O / sum O."""
+        if rows.min() >= 0:
+            return w @ self.phi[rows]  # Eq. 2
+        known = rows >= 0
+        return w[known] @ self.phi[rows[known]]  # Eq. 2
+
+    def q_values(self, rules: np.ndarray, O: np.ndarray) -> np.ndarray:  # noqa: E741
+        """Q(s, .) over joint actions = sum_i O^i phi^i / sum_i O^i (Eq. 2); untouched rules count as 0."""
+        total = O.sum()
+        if total <= 0.0:
+            return np.zeros(self.n_joint_actions)
+        return self.q_rows(self.lookup(rules), O / total)
+
+    def update(self, rules: np.ndarray, O: np.ndarray, action: int, delta: float) -> None:  # noqa: E741
+        """phi^i[a] += delta * O^i / sum_i O^i (Eq. 6), delta from Eq. 5."""
+        total = O.sum()
+        if total <= 0.0:
+            return
+        self.update_rows(self.touch(rules), O / total, action, delta)
+
+    def update_rows(self, rows: np.ndarray, w: np.ndarray, action: int, delta: float) -> None:
+        """Eq. 6 on rows returned by touch(), w = O / sum O = dQ(s, a) / dphi^i."""
+        # Fired rules are distinct (distinct set combinations), so fancy-index += is exact.
+        self.phi[rows, action] += delta * w  # Eq. 6
+
+    def td_delta(self, q_sa: float, reward: float, bootstrap: float, lr: float, gamma: float) -> float:
+        """delta = lambda (r + gamma * bootstrap - Q(s, a)) (Eq. 5)."""
+        return lr * (reward + gamma * bootstrap - q_sa)
+
+    def export(self) -> tuple[np.ndarray, np.ndarray]:
+        """(keys int64[rows], phi float64[rows, n_joint_actions]) in row order, copies."""
+        keys = np.fromiter(self.index.keys(), dtype=np.int64, count=len(self.index))
+        return keys, self.phi[: len(self.index)].copy()
+
+    def load(self, keys: np.ndarray, phi: np.ndarray) -> None:
+        keys = np.asarray(keys)
+        phi = np.asarray(phi)
+        if keys.ndim != 1 or not np.issubdtype(keys.dtype, np.integer):
+            raise ValueError(f"phi_keys must be a 1-d integer array, got {keys.dtype} shape {keys.shape}")
+        if phi.ndim != 2 or phi.shape != (len(keys), self.n_joint_actions):
+            raise ValueError(f"phi must have shape ({len(keys)}, {self.n_joint_actions}), got {phi.shape}")
+        if not np.issubdtype(phi.dtype, np.floating):
+            raise ValueError(f"phi must be a float array, got {phi.dtype}")
+        if len(np.unique(keys)) != len(keys):
+            raise ValueError("phi_keys contains duplicates")
+        self.index = {int(k): n for n, k in enumerate(keys.tolist())}
+        self.phi = np.zeros((max(len(keys) * 2, 1024), self.n_joint_actions))
+        self.phi[: len(keys)] = phi

@@ -1,0 +1,109 @@
+"""Hyper-parameters of one agent's fuzzy Q-learner (paper §4, §5.1)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+
+#: Names of the six state variables S_i = <q_i, theta_i, d_i, g1, g2, g3> (paper §3.3).
+STATE_NAMES: tuple[str, ...] = ("q", "theta", "d", "g1", "g2", "g3")
+BOOTSTRAPS: tuple[str, ...] = ("joint_max", "expected")
+
+#: Reach of the paper's planar 4R chain (4 links of length 3); default ranges scale with it.
+DEFAULT_REACH = 12.0
+
+
+def _ranges_for(reach: float) -> tuple[tuple[float, float], ...]:
+    return (
+        (-math.pi, math.pi),  # q: joint angle
+        (-math.pi, math.pi),  # theta: bearing of the end effector in the agent frame
+        (0.0, reach),  # d: distance joint -> end effector
+        (-2.0 * reach, 2.0 * reach),  # g1: goal - tip, x in the agent frame
+        (-2.0 * reach, 2.0 * reach),  # g2: goal - tip, y in the agent frame
+        (-math.pi, math.pi),  # g3: bearing of the goal from the end effector
+    )
+
+
+@dataclass(frozen=True)
+class LearnerSettings:
+    """Settings of one agent's learner; defaults were chosen by measurement on the planar 4R chain.
+
+    Attributes:
+        n_sets: membership functions per state variable (q, theta, d, g1, g2, g3); paper §5.1.
+        ranges: (lo, hi) per state variable; set centres are spread evenly over it, values outside clip.
+        slope: steepness of the sigmoid memberships (Eq. 3), as sigma * centre spacing. Larger = crisper
+            sets; at 4 a value at a centre gives ~0.12 to each neighbour.
+        top_k: memberships kept per variable (sparse activation: top_k**6 rules fire per state).
+        gamma: discount factor of Eq. 5.
+        lr: learning rate lambda of Eq. 5 in epoch 0.
+        lr_decay: per-epoch decay, lr(epoch) = lr * (1 - lr_decay) ** epoch (paper: 1/1050).
+        T_max: initial temperature of T(t) = 1 + T_max * exp(-s t) (Eq. 8); must exceed 1.
+        s: decay of T(t), t = step within the epoch.
+        epsilon: epsilon-decreasing factor; exploration probability epsilon * (T(t) - 1) / (T_max - 1).
+        bootstrap: "joint_max" = max over joint actions of Q(s', .) as printed in Eq. 5;
+            "expected" = max over own actions of E(s', .) (Eq. 9), i.e. what the agent can choose.
+        count_prior: initial fictitious-play count of every action, so Eq. 7 is defined at the start.
+        n_actions: own actions (0 decrease, 1 keep, 2 increase).
+    """
+
+    n_sets: tuple[int, ...] = (20, 20, 13, 7, 7, 7)
+    ranges: tuple[tuple[float, float], ...] = _ranges_for(DEFAULT_REACH)
+    slope: float = 4.0
+    top_k: int = 2
+    gamma: float = 0.9
+    lr: float = 0.5
+    lr_decay: float = 1.0 / 1050.0
+    T_max: float = 10.0
+    s: float = 0.01
+    epsilon: float = 1.0
+    bootstrap: str = "expected"
+    count_prior: float = 1.0
+    n_actions: int = 3
+
+    @classmethod
+    def for_reach(cls, reach: float, **overrides: object) -> LearnerSettings:
+        """Settings with d in [0, reach] and g1, g2 in [-2 reach, 2 reach]; overrides replace any field."""
+        if not (isinstance(reach, (int, float)) and math.isfinite(reach) and reach > 0):
+            raise ValueError(f"reach must be a positive finite number, got {reach!r}")
+        kwargs: dict[str, object] = {"ranges": _ranges_for(float(reach))}
+        kwargs.update(overrides)
+        return cls(**kwargs)  # type: ignore[arg-type]
+
+    def replace(self, **changes: object) -> LearnerSettings:
+        return replace(self, **changes)  # type: ignore[arg-type]
+
+    def __post_init__(self) -> None:
+        n = len(STATE_NAMES)
+        object.__setattr__(self, "n_sets", tuple(int(m) for m in self.n_sets))
+        object.__setattr__(self, "ranges", tuple((float(lo), float(hi)) for lo, hi in self.ranges))
+        if len(self.n_sets) != n:
+            raise ValueError(f"n_sets needs {n} entries {STATE_NAMES}, got {len(self.n_sets)}")
+        if len(self.ranges) != n:
+            raise ValueError(f"ranges needs {n} (lo, hi) pairs {STATE_NAMES}, got {len(self.ranges)}")
+        for name, m, (lo, hi) in zip(STATE_NAMES, self.n_sets, self.ranges, strict=True):
+            if m < 1:
+                raise ValueError(f"n_sets[{name}] must be >= 1, got {m}")
+            if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
+                raise ValueError(f"ranges[{name}] must be finite with lo < hi, got ({lo}, {hi})")
+        if not (isinstance(self.top_k, int) and 1 <= self.top_k <= min(self.n_sets)):
+            raise ValueError(f"top_k must be an int in [1, min(n_sets)={min(self.n_sets)}], got {self.top_k}")
+        if not (math.isfinite(self.slope) and self.slope > 0):
+            raise ValueError(f"slope must be > 0, got {self.slope}")
+        if not 0.0 <= self.gamma <= 1.0:
+            raise ValueError(f"gamma must be in [0, 1], got {self.gamma}")
+        if not 0.0 < self.lr <= 1.0:
+            raise ValueError(f"lr must be in (0, 1], got {self.lr}")
+        if not 0.0 <= self.lr_decay < 1.0:
+            raise ValueError(f"lr_decay must be in [0, 1), got {self.lr_decay}")
+        if not (math.isfinite(self.T_max) and self.T_max > 1.0):
+            raise ValueError(f"T_max must be > 1 (epsilon-decreasing divides by T_max - 1), got {self.T_max}")
+        if not (math.isfinite(self.s) and self.s >= 0.0):
+            raise ValueError(f"s must be >= 0, got {self.s}")
+        if not 0.0 <= self.epsilon <= 1.0:
+            raise ValueError(f"epsilon must be in [0, 1], got {self.epsilon}")
+        if self.bootstrap not in BOOTSTRAPS:
+            raise ValueError(f"bootstrap must be one of {BOOTSTRAPS}, got {self.bootstrap!r}")
+        if not (math.isfinite(self.count_prior) and self.count_prior > 0):
+            raise ValueError(f"count_prior must be > 0 so Eq. 7 is defined, got {self.count_prior}")
+        if not (isinstance(self.n_actions, int) and self.n_actions >= 1):
+            raise ValueError(f"n_actions must be an int >= 1, got {self.n_actions}")

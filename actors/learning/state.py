@@ -1,0 +1,52 @@
+"""Planar agent state (paper §3.3): frames and S_i = <q_i, theta_i, d_i, g1, g2, g3>.
+
+A frame is (x, y, heading) in the world frame.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import numpy as np
+
+Frame = tuple[float, float, float]
+
+
+def joint_frame(base: Sequence[float], offset: Sequence[float], q: float) -> Frame:
+    """Frame of a joint mounted on base: position = base + offset_xy rotated by base heading;
+    heading = base_h + offset_h + q."""
+    bx, by, bh = base
+    ox, oy, oh = offset
+    c, s = math.cos(bh), math.sin(bh)
+    return (bx + c * ox - s * oy, by + s * ox + c * oy, bh + oh + q)
+
+
+def link_end(frame: Sequence[float], link_length: float) -> Frame:
+    """End of a link of length l along the frame's heading; this is each child's base."""
+    x, y, h = frame
+    return (x + link_length * math.cos(h), y + link_length * math.sin(h), h)
+
+
+def agent_state(
+    frame: Sequence[float], q: float, tip_xy: Sequence[float], goal_xy: Sequence[float]
+) -> np.ndarray:
+    """S_i = <q_i, theta_i, d_i, g1, g2, g3> of the agent whose joint frame is frame.
+
+    (d_i, theta_i): polar coordinates of the end effector (tip) in the agent frame (origin at the
+    joint, x along its heading). (g1, g2): goal - tip in the agent frame. g3: bearing of the goal seen
+    from the end effector, relative to the joint -> end effector direction (atan2(cross, dot); 0 when
+    either vector is degenerate). When several end effectors lie below the agent, pass their centroid
+    as tip_xy.
+    """
+    x, y, h = frame
+    c, s = math.cos(h), math.sin(h)
+    rx, ry = tip_xy[0] - x, tip_xy[1] - y  # joint -> tip, world frame
+    wx, wy = goal_xy[0] - tip_xy[0], goal_xy[1] - tip_xy[1]  # tip -> goal, world frame
+    lx, ly = c * rx + s * ry, -s * rx + c * ry  # rotate by -h into the agent frame
+    d = math.hypot(lx, ly)
+    theta = math.atan2(ly, lx) if d > 0.0 else 0.0
+    g1, g2 = c * wx + s * wy, -s * wx + c * wy
+    cross, dot = rx * wy - ry * wx, rx * wx + ry * wy
+    g3 = math.atan2(cross, dot) if (rx or ry) and (wx or wy) else 0.0
+    return np.array([q, theta, d, g1, g2, g3])
