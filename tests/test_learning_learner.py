@@ -1,0 +1,105 @@
+"""Learner: settings validation, TD update through step(), counts, lr decay, checkpoints, memory."""
+
+import numpy as np
+import pytest
+from kinswarm.actors.learning import Learner, LearnerSettings
+
+S0 = np.array([0.1, 0.2, 3.0, 1.0, 2.0, 0.3])
+S1 = np.array([0.4, -1.0, 6.0, -3.0, 2.0, -1.3])
+
+
+def test_settings_validation_and_for_reach():
+    st = LearnerSettings.for_reach(6.0, lr=0.2)
+    assert st.ranges[2] == (0.0, 6.0) and st.ranges[3] == (-12.0, 12.0) and st.lr == 0.2
+    for bad, match in [
+        (dict(bootstrap="nope"), "bootstrap"),
+        (dict(T_max=1.0), "T_max"),
+        (dict(n_sets=(3, 3)), "n_sets"),
+        (dict(top_k=8), "top_k"),
+        (dict(ranges=((0, 1),) * 5 + ((1, 0),)), "ranges"),
+        (dict(count_prior=0.0), "count_prior"),
+        (dict(lr=0.0), "lr"),
+    ]:
+        with pytest.raises(ValueError, match=match):
+            LearnerSettings(**bad)
+    with pytest.raises(ValueError, match="reach"):
+        LearnerSettings.for_reach(-1.0)
+
+
+def test_td_update_through_step_hand_computed():
+    st = LearnerSettings(bootstrap="joint_max", lr=0.5)
+    ln = Learner(st, n_visible=0, seed=0)
+    ln.start_epoch(0)
+    a0 = ln.step(S0, None, [])
+    assert ln.rules_used == 0  # no reward yet: nothing learned
+    ln.step(S1, 1.0, [])
+    # phi = 0 everywhere: delta = lr (r + gamma * 0 - 0) = 0.5; phi^i[a0] = 0.5 O^i / sum O
+    rules, O = ln.fuzzy.activate(S0)  # noqa: E741
+    w = O / O.sum()
+    Q = ln.q.q_values(rules, O)
+    assert Q[a0] == pytest.approx(0.5 * np.sum(w * w))
+    assert np.count_nonzero(Q) == 1
+    assert ln.rules_used == 64
+
+
+def test_counts_joint_index_and_lr_decay():
+    st = LearnerSettings()
+    ln = Learner(st, n_visible=2, seed=[3, 1])
+    assert ln.n_joint == 27 and ln.joint_index(2, [1, 0]) == 2 * 9 + 1 * 3 + 0
+    ln.start_epoch(0)
+    ln.step(S0, None, [2, 0])
+    np.testing.assert_allclose(ln.counts, [[1, 1, 2], [2, 1, 1]])
+    ln.start_epoch(2)
+    assert ln.t == 0 and ln.lr == pytest.approx(st.lr * (1 - st.lr_decay) ** 2)
+    with pytest.raises(ValueError, match="visible"):
+        ln.step(S0, None, [1])
+
+
+def test_greedy_ties_random_at_start():
+    ln = Learner(LearnerSettings(), n_visible=1, seed=7)
+    ln.start_epoch(0)
+    picks = {ln.step(S0, None, [1], learn=False, explore=False) for _ in range(60)}
+    assert picks == {0, 1, 2}
+
+
+def _trained(seed=0, n=300):
+    ln = Learner(LearnerSettings(), n_visible=1, seed=seed)
+    rng = np.random.default_rng(seed)
+    ln.start_epoch(0)
+    r = None
+    for _ in range(n):
+        ln.step(S0 + rng.normal(size=6) * 0.3, r, [int(rng.integers(3))])
+        r = float(rng.normal())
+    return ln
+
+
+def test_state_dict_round_trip_and_validation():
+    ln = _trained()
+    d = ln.state_dict()
+    assert set(d) >= {"phi_keys", "phi", "counts", "lr", "epoch"}
+    fresh = Learner(LearnerSettings(), n_visible=1, seed=1)
+    fresh.load_state_dict(d)
+    assert fresh.rules_used == ln.rules_used and fresh.epoch == ln.epoch and fresh.lr == ln.lr
+    np.testing.assert_array_equal(fresh.counts, ln.counts)
+    for s in (S0, S1):
+        rules, O = ln.fuzzy.activate(s)  # noqa: E741
+        np.testing.assert_allclose(fresh.q.q_values(rules, O), ln.q.q_values(rules, O))
+    for field, bad in [
+        ("counts", np.ones((2, 3))),
+        ("phi", d["phi"][:, :3]),
+        ("phi_keys", d["phi_keys"].astype(np.float64)),
+        ("lr", np.array(2.0)),
+        ("epoch", np.array(-1)),
+    ]:
+        with pytest.raises(ValueError, match=field):
+            fresh.load_state_dict({**d, field: bad})
+    with pytest.raises(ValueError, match="counts"):
+        fresh.load_state_dict({k: v for k, v in d.items() if k != "counts"})
+
+
+def test_dense_grid_never_allocated():
+    ln = _trained(n=1000)
+    dense = 1_783_600 * 9 * 8  # the full phi table would be ~128 MB
+    assert ln.rules_used <= 64 * 1000
+    assert ln.memory_bytes < dense / 20
+    assert ln.q.phi.shape[0] < 1_783_600

@@ -1,0 +1,38 @@
+"""Eq. 10 and its two variants."""
+
+import math
+
+import pytest
+from kinswarm.actors.learning import reach_reward
+
+
+@pytest.mark.parametrize("mode", ["paper", "strict", "shaped"])
+def test_inside_branches(mode):
+    assert reach_reward(1.0, 1.5, mode) == pytest.approx(math.exp(-1.0))  # inside, approaching
+    assert reach_reward(2.0, 1.5, mode, c=2.0) == -1.0  # inside, moving away
+    assert reach_reward(3.0, 2.9, mode) == -1.0  # D == D_min moving away: our choice, -1
+    assert reach_reward(3.0, 3.2, mode) == pytest.approx(math.exp(-3.0))  # D == D_min approaching
+
+
+def test_paper_outside_and_still():
+    assert reach_reward(5.0, 4.0, "paper") == -2.0
+    assert reach_reward(5.0, 6.0, "paper") == -2.0
+    assert reach_reward(1.0, 1.0, "paper") == pytest.approx(math.exp(-1.0))  # Delta D = 0 rewarded
+
+
+def test_strict_still_inside_is_zero():
+    assert reach_reward(1.0, 1.0, "strict") == 0.0
+    assert reach_reward(1.0, 1.0 + 1e-13, "strict") == 0.0
+    assert reach_reward(5.0, 5.0, "strict") == -2.0
+    assert reach_reward(5.0, 4.0, "strict") == -2.0
+
+
+def test_shaped_outside_gradient():
+    assert reach_reward(5.0, 5.5, "shaped", k=20.0) == pytest.approx(-2.0 + 20 * 0.5)
+    assert reach_reward(5.0, 4.9, "shaped", k=20.0) == pytest.approx(-2.0 - 2.0)
+    assert reach_reward(1.0, 1.0, "shaped") == 0.0  # strict inside
+
+
+def test_unknown_mode():
+    with pytest.raises(ValueError, match="paper, strict, shaped"):
+        reach_reward(1.0, 1.0, "bogus")

@@ -1,0 +1,32 @@
+"""Planar state of §3.3 on hand-computed geometry."""
+
+import math
+
+import numpy as np
+import pytest
+from kinswarm.actors.learning import agent_state, joint_frame, link_end
+
+
+def test_joint_frame_and_link_end():
+    f = joint_frame((1.0, 1.0, math.pi / 2), (2.0, 0.0, 0.1), 0.2)
+    assert f == pytest.approx((1.0, 3.0, math.pi / 2 + 0.3))
+    assert link_end((0.0, 0.0, math.pi / 2), 3.0) == pytest.approx((0.0, 3.0, math.pi / 2))
+    assert link_end((1.0, 2.0, 0.0), 3.0) == pytest.approx((4.0, 2.0, 0.0))
+
+
+def test_agent_state_hand_computed():
+    # joint at (1, 0) heading 90 deg, tip straight ahead at (1, 2), goal at (0, 2)
+    s = agent_state((1.0, 0.0, math.pi / 2), 0.7, (1.0, 2.0), (0.0, 2.0))
+    q, theta, d, g1, g2, g3 = s
+    assert q == 0.7 and d == pytest.approx(2.0) and theta == pytest.approx(0.0, abs=1e-12)
+    # goal - tip = (-1, 0) in the world = (0, +1) in the frame heading 90 deg (to the agent's left)
+    assert (g1, g2) == pytest.approx((0.0, 1.0), abs=1e-12)
+    # joint->tip points along +y, tip->goal along -x: a left turn of 90 deg
+    assert g3 == pytest.approx(math.pi / 2)
+
+
+def test_agent_state_sideways_tip_and_degenerate():
+    s = agent_state((0.0, 0.0, 0.0), 0.0, (0.0, -3.0), (0.0, -3.0))
+    assert s[1] == pytest.approx(-math.pi / 2) and s[2] == pytest.approx(3.0)
+    assert s[5] == 0.0 and s[3] == 0.0 and s[4] == 0.0  # tip on the goal: g3 degenerate -> 0
+    assert isinstance(s, np.ndarray) and s.shape == (6,)
