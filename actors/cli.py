@@ -1,0 +1,203 @@
+"""`kinswarm`: run a learning swarm, run the model-based baseline, rebuild a run's report."""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import logging
+import secrets
+import signal
+import sys
+import time
+from pathlib import Path
+
+from kinswarm.actors.checkpoint import CheckpointError, load_checkpoint
+from kinswarm.actors.config import PLACEMENTS, REWARDS, ConfigError, RunConfig
+from kinswarm.actors.runtime import DEFAULT_LISTEN, open_session, setup_logging
+from kinswarm.protocol.messages import EpochDone
+from kinswarm.protocol.topology import Topology, TopologyError, load_topology
+
+log = logging.getLogger("kinswarm")
+
+
+def _goal(text: str) -> tuple[float, float]:
+    try:
+        x, y = (float(v) for v in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected X,Y (two numbers), got {text!r}") from None
+    return (x, y)
+
+
+def _on_off(text: str) -> bool:
+    if text not in ("on", "off"):
+        raise argparse.ArgumentTypeError(f"expected on or off, got {text!r}")
+    return text == "on"
+
+
+def _add_common(p: argparse.ArgumentParser) -> None:
+    p.add_argument("topology", type=Path, help="topology TOML (e.g. examples/chain4.toml)")
+    p.add_argument("--epochs", type=int, default=60)
+    p.add_argument("--steps", type=int, default=500, help="steps per epoch")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--goal", type=_goal, default=None, help="X,Y (default: the topology's [task] goal)")
+    p.add_argument("--placement", choices=PLACEMENTS, default="process")
+    p.add_argument("--run-id", default=None)
+    p.add_argument(
+        "--listen", default=DEFAULT_LISTEN, help=f"the supervisor's endpoint (default {DEFAULT_LISTEN})"
+    )
+    p.add_argument("--out", type=Path, default=None, help="run directory (default runs/<run-id>)")
+    p.add_argument("--deadline-ms", type=int, default=500, help="per-step deadline; a missing cmd holds")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--log-level", default="WARNING")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="kinswarm", description="A swarm of per-joint learning agents over Zenoh."
+    )
+    sub = p.add_subparsers(dest="command", required=True)
+    run = sub.add_parser("run", help="train (or evaluate) a swarm of agents on a topology")
+    _add_common(run)
+    run.add_argument("--reward", choices=REWARDS, default="shaped")
+    run.add_argument(
+        "--from", dest="from_dir", type=Path, default=None, help="start from a run's checkpoints"
+    )
+    run.add_argument("--learn", type=_on_off, default=True, metavar="on|off")
+    run.add_argument("--explore", type=_on_off, default=True, metavar="on|off")
+    run.add_argument(
+        "--checkpoint-every", type=int, default=10, help="epochs between checkpoints (0: last only)"
+    )
+    base = sub.add_parser("baseline", help="drive the same simulator with the pseudo-inverse controller")
+    _add_common(base)
+    rep = sub.add_parser("report", help="rebuild a run's summary plots")
+    rep.add_argument("run_dir", type=Path)
+    return p
+
+
+def _resolve(a: argparse.Namespace, controller: str) -> tuple[RunConfig, Topology]:
+    topo = load_topology(a.topology)
+    run_id = a.run_id or f"{topo.name}-{time.strftime('%Y%m%d-%H%M%S')}-{secrets.token_hex(2)}"
+    out = (a.out or Path("runs") / run_id).resolve()
+    from_dir = getattr(a, "from_dir", None)
+    cfg = RunConfig(
+        run_id=run_id,
+        topology=str(a.topology.resolve()),
+        out=str(out),
+        epochs=a.epochs,
+        steps=a.steps,
+        seed=a.seed,
+        goal=a.goal,
+        reward=getattr(a, "reward", "shaped"),
+        placement=a.placement,
+        listen=a.listen,
+        from_dir=str(from_dir.resolve()) if from_dir else None,
+        learn=getattr(a, "learn", False),
+        explore=getattr(a, "explore", False),
+        deadline_ms=a.deadline_ms,
+        checkpoint_every=getattr(a, "checkpoint_every", 0),
+        controller=controller,
+    )
+    cfg.resolved_goal(topo)
+    if cfg.from_dir:  # refuse a bad checkpoint before anything starts
+        for aid in topo.dof_agents:
+            load_checkpoint(Path(cfg.from_dir) / "agents" / f"{aid}.npz", agent=aid)
+    return cfg, topo
+
+
+async def _supervise(cfg: RunConfig, topo: Topology, progress: bool) -> dict:
+    from kinswarm.actors.report import write_plots, write_summary
+    from kinswarm.actors.supervisor import ProcessPlacement, SinglePlacement, Supervisor
+
+    out = Path(cfg.out)
+    try:
+        session = open_session(listen=[cfg.listen])
+    except Exception as e:
+        raise ConfigError(
+            f"cannot listen on {cfg.listen} ({e}); is another run using it? pass --listen tcp/127.0.0.1:PORT"
+        ) from None
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=cfg.epochs, unit="epoch", desc=cfg.run_id, dynamic_ncols=True)
+
+    def on_epoch(d: EpochDone) -> None:
+        if bar is not None:
+            bar.set_postfix(
+                final=f"{d.final_error:.3f}", mean=f"{d.mean_error:.3f}", steps_s=f"{d.steps / d.seconds:.0f}"
+            )
+            bar.update(1)
+
+    placement: ProcessPlacement | SinglePlacement
+    if cfg.placement == "single":
+        placement = SinglePlacement(cfg, topo, session)
+    else:
+        placement = ProcessPlacement(out / "config.json", cfg.listen, out / "logs")
+    sup = Supervisor(cfg, topo, session, placement, on_epoch=on_epoch)
+    main = asyncio.current_task()
+    loop = asyncio.get_running_loop()
+    assert main is not None
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        loop.add_signal_handler(sig, main.cancel)
+    try:
+        result = await sup.run()
+    finally:
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            loop.remove_signal_handler(sig)
+        if bar is not None:
+            bar.close()
+        session.close()
+    summary = write_summary(
+        out,
+        {
+            "wall_seconds": result.wall_seconds,
+            "interrupted": result.interrupted,
+            "rejected_messages": result.rejected,
+        },
+    )
+    write_plots(out)
+    return summary
+
+
+def run_swarm(cfg: RunConfig, topo: Topology, progress: bool = False) -> dict:
+    """Run one swarm to the end and return its summary (used by the CLI, experiments and tests)."""
+    out = Path(cfg.out)
+    out.mkdir(parents=True, exist_ok=True)
+    cfg.write(out / "config.json")
+    (out / "metrics.jsonl").write_text("")
+    return asyncio.run(_supervise(cfg, topo, progress))
+
+
+def main(argv: list[str] | None = None) -> int:
+    a = build_parser().parse_args(argv)
+    setup_logging(getattr(a, "log_level", "WARNING"))
+    sys.setswitchinterval(0.0005)
+    try:
+        if a.command == "report":
+            from kinswarm.actors.report import write_plots
+
+            for path in write_plots(a.run_dir):
+                print(path)
+            return 0
+        cfg, topo = _resolve(a, "agents" if a.command == "run" else "baseline")
+        summary = run_swarm(cfg, topo, progress=not a.no_progress and sys.stderr.isatty())
+    except (TopologyError, ConfigError, CheckpointError) as e:
+        print(f"kinswarm: error: {e}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("kinswarm: interrupted", file=sys.stderr)
+        return 130
+    fe = summary["final_error"]
+    last = fe[-20:]
+    within = sum(e <= 0.5 for e in last)
+    print(
+        f"{cfg.run_id}: {len(fe)} epochs, final error {fe[-1]:.3f} (last {len(last)}: {within} within 0.5), "
+        f"{summary['steps_per_second']:.0f} steps/s, {summary['wall_seconds']:.1f} s -> {cfg.out}"
+    )
+    if summary.get("interrupted"):
+        return 130
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

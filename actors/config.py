@@ -1,0 +1,99 @@
+"""The run configuration: resolved once by the CLI, written to `<out>/config.json`, and read back by
+every actor process through `load_run_config` (the one config loader)."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from kinswarm.protocol.keys import check_id
+from kinswarm.protocol.topology import Topology, load_topology
+
+REWARDS = ("paper", "strict", "shaped")
+PLACEMENTS = ("process", "single")
+CONTROLLERS = ("agents", "baseline")
+
+
+class ConfigError(ValueError):
+    pass
+
+
+@dataclass(frozen=True)
+class RunConfig:
+    run_id: str
+    topology: str  # absolute path of the topology TOML
+    out: str  # absolute path of the run directory
+    epochs: int = 60
+    steps: int = 500
+    seed: int = 0
+    goal: tuple[float, float] | None = None  # None: the topology's [task] goal
+    reward: str = "shaped"
+    placement: str = "process"
+    listen: str = "tcp/127.0.0.1:7447"
+    from_dir: str | None = None
+    learn: bool = True
+    explore: bool = True
+    deadline_ms: int = 500
+    action_deg: float = 1.0
+    checkpoint_every: int = 10
+    controller: str = "agents"
+    learner: dict[str, Any] = field(default_factory=dict)  # LearnerSettings overrides
+
+    def __post_init__(self) -> None:
+        check_id("run id", self.run_id)
+        for name, lo in (("epochs", 1), ("steps", 1), ("deadline_ms", 1), ("checkpoint_every", 0)):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int) or v < lo:
+                raise ConfigError(f"{name}: expected an integer >= {lo}, got {v!r}")
+        if self.reward not in REWARDS:
+            raise ConfigError(f"reward: {self.reward!r} is not one of {', '.join(REWARDS)}")
+        if self.placement not in PLACEMENTS:
+            raise ConfigError(f"placement: {self.placement!r} is not one of {', '.join(PLACEMENTS)}")
+        if self.controller not in CONTROLLERS:
+            raise ConfigError(f"controller: {self.controller!r} is not one of {', '.join(CONTROLLERS)}")
+        if not (isinstance(self.action_deg, (int, float)) and 0 < self.action_deg <= 45):
+            raise ConfigError(f"action_deg: expected a number in (0, 45], got {self.action_deg!r}")
+        if self.goal is not None and (len(self.goal) != 2 or not all(math.isfinite(g) for g in self.goal)):
+            raise ConfigError(f"goal: expected two finite numbers, got {self.goal!r}")
+
+    @property
+    def action_rad(self) -> float:
+        return math.radians(self.action_deg)
+
+    def topo(self) -> Topology:
+        return load_topology(self.topology)
+
+    def resolved_goal(self, topo: Topology) -> tuple[float, float]:
+        goal = self.goal if self.goal is not None else topo.goal
+        if goal is None:
+            raise ConfigError(f"no goal: pass --goal X,Y or give [task] goal in {topo.source}")
+        return (float(goal[0]), float(goal[1]))
+
+    def to_json(self) -> str:
+        return json.dumps(dataclasses.asdict(self), indent=2)
+
+    def write(self, path: Path) -> None:
+        path.write_text(self.to_json() + "\n")
+
+
+def load_run_config(path: str | Path) -> RunConfig:
+    try:
+        data = json.loads(Path(path).read_text())
+    except (OSError, json.JSONDecodeError) as e:
+        raise ConfigError(f"{path}: cannot read run config: {e}") from None
+    if not isinstance(data, dict):
+        raise ConfigError(f"{path}: expected a JSON object")
+    known = {f.name for f in dataclasses.fields(RunConfig)}
+    unknown = set(data) - known
+    if unknown:
+        raise ConfigError(f"{path}: unknown field {sorted(unknown)[0]!r}")
+    if data.get("goal") is not None:
+        data["goal"] = tuple(data["goal"])
+    try:
+        return RunConfig(**data)
+    except TypeError as e:
+        raise ConfigError(f"{path}: {e}") from None

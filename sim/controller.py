@@ -1,0 +1,54 @@
+"""The model-based baseline as an actor: it takes the place of the agents on the same wire — reads the
+same encoder readings and task observation, and sends one `cmd` per joint — so learned and
+model-based runs go through the same simulator, deadlines and metrics."""
+
+from __future__ import annotations
+
+from kinswarm.actors.config import RunConfig
+from kinswarm.actors.runtime import Node
+from kinswarm.protocol.messages import Cmd, Obs, Stop, Task
+from kinswarm.protocol.topology import Topology
+from kinswarm.sim.baseline import pinv_increments
+
+
+class BaselineController:
+    def __init__(self, cfg: RunConfig, topo: Topology, node: Node) -> None:
+        self.cfg, self.topo, self.node, self.keys = cfg, topo, node, node.keys
+        self.dof = topo.dof_agents
+        self.q: dict[tuple[int, int], dict[str, float]] = {}
+        self.task: dict[tuple[int, int], Task] = {}
+
+    def outputs(self) -> list[str]:
+        return [self.keys.cmd(a) for a in self.dof]
+
+    async def run(self) -> None:
+        node, k = self.node, self.keys
+        node.listen(k.ctl_all)
+        node.listen(k.task)
+        for a in self.dof:
+            node.listen(k.obs(a))
+        await node.wait_matched(self.outputs(), timeout=30.0)
+        node.declare_alive()
+        while True:
+            key, payload = await node.recv()
+            if key == k.task:
+                if (t := node.decode(key, payload, Task)) is not None:
+                    self.task[(t.epoch, t.step)] = t
+                    self._try((t.epoch, t.step))
+            elif key == k.ctl("stop"):
+                if node.decode(key, payload, Stop) is not None:
+                    return
+            elif "/sim/obs/" in key:
+                if (o := node.decode(key, payload, Obs)) is not None:
+                    self.q.setdefault((o.epoch, o.step), {})[k.last_chunk(key)] = o.q
+                    self._try((o.epoch, o.step))
+
+    def _try(self, step: tuple[int, int]) -> None:
+        q, task = self.q.get(step, {}), self.task.get(step)
+        if task is None or len(q) < len(self.dof):
+            return
+        self.q = {s: v for s, v in self.q.items() if s > step}
+        self.task = {s: v for s, v in self.task.items() if s > step}
+        dq = pinv_increments(self.topo, q, task.goal, max_step=self.cfg.action_rad)
+        for a in self.dof:
+            self.node.send(self.keys.cmd(a), Cmd(epoch=step[0], step=step[1], delta=dq[a]))
