@@ -7,20 +7,36 @@ a fresh interpreter, the Zenoh session opened inside the child). `build_actor` i
 
 from __future__ import annotations
 
-import argparse
-import asyncio
 import ctypes
-import logging
 import os
 import signal
 import sys
-from pathlib import Path
-from typing import Any, Protocol
 
-from kinswarm.actors.config import RunConfig, load_run_config
-from kinswarm.actors.runtime import Node, open_session, setup_logging
-from kinswarm.protocol.keys import Keys
-from kinswarm.protocol.topology import Topology
+
+def _die_with_parent(parent: int) -> None:
+    """Linux: get SIGTERM when the supervisor dies, even by SIGKILL, so no actor is orphaned. Done
+    before the heavy imports; a supervisor that died before this point is caught by the ppid check."""
+    try:
+        ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
+    except OSError:
+        pass
+    if os.getppid() != parent:
+        os._exit(3)
+
+
+if __name__ == "__main__" and "--parent" in sys.argv:
+    _die_with_parent(int(sys.argv[sys.argv.index("--parent") + 1]))
+
+import argparse  # noqa: E402
+import asyncio  # noqa: E402
+import logging  # noqa: E402
+from pathlib import Path  # noqa: E402
+from typing import Any, Protocol  # noqa: E402
+
+from kinswarm.actors.config import RunConfig, load_run_config  # noqa: E402
+from kinswarm.actors.runtime import Node, open_session, setup_logging  # noqa: E402
+from kinswarm.protocol.keys import Keys  # noqa: E402
+from kinswarm.protocol.topology import Topology  # noqa: E402
 
 ROLES = ("agent", "sim", "controller")
 
@@ -48,19 +64,10 @@ def build_actor(role: str, ident: str, cfg: RunConfig, topo: Topology, node: Nod
     raise ValueError(f"unknown role {role!r}; expected one of {', '.join(ROLES)}")
 
 
-def _die_with_parent() -> None:
-    """Linux: get SIGTERM when the supervisor dies, even by SIGKILL, so no actor is orphaned."""
-    try:
-        libc = ctypes.CDLL("libc.so.6", use_errno=True)
-        libc.prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
-    except OSError:
-        pass
-
-
 async def _serve(role: str, ident: str, cfg: RunConfig, connect: str, parent_pid: int) -> None:
     log = logging.getLogger(f"kinswarm.{role}.{ident}")
     topo = cfg.topo()
-    session = open_session(listen=["tcp/127.0.0.1:0"], connect=[connect])
+    session = open_session(listen=["tcp/127.0.0.1:0"], connect=[connect], must_connect=True)
     loop = asyncio.get_running_loop()
     task = asyncio.current_task()
     assert task is not None
@@ -101,10 +108,10 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("ident")
     p.add_argument("config", type=Path)
     p.add_argument("--connect", required=True, help="the supervisor's endpoint")
+    p.add_argument("--parent", type=int, default=None, help="the supervisor's pid: leave when it is gone")
     p.add_argument("--log-level", default="INFO")
     a = p.parse_args(argv)
-    _die_with_parent()
-    parent = os.getppid()
+    parent = a.parent if a.parent is not None else os.getppid()
     setup_logging(a.log_level)
     sys.setswitchinterval(0.0005)  # zenoh callbacks need the GIL promptly (shared notes: p99 10 -> 3 ms)
     try:

@@ -32,6 +32,7 @@ def zenoh_config(
     connect: Iterable[str] = (),
     mode: str = "peer",
     lease_ms: int = LEASE_MS,
+    must_connect: bool = False,
 ) -> zenoh.Config:
     """The one place a Zenoh config is built. Multicast scouting is off: peers find each other only
     through the endpoints given (and gossip among themselves), never across the network by accident."""
@@ -41,15 +42,18 @@ def zenoh_config(
     c.insert_json5("connect/endpoints", json.dumps(list(connect)))
     c.insert_json5("scouting/multicast/enabled", "false")
     c.insert_json5("transport/link/tx/lease", str(lease_ms))
+    if must_connect:  # an actor whose supervisor is unreachable fails instead of retrying forever
+        c.insert_json5("connect/timeout_ms", "10000")
+        c.insert_json5("connect/exit_on_failure", "true")
     return c
 
 
 def open_session(
-    *, listen: Iterable[str] = (), connect: Iterable[str] = (), mode: str = "peer"
+    *, listen: Iterable[str] = (), connect: Iterable[str] = (), mode: str = "peer", must_connect: bool = False
 ) -> zenoh.Session:
     """The one session factory. An actor process listens on a fresh loopback port so the others can
     reach it directly (gossip spreads the locator), and connects to the supervisor's endpoint."""
-    return zenoh.open(zenoh_config(listen=listen, connect=connect, mode=mode))
+    return zenoh.open(zenoh_config(listen=listen, connect=connect, mode=mode, must_connect=must_connect))
 
 
 class Mailbox:

@@ -1,0 +1,49 @@
+"""Shared fixtures: free loopback ports, the example topologies, a quick run config."""
+
+from __future__ import annotations
+
+import os
+import socket
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+EXAMPLES = ROOT / "examples"
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@pytest.fixture
+def endpoint() -> str:
+    return f"tcp/127.0.0.1:{free_port()}"
+
+
+@pytest.fixture
+def chain4() -> Path:
+    return EXAMPLES / "chain4.toml"
+
+
+@pytest.fixture
+def tree5() -> Path:
+    return EXAMPLES / "tree5.toml"
+
+
+def swarm_pids(marker: str) -> list[int]:
+    """PIDs of live processes whose command line mentions `marker` (a run's config path)."""
+    pids = []
+    for d in os.listdir("/proc"):
+        if not d.isdigit() or int(d) == os.getpid():
+            continue
+        try:
+            cmd = Path(f"/proc/{d}/cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace")
+            state = Path(f"/proc/{d}/stat").read_text().split()[2]
+        except OSError:
+            continue
+        if marker in cmd and state != "Z":
+            pids.append(int(d))
+    return pids
