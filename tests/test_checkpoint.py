@@ -1,6 +1,5 @@
 import numpy as np
 import pytest
-
 from kinswarm.actors.checkpoint import CheckpointError, load_checkpoint, save_checkpoint
 
 

@@ -2,7 +2,6 @@ import math
 
 import msgpack
 import pytest
-
 from kinswarm.protocol import codec
 from kinswarm.protocol.keys import Keys, check_id
 from kinswarm.protocol.messages import (

@@ -1,7 +1,6 @@
 import math
 
 import pytest
-
 from kinswarm.protocol.topology import TopologyError, load_topology
 
 

@@ -4,7 +4,6 @@ import math
 
 import numpy as np
 import pytest
-
 from kinswarm.actors.learning.state import agent_state, joint_frame, link_end
 from kinswarm.protocol.topology import load_topology
 from kinswarm.sim import kinematics

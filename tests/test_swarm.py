@@ -13,7 +13,6 @@ from pathlib import Path
 
 import pytest
 import zenoh
-
 from conftest import free_port, swarm_pids
 from kinswarm.actors.cli import main as cli_main
 from kinswarm.actors.config import RunConfig
