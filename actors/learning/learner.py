@@ -36,7 +36,8 @@ class Learner:
         self.epoch = 0
         self.lr = settings.lr
         self.t = 0
-        self._pending: tuple[np.ndarray, np.ndarray, int] | None = None
+        # (rules, their phi rows or -1, w = O / sum O, joint action) of s(t-1), a(t-1)
+        self._pending: tuple[np.ndarray, np.ndarray, np.ndarray, int] | None = None
 
     # -- epochs ---------------------------------------------------------------------------------
     def start_epoch(self, epoch: int) -> None:
@@ -81,8 +82,8 @@ class Learner:
 
         # (a) TD update of the previous transition with s(t) as s' (Eqs. 5-6).
         if learn and reward is not None and self._pending is not None:
-            p_rules, p_w, p_joint = self._pending
-            p_rows = self.q.touch(p_rules)  # creates phi = 0 rows, so Q(s, a) below is unchanged
+            p_rules, p_rows, p_w, p_joint = self._pending
+            p_rows = self.q.touch(p_rules, p_rows)  # creates phi = 0 rows, so Q(s, a) below is unchanged
             q_sa = float(p_w @ self.q.phi[p_rows, p_joint])  # Q(s(t-1), a(t-1)), Eq. 2
             boot = self._bootstrap(q_now, P)
             delta = self.q.td_delta(q_sa, float(reward), boot, self.lr, st.gamma)  # Eq. 5
@@ -102,7 +103,7 @@ class Learner:
             self.counts[j, b] += 1.0
 
         # (d) remember (s(t), joint action(t)) for the next update.
-        self._pending = (rules, w, self.joint_index(a, visible_actions))
+        self._pending = (rules, rows, w, self.joint_index(a, visible_actions))
         self.t += 1
         return a
 

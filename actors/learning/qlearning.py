@@ -35,9 +35,12 @@ class SparseFuzzyQ:
         rules_list = rules.tolist()
         return np.array(list(map(self.index.get, rules_list, repeat(-1, len(rules_list)))), dtype=np.int64)
 
-    def touch(self, rules: np.ndarray) -> np.ndarray:
-        """Rows for rules, creating zero rows (phi = 0) for rules seen for the first time."""
-        rows = self.lookup(rules)
+    def touch(self, rules: np.ndarray, rows: np.ndarray | None = None) -> np.ndarray:
+        """Rows for rules, creating zero rows (phi = 0) for rules seen for the first time.
+
+        rows: a previous lookup() of the same rules (rows are never removed, so only -1 entries can be stale).
+        """
+        rows = self.lookup(rules) if rows is None else rows.copy()
         missing = np.flatnonzero(rows < 0)
         if len(missing):
             idx = self.index
