@@ -53,6 +53,8 @@ def test_counts_joint_index_and_lr_decay():
     assert ln.t == 0 and ln.lr == pytest.approx(st.lr * (1 - st.lr_decay) ** 2)
     with pytest.raises(ValueError, match="visible"):
         ln.step(S0, None, [1])
+    with pytest.raises(ValueError, match="visible action 3"):
+        ln.step(S0, None, [1, 3])
 
 
 def test_greedy_ties_random_at_start():

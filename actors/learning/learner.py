@@ -100,6 +100,8 @@ class Learner:
 
         # (c) fictitious play: count what the visible agents did (Eq. 7 next time).
         for j, b in enumerate(visible_actions):
+            if not 0 <= b < self.n_actions:
+                raise ValueError(f"visible action {b!r} of agent {j} is not in [0, {self.n_actions})")
             self.counts[j, b] += 1.0
 
         # (d) remember (s(t), joint action(t)) for the next update.
