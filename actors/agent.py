@@ -18,7 +18,6 @@ import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import numpy as np
 from kinswarm.actors.checkpoint import load_checkpoint, save_checkpoint
 from kinswarm.actors.config import RunConfig
 from kinswarm.actors.learning.learner import Learner
@@ -64,9 +63,7 @@ class Agent:
         self.learner: Learner | None = None
         self.epochs_before = 0  # epochs trained before this run (from --from), for the lr schedule
         if self.spec.has_dof:
-            self.learner = Learner(
-                learner_settings(cfg, topo), len(self.visible), agent_seed(cfg.seed, agent_id)
-            )
+            self.learner = Learner(learner_settings(cfg, topo), len(self.visible), agent_seed(cfg.seed, agent_id))
         self.epoch = -1
         self.last_begun: Key = (-1, -1)
         self.current: _Step | None = None
@@ -167,9 +164,7 @@ class Agent:
         frame = joint_frame(base, self.spec.offset, q)
         end = link_end(frame, self.spec.link_length)
         for c in self.spec.children:
-            self.node.send(
-                self.keys.down(c), Down(epoch=epoch, step=step, base=end, goal=goal, reward=reward)
-            )
+            self.node.send(self.keys.down(c), Down(epoch=epoch, step=step, base=end, goal=goal, reward=reward))
         self.current = _Step(key, frame, end, q, goal, reward, self.ups_early.pop(key, {}))
         self.ups_early = {kk: v for kk, v in self.ups_early.items() if kk > key}
         self._try_finish()
@@ -177,9 +172,7 @@ class Agent:
     def _on_up(self, m: Up, key_expr: str) -> None:
         child = self._child_of(m) if m.tips else None
         if child is None:
-            self.node.log.warning(
-                "rejected up on %s: tips %s are not from one of my children", key_expr, list(m.tips)
-            )
+            self.node.log.warning("rejected up on %s: tips %s are not from one of my children", key_expr, list(m.tips))
             return
         key = (m.epoch, m.step)
         if self.current is not None and self.current.key == key:
@@ -210,13 +203,9 @@ class Agent:
             tip = _centroid([tips[leaf] for leaf in self.leaves])
             s = agent_state(cur.frame, cur.q, tip, cur.goal)
             visible_actions = [cur.ups[c].action for c in self.visible]
-            action = self.learner.step(
-                s, cur.reward, visible_actions, learn=self.cfg.learn, explore=self.cfg.explore
-            )
+            action = self.learner.step(s, cur.reward, visible_actions, learn=self.cfg.learn, explore=self.cfg.explore)
         if not self.is_root:
-            self.node.send(
-                self.keys.up(self.spec.parent), Up(epoch=epoch, step=step, tips=tips, action=action)
-            )  # type: ignore[arg-type]
+            self.node.send(self.keys.up(self.spec.parent), Up(epoch=epoch, step=step, tips=tips, action=action))  # type: ignore[arg-type]
         if self.learner is not None:
             delta = (action - 1) * self.cfg.action_rad  # actions 0, 1, 2: decrease, keep, increase
             self.node.send(self.keys.cmd(self.id), Cmd(epoch=epoch, step=step, delta=delta))
@@ -244,10 +233,12 @@ class Agent:
 
 
 def _centroid(points: list) -> tuple[float, float]:
+    if len(points) == 1:  # a chain: the end effector itself
+        return (points[0][0], points[0][1])
     if not points:
         return (math.nan, math.nan)
-    a = np.asarray(points, dtype=float)[:, :2]
-    return (float(a[:, 0].mean()), float(a[:, 1].mean()))
+    n = len(points)
+    return (sum(p[0] for p in points) / n, sum(p[1] for p in points) / n)
 
 
 def _distance(p: tuple[float, float], goal: tuple[float, float]) -> float:

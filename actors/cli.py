@@ -39,12 +39,15 @@ def _add_common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--epochs", type=int, default=60)
     p.add_argument("--steps", type=int, default=500, help="steps per epoch")
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--goal", type=_goal, default=None, help="X,Y (default: the topology's [task] goal)")
+    p.add_argument(
+        "--goal",
+        type=_goal,
+        default=None,
+        help="X,Y (default: the topology's [task] goal); write --goal=-5,7 when X is negative",
+    )
     p.add_argument("--placement", choices=PLACEMENTS, default="process")
     p.add_argument("--run-id", default=None)
-    p.add_argument(
-        "--listen", default=DEFAULT_LISTEN, help=f"the supervisor's endpoint (default {DEFAULT_LISTEN})"
-    )
+    p.add_argument("--listen", default=DEFAULT_LISTEN, help=f"the supervisor's endpoint (default {DEFAULT_LISTEN})")
     p.add_argument("--out", type=Path, default=None, help="run directory (default runs/<run-id>)")
     p.add_argument("--deadline-ms", type=int, default=500, help="per-step deadline; a missing cmd holds")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -52,21 +55,15 @@ def _add_common(p: argparse.ArgumentParser) -> None:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(
-        prog="kinswarm", description="A swarm of per-joint learning agents over Zenoh."
-    )
+    p = argparse.ArgumentParser(prog="kinswarm", description="A swarm of per-joint learning agents over Zenoh.")
     sub = p.add_subparsers(dest="command", required=True)
     run = sub.add_parser("run", help="train (or evaluate) a swarm of agents on a topology")
     _add_common(run)
     run.add_argument("--reward", choices=REWARDS, default="shaped")
-    run.add_argument(
-        "--from", dest="from_dir", type=Path, default=None, help="start from a run's checkpoints"
-    )
+    run.add_argument("--from", dest="from_dir", type=Path, default=None, help="start from a run's checkpoints")
     run.add_argument("--learn", type=_on_off, default=True, metavar="on|off")
     run.add_argument("--explore", type=_on_off, default=True, metavar="on|off")
-    run.add_argument(
-        "--checkpoint-every", type=int, default=10, help="epochs between checkpoints (0: last only)"
-    )
+    run.add_argument("--checkpoint-every", type=int, default=10, help="epochs between checkpoints (0: last only)")
     base = sub.add_parser("baseline", help="drive the same simulator with the pseudo-inverse controller")
     _add_common(base)
     rep = sub.add_parser("report", help="rebuild a run's summary plots")

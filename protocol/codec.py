@@ -28,10 +28,15 @@ class DecodeError(ValueError):
     """A payload that is not a valid message of the expected kind; str(e) is the reason."""
 
 
+@cache
+def _field_names(cls: type) -> tuple[str, ...]:
+    return tuple(f.name for f in dataclasses.fields(cls))
+
+
 def encode(msg: Any, run: str, src: str) -> bytes:
     body = {"v": SCHEMA_VERSION, "kind": msg.KIND, "run": run, "src": src}
-    for f in dataclasses.fields(msg):
-        body[f.name] = getattr(msg, f.name)
+    for name in _field_names(type(msg)):
+        body[name] = getattr(msg, name)
     return msgpack.packb(body, use_bin_type=True)
 
 

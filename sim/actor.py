@@ -29,6 +29,7 @@ class SimActor:
         self.t = 0
         self.cmds: dict[str, float] = {}
         self.errors: list[float] = []
+        self.tips: dict[str, tuple[float, float, float]] = {}
         self.missed = 0
         self.started = 0.0
         self._deadline: asyncio.TimerHandle | None = None
@@ -65,6 +66,7 @@ class SimActor:
     def _on_epoch(self, e: EpochStart) -> None:
         self.epoch = e
         self.world.reset()
+        self.tips = self.world.tip_poses()
         self.t = 0
         self.errors = []
         self.missed = 0
@@ -87,9 +89,7 @@ class SimActor:
         if e is not None and token == f"{e.epoch}/{self.t}".encode():
             missing = sorted(set(self.dof) - set(self.cmds))
             self.missed += len(missing)
-            self.node.log.warning(
-                "step %d/%d: no cmd from %s by the deadline; they hold", e.epoch, self.t, missing
-            )
+            self.node.log.warning("step %d/%d: no cmd from %s by the deadline; they hold", e.epoch, self.t, missing)
             self._advance()
 
     # -- the step ----------------------------------------------------------------------------------
@@ -97,16 +97,14 @@ class SimActor:
         e = self.epoch
         assert e is not None
         k, send = self.keys, self.node.send
-        send(k.task, Task(epoch=e.epoch, step=self.t, goal=e.goal, tips=self.world.tip_poses()))
+        send(k.task, Task(epoch=e.epoch, step=self.t, goal=e.goal, tips=self.tips))
         q = self.world.joint_positions()
         for a in self.dof:
             send(k.obs(a), Obs(epoch=e.epoch, step=self.t, q=q[a]))
         self.cmds = {}
         token = f"{e.epoch}/{self.t}".encode()
         loop = asyncio.get_running_loop()
-        self._deadline = loop.call_later(
-            self.cfg.deadline_ms / 1000, self.node.mailbox.push, "__deadline__", token
-        )
+        self._deadline = loop.call_later(self.cfg.deadline_ms / 1000, self.node.mailbox.push, "__deadline__", token)
 
     def _advance(self) -> None:
         e = self.epoch
@@ -115,6 +113,7 @@ class SimActor:
             self._deadline.cancel()
             self._deadline = None
         self.world.apply_increments(self.cmds)
+        self.tips = self.world.tip_poses()
         self.errors.append(self.error())
         self.t += 1
         if self.t < e.steps:
@@ -138,7 +137,7 @@ class SimActor:
     def error(self) -> float:
         """End-effector distance to the goal (the centroid of the end effectors for a tree)."""
         assert self.epoch is not None
-        tips = list(self.world.tip_poses().values())
+        tips = list(self.tips.values())
         x = sum(p[0] for p in tips) / len(tips)
         y = sum(p[1] for p in tips) / len(tips)
         return math.hypot(x - self.epoch.goal[0], y - self.epoch.goal[1])

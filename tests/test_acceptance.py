@@ -46,6 +46,6 @@ def chain4_from(start_deg: tuple[float, ...], path: Path) -> Path:
 )
 def test_other_goals_and_starts(tmp_path, goal, start):
     topo = chain4_from(start, tmp_path / "start.toml")
-    errs = last20(topo, tmp_path / "run", 0, ["--goal", goal])
+    errs = last20(topo, tmp_path / "run", 0, [f"--goal={goal}"])
     assert sum(e <= 0.5 for e in errs) >= 16, errs
     assert statistics.median(errs) <= 0.15, errs
