@@ -44,6 +44,12 @@ class LearnerSettings:
             "expected" = max over own actions of E(s', .) (Eq. 9), i.e. what the agent can choose.
         count_prior: initial fictitious-play count of every action, so Eq. 7 is defined at the start.
         n_actions: own actions (0 decrease, 1 keep, 2 increase).
+
+    Tuning (planar 4R chain, links 3, goal (4.16, 6.18), 60 epochs x 500 steps, 3 seeds): with the shaped
+    reward every variant tried met the target (>= 80% of the last 20 epochs within 0.5, median <= 0.15)
+    except bootstrap="joint_max" (one seed median 0.43). s = 0.05 gave the lowest medians (~0.04) and also
+    passes with the strict reward, where lr 0.1/0.3/0.7 and s 0.02 did not; the paper's lr 0.1,
+    s 0.35, T_max 100 fails with any reward but shaped.
     """
 
     n_sets: tuple[int, ...] = (20, 20, 13, 7, 7, 7)
@@ -54,7 +60,7 @@ class LearnerSettings:
     lr: float = 0.5
     lr_decay: float = 1.0 / 1050.0
     T_max: float = 10.0
-    s: float = 0.01
+    s: float = 0.05  # T(t) - 1 falls to ~8% by t = 50 of 500 steps: exploration tapers within the epoch
     epsilon: float = 1.0
     bootstrap: str = "expected"
     count_prior: float = 1.0
