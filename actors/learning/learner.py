@@ -73,6 +73,9 @@ class Learner:
         """Learn from the previous transition, choose this agent's action a(t) (0 dec, 1 keep, 2 inc)."""
         if len(visible_actions) != self.n_visible:
             raise ValueError(f"expected {self.n_visible} visible actions, got {len(visible_actions)}")
+        for j, b in enumerate(visible_actions):  # validate before any state changes
+            if not 0 <= b < self.n_actions:
+                raise ValueError(f"visible action {b!r} of agent {j} is not in [0, {self.n_actions})")
         st = self.settings
         rules, O = self.fuzzy.activate(state)  # noqa: E741 -- the paper's O^i
         P = jasm.probabilities(self.counts) if self.n_visible else np.zeros((0, self.n_actions))
@@ -100,8 +103,6 @@ class Learner:
 
         # (c) fictitious play: count what the visible agents did (Eq. 7 next time).
         for j, b in enumerate(visible_actions):
-            if not 0 <= b < self.n_actions:
-                raise ValueError(f"visible action {b!r} of agent {j} is not in [0, {self.n_actions})")
             self.counts[j, b] += 1.0
 
         # (d) remember (s(t), joint action(t)) for the next update.
