@@ -8,7 +8,14 @@ import math
 
 import numpy as np
 import pytest
-from kinswarm.actors.learning import Learner, LearnerSettings, agent_state, joint_frame, link_end, reach_reward
+from kinswarm.actors.learning import (
+    Learner,
+    LearnerSettings,
+    agent_state,
+    joint_frame,
+    link_end,
+    reach_reward,
+)
 
 LINK, N, STEP = 3.0, 4, math.radians(1.0)
 
