@@ -106,13 +106,18 @@ def test_malformed_messages_are_rejected_and_the_run_goes_on(tmp_path, chain4):
     assert "not msgpack" in logs and "schema version 99" in logs
 
 
+def start_long_run(topology: Path, endpoint: str, out: Path) -> subprocess.Popen:
+    """`kinswarm run` as a user starts it, long enough to be stopped from outside."""
+    return subprocess.Popen(
+        [sys.executable, "-m", "kinswarm.actors.cli", "run", str(topology), "--epochs", "1000", "--steps", "200",
+         "--listen", endpoint, "--out", str(out), "--no-progress"],
+        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+    )
+
+
 def test_ctrl_c_stops_everything(tmp_path, chain4, endpoint):
     out = tmp_path / "c"
-    p = subprocess.Popen(
-        [sys.executable, "-m", "kinswarm.actors.cli", "run", str(chain4), "--epochs", "1000", "--steps", "200",
-         "--listen", endpoint, "--out", str(out), "--no-progress"],
-        stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-    )
+    p = start_long_run(chain4, endpoint, out)
     try:
         deadline = time.monotonic() + 60
         while time.monotonic() < deadline:
@@ -135,11 +140,7 @@ def test_ctrl_c_stops_everything(tmp_path, chain4, endpoint):
 
 def test_killed_supervisor_leaves_no_orphans(tmp_path, chain4, endpoint):
     out = tmp_path / "k"
-    p = subprocess.Popen(
-        [sys.executable, "-m", "kinswarm.actors.cli", "run", str(chain4), "--epochs", "1000", "--steps", "200",
-         "--listen", endpoint, "--out", str(out), "--no-progress"],
-        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-    )
+    p = start_long_run(chain4, endpoint, out)
     try:
         deadline = time.monotonic() + 60
         while time.monotonic() < deadline and len(swarm_pids(str(out))) < 6:
