@@ -75,6 +75,29 @@ class FuzzyPartition:
         # Which of the k kept sets each of the k^n combinations takes, per variable.
         self._combos = np.array(list(itertools.product(range(self.top_k), repeat=n_vars)), dtype=np.int64)
         self._rows = np.arange(n_vars)
+        # Buffers of activate()'s membership evaluation (same Eq. 3 arithmetic as memberships(), fewer calls).
+        # L is written only at real boundaries (_real); the other L columns are constants chosen so that
+        # mu = L_{b_{j-1}} - L_{b_j} is 0 - (-1) ... = -1 at padded sets (memberships() adds -1 there) and
+        # L_{b_{m-1}} = 0. memberships() has ~1e-304 there (capped exponent), which cannot change
+        # L_{b_{m-2}} - L_{b_{m-1}} as long as L_{b_{m-2}} > 1e-280: _exact_fast checks that bound.
+        self._real = np.arange(bounds.shape[1])[None, :] < (self.n_sets - 1)[:, None]
+        self._L = np.zeros((n_vars, width + 1))
+        self._L[:, 0] = 1.0  # L_{b_{-1}} = 1
+        for v, m in enumerate(settings.n_sets):
+            self._L[v, m + 1 :] = np.arange(1, width + 1 - m)  # L_{b_m}, L_{b_m+1}, ... = 1, 2, ... -> mu = -1
+        self._L_real = self._L[:, 1:-1]  # view: L at b_0 .. b_{width-2}
+        self._L_lo, self._L_hi = self._L[:, :-1], self._L[:, 1:]  # views: mu_j = L_lo[j] - L_hi[j]
+        self._mu = np.empty((n_vars, width))
+        self._arg = np.empty(bounds.shape)
+        smallest_L = 1.0 / (1.0 + np.exp(np.where(self._real, sigma[:, None] * (bounds - lo[:, None]), 0.0)))
+        self._exact_fast = width >= 2 and bool(smallest_L.min() > 1e-280)
+        # Index tables for activate(): entry (v, j) of a (n_vars, width) array sits at flat position
+        # v * width + j, so "kept set c of variable v in fired rule i" is flat position _combo_at[v, i]
+        # of the argpartition result, and set j of variable v is flat position v * width + j of mu.
+        # Variables run along axis 0 so the product of Eq. 4 is 5 elementwise multiplies, left to right.
+        self._row_start = (self._rows * width)[:, None]
+        self._combo_at = np.ascontiguousarray((self._rows * width + self._combos).T)
+        self._rule_offset = int((self._rows * width) @ strides)
 
     def memberships(self, state: np.ndarray) -> np.ndarray:
         """Memberships (n_vars, max(n_sets)) of each variable in its sets (Eq. 3); padded sets hold -1."""
@@ -87,12 +110,36 @@ class FuzzyPartition:
         # set j = L_{b_{j-1}} - L_{b_j} with L_{b_{-1}} = 1 and L_{b_{m-1}} = 0: a partition of unity.
         return (buf[:, :-1] - buf[:, 1:])[:, : self._width] + self._pad_offset
 
+    def _memberships_fast(self, state: np.ndarray) -> np.ndarray:
+        """memberships() bit for bit in fewer numpy calls, into a reused buffer (valid until the next call)."""
+        if not self._exact_fast:
+            return self.memberships(state)
+        x = np.minimum(np.maximum(np.asarray(state, dtype=np.float64), self._lo), self._hi)[:, None]
+        arg = np.multiply(self._sigma, np.subtract(self._bounds, x, out=self._arg), out=self._arg)
+        e = np.exp(arg, out=arg)
+        e += 1.0
+        np.divide(1.0, e, out=self._L_real, where=self._real)  # Eq. 3: 1 / (1 + rho e^(-sigma x))
+        return np.subtract(self._L_lo, self._L_hi, out=self._mu)  # set j = L_{b_{j-1}} - L_{b_j}
+
     def activate(self, state: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Sparse rule activation: (flat rule indices int64[k^n], O float64[k^n]) for the fired rules.
 
         O^i is the product over variables of the kept memberships (Eq. 4); the index is row-major in
         the full grid over n_sets.
         """
+        mu = self._memberships_fast(state)
+        if self.top_k < mu.shape[1]:
+            top = np.argpartition(-mu, self.top_k - 1, axis=1)  # the first top_k columns hold the kept sets
+        else:
+            top = np.broadcast_to(np.arange(mu.shape[1]), mu.shape)
+        # flat mu position of the set each fired rule takes per variable: (n_vars, k^n)
+        at = (top + self._row_start).take(self._combo_at)
+        O = mu.take(at).prod(axis=0)  # noqa: E741 -- Eq. 4: prod_v mu_v, same order as prod(axis=1) per rule
+        rules = self.strides @ at - self._rule_offset  # row-major index in the full grid
+        return rules, O
+
+    def activate_reference(self, state: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """activate() as first written, with explicit fancy indexing; kept as the reference for tests."""
         mu = self.memberships(state)
         k = self.top_k
         if k < mu.shape[1]:

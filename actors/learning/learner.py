@@ -33,11 +33,12 @@ class Learner:
         self.q = SparseFuzzyQ(self.n_joint)
         # Fictitious-play counts C^i(alpha_k^j) (Eq. 7), started at count_prior so P is defined.
         self.counts = np.full((self.n_visible, self.n_actions), settings.count_prior)
+        self._no_visible = np.zeros((0, self.n_actions))  # P (Eq. 7) when no agent is visible
         self.epoch = 0
         self.lr = settings.lr
         self.t = 0
-        # (rules, their phi rows or -1, w = O / sum O, joint action) of s(t-1), a(t-1)
-        self._pending: tuple[np.ndarray, np.ndarray, np.ndarray, int] | None = None
+        # (rules, their phi rows or -1, w = O / sum O, joint action) of s(t-1), a(t-1); rules and rows as lists
+        self._pending: tuple[list[int], list[int], np.ndarray, int] | None = None
 
     # -- epochs ---------------------------------------------------------------------------------
     def start_epoch(self, epoch: int) -> None:
@@ -78,22 +79,27 @@ class Learner:
                 raise ValueError(f"visible action {b!r} of agent {j} is not in [0, {self.n_actions})")
         st = self.settings
         rules, O = self.fuzzy.activate(state)  # noqa: E741 -- the paper's O^i
-        P = jasm.probabilities(self.counts) if self.n_visible else np.zeros((0, self.n_actions))
+        rules_list = rules.tolist()
+        P = jasm.probabilities(self.counts) if self.n_visible else self._no_visible
         w = O / O.sum()  # O^i / sum_i O^i: the weight of rule i in Eq. 2 and its gradient in Eq. 6
-        rows = self.q.lookup(rules)
-        q_now = self.q.q_rows(rows, w)  # Q(s(t), .), Eq. 2
+        rows_list = self.q.row_list(rules_list)  # phi rows, -1 for rules never updated
+        complete = -1 not in rows_list
+        rows = np.array(rows_list, dtype=np.int64)
+        q_now = self.q.q_rows(rows, w, complete)  # Q(s(t), .), Eq. 2
 
         # (a) TD update of the previous transition with s(t) as s' (Eqs. 5-6).
         if learn and reward is not None and self._pending is not None:
-            p_rules, p_rows, p_w, p_joint = self._pending
-            p_rows = self.q.touch(p_rules, p_rows)  # creates phi = 0 rows, so Q(s, a) below is unchanged
+            p_rules, p_rows_list, p_w, p_joint = self._pending
+            p_rows = self.q.touch_list(p_rules, p_rows_list)  # creates phi = 0 rows: Q(s, a) below is unchanged
             q_sa = float(p_w @ self.q.phi[p_rows, p_joint])  # Q(s(t-1), a(t-1)), Eq. 2
             boot = self._bootstrap(q_now, P)
             delta = self.q.td_delta(q_sa, float(reward), boot, self.lr, st.gamma)  # Eq. 5
             self.q.update_rows(p_rows, p_w, p_joint, delta)  # Eq. 6
-            if rows.min() < 0:
-                rows = self.q.lookup(rules)  # s(t) may share rules just created for s(t-1)
-            q_now = self.q.q_rows(rows, w)
+            if not complete:  # s(t) may share rules just created for s(t-1)
+                rows_list = self.q.row_list(rules_list)
+                complete = -1 not in rows_list
+                rows = np.array(rows_list, dtype=np.int64)
+            q_now = self.q.q_rows(rows, w, complete)
 
         # (b) JASM: E (Eq. 9), Boltzmann pi (Eq. 8), epsilon-decreasing choice.
         E = jasm.expected_values(q_now, P, self.n_actions)
@@ -106,7 +112,7 @@ class Learner:
             self.counts[j, b] += 1.0
 
         # (d) remember (s(t), joint action(t)) for the next update.
-        self._pending = (rules, rows, w, self.joint_index(a, visible_actions))
+        self._pending = (rules_list, rows_list, w, self.joint_index(a, visible_actions))
         self.t += 1
         return a
 

@@ -32,8 +32,11 @@ class SparseFuzzyQ:
 
     def lookup(self, rules: np.ndarray) -> np.ndarray:
         """Rows of rules in phi, -1 for rules never touched (nothing is created)."""
-        rules_list = rules.tolist()
-        return np.array(list(map(self.index.get, rules_list, repeat(-1, len(rules_list)))), dtype=np.int64)
+        return np.array(self.row_list(rules.tolist()), dtype=np.int64)
+
+    def row_list(self, rules: list[int]) -> list[int]:
+        """lookup() with lists of Python ints in and out."""
+        return list(map(self.index.get, rules, repeat(-1, len(rules))))
 
     def touch(self, rules: np.ndarray, rows: np.ndarray | None = None) -> np.ndarray:
         """Rows for rules, creating zero rows (phi = 0) for rules seen for the first time.
@@ -49,13 +52,39 @@ class SparseFuzzyQ:
                 grown = np.zeros((max(need, 2 * self.phi.shape[0]), self.n_joint_actions))
                 grown[: len(idx)] = self.phi[: len(idx)]  # double the capacity
                 self.phi = grown
-            for n in missing.tolist():
-                rows[n] = idx[int(rules[n])] = len(idx)
+            new = rules[missing].tolist()
+            if len(set(new)) == len(new) and idx.keys().isdisjoint(new):
+                # the usual case (distinct rules, fresh rows): new rows len(idx), len(idx) + 1, ... in order
+                idx.update(zip(new, range(len(idx), need), strict=True))
+                rows[missing] = np.arange(need - len(new), need)
+            else:
+                for n in missing.tolist():
+                    rows[n] = idx[int(rules[n])] = len(idx)
         return rows
 
-    def q_rows(self, rows: np.ndarray, w: np.ndarray) -> np.ndarray:
-        """Eq. 2 from rows already looked up (-1 = untouched rule, phi = 0) and w = O / sum O."""
-        if rows.min() >= 0:
+    def touch_list(self, rules: list[int], rows: list[int]) -> np.ndarray:
+        """touch() for distinct rules given as a list, with rows = row_list(rules) taken since the index last
+        changed (the learner's pending transition); returns the rows as an array, numbered as touch() does."""
+        new = [rule for rule, row in zip(rules, rows, strict=True) if row < 0]
+        if not new:
+            return np.array(rows, dtype=np.int64)
+        idx = self.index
+        need = len(idx) + len(new)
+        if need > self.phi.shape[0]:
+            grown = np.zeros((max(need, 2 * self.phi.shape[0]), self.n_joint_actions))
+            grown[: len(idx)] = self.phi[: len(idx)]  # double the capacity
+            self.phi = grown
+        idx.update(zip(new, range(len(idx), need), strict=True))  # new rows in rule order, as touch() numbers them
+        if len(new) == len(rules):
+            return np.arange(need - len(new), need)
+        return np.array(list(map(idx.__getitem__, rules)), dtype=np.int64)
+
+    def q_rows(self, rows: np.ndarray, w: np.ndarray, complete: bool | None = None) -> np.ndarray:
+        """Eq. 2 from rows already looked up (-1 = untouched rule, phi = 0) and w = O / sum O.
+
+        complete: whether every row is >= 0, when the caller already knows.
+        """
+        if complete if complete is not None else rows.min() >= 0:
             return w @ self.phi[rows]  # Eq. 2
         known = rows >= 0
         return w[known] @ self.phi[rows[known]]  # Eq. 2
