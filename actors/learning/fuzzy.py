@@ -129,7 +129,7 @@ class FuzzyPartition:
         """
         mu = self._memberships_fast(state)
         if self.top_k < mu.shape[1]:
-            top = np.argpartition(-mu, self.top_k - 1, axis=1)  # the first top_k columns hold the kept sets
+            top = (-mu).argpartition(self.top_k - 1, axis=1)  # the first top_k columns hold the kept sets
         else:
             top = np.broadcast_to(np.arange(mu.shape[1]), mu.shape)
         # flat mu position of the set each fired rule takes per variable: (n_vars, k^n)

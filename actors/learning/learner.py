@@ -82,10 +82,8 @@ class Learner:
         rules_list = rules.tolist()
         P = jasm.probabilities(self.counts) if self.n_visible else self._no_visible
         w = O / O.sum()  # O^i / sum_i O^i: the weight of rule i in Eq. 2 and its gradient in Eq. 6
-        rows_list = self.q.row_list(rules_list)  # phi rows, -1 for rules never updated
-        complete = -1 not in rows_list
-        rows = np.array(rows_list, dtype=np.int64)
-        q_now = self.q.q_rows(rows, w, complete)  # Q(s(t), .), Eq. 2
+        rows = self.q.row_list(rules_list)  # phi rows, -1 for rules never updated
+        q_now = self.q.q_list(rows, w)  # Q(s(t), .), Eq. 2
 
         # (a) TD update of the previous transition with s(t) as s' (Eqs. 5-6).
         if learn and reward is not None and self._pending is not None:
@@ -95,11 +93,9 @@ class Learner:
             boot = self._bootstrap(q_now, P)
             delta = self.q.td_delta(q_sa, float(reward), boot, self.lr, st.gamma)  # Eq. 5
             self.q.update_rows(p_rows, p_w, p_joint, delta)  # Eq. 6
-            if not complete:  # s(t) may share rules just created for s(t-1)
-                rows_list = self.q.row_list(rules_list)
-                complete = -1 not in rows_list
-                rows = np.array(rows_list, dtype=np.int64)
-            q_now = self.q.q_rows(rows, w, complete)
+            if -1 in rows:  # s(t) may share rules just created for s(t-1)
+                rows = self.q.row_list(rules_list)
+            q_now = self.q.q_list(rows, w)
 
         # (b) JASM: E (Eq. 9), Boltzmann pi (Eq. 8), epsilon-decreasing choice.
         E = jasm.expected_values(q_now, P, self.n_actions)
@@ -112,7 +108,7 @@ class Learner:
             self.counts[j, b] += 1.0
 
         # (d) remember (s(t), joint action(t)) for the next update.
-        self._pending = (rules_list, rows_list, w, self.joint_index(a, visible_actions))
+        self._pending = (rules_list, rows, w, self.joint_index(a, visible_actions))
         self.t += 1
         return a
 

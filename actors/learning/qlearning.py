@@ -89,6 +89,13 @@ class SparseFuzzyQ:
         known = rows >= 0
         return w[known] @ self.phi[rows[known]]  # Eq. 2
 
+    def q_list(self, rows: list[int], w: np.ndarray) -> np.ndarray:
+        """q_rows() for rows given as a list (the learner's path): skips the empty sum when no rule is known."""
+        unknown = rows.count(-1)
+        if unknown == len(rows):
+            return np.zeros(self.n_joint_actions)  # what the empty product w[known] @ phi[rows[known]] gives
+        return self.q_rows(np.array(rows, dtype=np.int64), w, complete=unknown == 0)
+
     def q_values(self, rules: np.ndarray, O: np.ndarray) -> np.ndarray:  # noqa: E741
         """Q(s, .) over joint actions = sum_i O^i phi^i / sum_i O^i (Eq. 2); untouched rules count as 0."""
         total = O.sum()
