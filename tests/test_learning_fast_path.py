@@ -22,6 +22,7 @@ SETTINGS = [
     LearnerSettings.for_reach(3.0, bootstrap="joint_max", slope=9.0, n_sets=(5, 4, 3, 2, 6, 3)),
     LearnerSettings(n_sets=(4, 1, 3, 5, 2, 3), top_k=1, slope=2.0),
     LearnerSettings(n_sets=(4, 3, 3, 5, 4, 3), top_k=3),
+    LearnerSettings(n_sets=(2, 2, 2, 2, 2, 2), slope=30.0),  # top_k = max(n_sets): no argpartition
 ]
 
 
@@ -127,6 +128,7 @@ def test_activate_matches_reference(settings: LearnerSettings) -> None:
         (SETTINGS[1], 1, 400),
         (SETTINGS[2], 2, 200),
         (SETTINGS[3], 1, 200),
+        (SETTINGS[4], 1, 100),
     ],
 )
 def test_learner_matches_reference(settings: LearnerSettings, n_visible: int, n_steps: int) -> None:

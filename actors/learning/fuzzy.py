@@ -75,16 +75,16 @@ class FuzzyPartition:
         # Which of the k kept sets each of the k^n combinations takes, per variable.
         self._combos = np.array(list(itertools.product(range(self.top_k), repeat=n_vars)), dtype=np.int64)
         self._rows = np.arange(n_vars)
-        # Buffers of activate()'s membership evaluation (same Eq. 3 arithmetic as memberships(), fewer calls).
-        # L is written only at real boundaries (_real); the other L columns are constants chosen so that
-        # mu = L_{b_{j-1}} - L_{b_j} is 0 - (-1) ... = -1 at padded sets (memberships() adds -1 there) and
-        # L_{b_{m-1}} = 0. memberships() has ~1e-304 there (capped exponent), which cannot change
-        # L_{b_{m-2}} - L_{b_{m-1}} as long as L_{b_{m-2}} > 1e-280: _exact_fast checks that bound.
+        # Buffers of activate()'s membership evaluation: the same Eq. 3 arithmetic as memberships() in fewer
+        # calls. L is written only at real boundaries (_real); per variable, the columns after b_{m-2} hold the
+        # constants 0, 1, 2, ... so that mu_j = L_{b_{j-1}} - L_{b_j} is L_{b_{m-2}} for the last real set and
+        # -1 for padded sets, as in memberships(). (memberships() has ~1e-304 rather than 0 at b_{m-1}; that
+        # cannot change L_{b_{m-2}} - L_{b_{m-1}} while L_{b_{m-2}} > 1e-280, which _exact_fast checks.)
         self._real = np.arange(bounds.shape[1])[None, :] < (self.n_sets - 1)[:, None]
         self._L = np.zeros((n_vars, width + 1))
         self._L[:, 0] = 1.0  # L_{b_{-1}} = 1
         for v, m in enumerate(settings.n_sets):
-            self._L[v, m + 1 :] = np.arange(1, width + 1 - m)  # L_{b_m}, L_{b_m+1}, ... = 1, 2, ... -> mu = -1
+            self._L[v, m + 1 :] = np.arange(1, width + 1 - m)  # L at b_m, b_{m+1}, ... = 1, 2, ...
         self._L_real = self._L[:, 1:-1]  # view: L at b_0 .. b_{width-2}
         self._L_lo, self._L_hi = self._L[:, :-1], self._L[:, 1:]  # views: mu_j = L_lo[j] - L_hi[j]
         self._mu = np.empty((n_vars, width))

@@ -48,10 +48,7 @@ class SparseFuzzyQ:
         if len(missing):
             idx = self.index
             need = len(idx) + len(missing)
-            if need > self.phi.shape[0]:
-                grown = np.zeros((max(need, 2 * self.phi.shape[0]), self.n_joint_actions))
-                grown[: len(idx)] = self.phi[: len(idx)]  # double the capacity
-                self.phi = grown
+            self._reserve(need)
             new = rules[missing].tolist()
             if len(set(new)) == len(new) and idx.keys().isdisjoint(new):
                 # the usual case (distinct rules, fresh rows): new rows len(idx), len(idx) + 1, ... in order
@@ -62,18 +59,25 @@ class SparseFuzzyQ:
                     rows[n] = idx[int(rules[n])] = len(idx)
         return rows
 
+    def _reserve(self, need: int) -> None:
+        """Room for need phi rows (rows in use are kept)."""
+        if need > self.phi.shape[0]:
+            grown = np.zeros((max(need, 2 * self.phi.shape[0]), self.n_joint_actions))
+            grown[: len(self.index)] = self.phi[: len(self.index)]  # double the capacity
+            self.phi = grown
+
     def touch_list(self, rules: list[int], rows: list[int]) -> np.ndarray:
-        """touch() for distinct rules given as a list, with rows = row_list(rules) taken since the index last
-        changed (the learner's pending transition); returns the rows as an array, numbered as touch() does."""
+        """touch() for rules given as a list; returns the rows as an array, new rows numbered as touch() does.
+
+        Preconditions (the learner's pending transition meets both): the rules are distinct (distinct set
+        combinations) and rows = row_list(rules) was taken after the last change of the index.
+        """
         new = [rule for rule, row in zip(rules, rows, strict=True) if row < 0]
         if not new:
             return np.array(rows, dtype=np.int64)
         idx = self.index
         need = len(idx) + len(new)
-        if need > self.phi.shape[0]:
-            grown = np.zeros((max(need, 2 * self.phi.shape[0]), self.n_joint_actions))
-            grown[: len(idx)] = self.phi[: len(idx)]  # double the capacity
-            self.phi = grown
+        self._reserve(need)
         idx.update(zip(new, range(len(idx), need), strict=True))  # new rows in rule order, as touch() numbers them
         if len(new) == len(rules):
             return np.arange(need - len(new), need)
