@@ -89,7 +89,7 @@ class SparseFuzzyQ:
         complete: whether every row is >= 0, when the caller already knows.
         """
         if complete if complete is not None else rows.min() >= 0:
-            return w @ self.phi[rows]  # Eq. 2
+            return w @ self.phi.take(rows, axis=0)  # Eq. 2 (take = phi[rows], ~3x cheaper)
         known = rows >= 0
         return w[known] @ self.phi[rows[known]]  # Eq. 2
 
@@ -117,7 +117,8 @@ class SparseFuzzyQ:
     def update_rows(self, rows: np.ndarray, w: np.ndarray, action: int, delta: float) -> None:
         """Eq. 6 on rows returned by touch(), w = O / sum O = dQ(s, a) / dphi^i."""
         # Fired rules are distinct (distinct set combinations), so fancy-index += is exact.
-        self.phi[rows, action] += delta * w  # Eq. 6
+        column = self.phi[:, action]  # a view; 1-d fancy indexing is cheaper than phi[rows, action]
+        column[rows] += delta * w  # Eq. 6
 
     def td_delta(self, q_sa: float, reward: float, bootstrap: float, lr: float, gamma: float) -> float:
         """delta = lambda (r + gamma * bootstrap - Q(s, a)) (Eq. 5)."""
