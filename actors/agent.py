@@ -60,6 +60,8 @@ class Agent:
         # The paper's neighbourhood: an agent sees the agents one level below it (its DOF children).
         self.visible = [c for c in self.spec.children if topo.agents[c].has_dof]
         self.leaves = topo.subtree_leaves(agent_id)
+        # which child an `up` comes from, by the set of tips it reports (computed once, not per message)
+        self.child_by_tips = {frozenset(topo.subtree_leaves(c)): c for c in self.spec.children}
         self.learner: Learner | None = None
         self.epochs_before = 0  # epochs trained before this run (from --from), for the lr schedule
         if self.spec.has_dof:
@@ -183,10 +185,7 @@ class Agent:
 
     def _child_of(self, m: Up) -> str | None:
         """The child whose subtree holds exactly the tips reported."""
-        for c in self.spec.children:
-            if set(m.tips) == set(self.topo.subtree_leaves(c)):
-                return c
-        return None
+        return self.child_by_tips.get(frozenset(m.tips))
 
     def _try_finish(self) -> None:
         cur = self.current

@@ -13,6 +13,7 @@ from __future__ import annotations
 import asyncio
 import json
 import logging
+import math
 import os
 import signal
 import subprocess
@@ -162,6 +163,7 @@ class Supervisor:
         self.alive: set[ActorId] = set()
         self.node: Node | None = None
         self.result = RunResult()
+        self.metrics_file: Any = None
 
     async def run(self) -> RunResult:
         t0 = time.perf_counter()
@@ -201,16 +203,14 @@ class Supervisor:
             log.warning("interrupted: stopping the swarm")
         finally:
             try:
-                node.send(
-                    self.keys.ctl("stop"), Stop(reason="interrupted" if self.result.interrupted else "done")
-                )
+                node.send(self.keys.ctl("stop"), Stop(reason="interrupted" if self.result.interrupted else "done"))
             except Exception:  # the session may be closing
                 pass
             await self.placement.stop()
             watch.undeclare()
             self.result.rejected = node.rejected
             node.close()
-            if hasattr(self, "metrics_file"):
+            if self.metrics_file is not None:
                 self.metrics_file.close()
             self.result.wall_seconds = time.perf_counter() - t0
         return self.result
@@ -284,9 +284,7 @@ class Supervisor:
             "steps": d.steps,
             "seconds": d.seconds,
             "missed_cmds": d.missed_cmds,
-            "final_angles_deg": {
-                a: round(float(q) * 180 / 3.141592653589793, 4) for a, q in d.final_angles.items()
-            },
+            "final_angles_deg": {a: round(math.degrees(q), 4) for a, q in d.final_angles.items()},
         }
         self.metrics_file.write(json.dumps(row) + "\n")
         self.metrics_file.flush()
