@@ -78,9 +78,7 @@ def write_plots(run_dir: Path) -> list[Path]:
         for i, (angles, style) in enumerate(((topo.initial_angles(), ":"), (final, "-"))):
             for pts in arm_points(topo, angles):
                 xs, ys = zip(*pts, strict=True)
-                label = (
-                    ("start" if i == 0 else f"epoch {rows[-1]['epoch']} final") if pts is not None else None
-                )
+                label = "start" if i == 0 else f"epoch {rows[-1]['epoch']} final"
                 ax.plot(xs, ys, style, marker="o", ms=4, color="grey" if i == 0 else "C0", label=label)
         ax.plot(*goal, "r*", ms=14, label=f"goal ({goal[0]:.2f}, {goal[1]:.2f})")
         R = topo.reach
