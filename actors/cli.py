@@ -63,7 +63,9 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--from", dest="from_dir", type=Path, default=None, help="start from a run's checkpoints")
     run.add_argument("--learn", type=_on_off, default=True, metavar="on|off")
     run.add_argument("--explore", type=_on_off, default=True, metavar="on|off")
-    run.add_argument("--checkpoint-every", type=int, default=10, help="epochs between checkpoints (0: last only)")
+    run.add_argument(
+        "--checkpoint-every", type=int, default=1, help="epochs between checkpoints (0: last only; default 1)"
+    )
     base = sub.add_parser("baseline", help="drive the same simulator with the pseudo-inverse controller")
     _add_common(base)
     rep = sub.add_parser("report", help="rebuild a run's summary plots")

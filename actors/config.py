@@ -6,6 +6,8 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import os
+import secrets
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -39,13 +41,19 @@ class RunConfig:
     explore: bool = True
     deadline_ms: int = 500
     action_deg: float = 1.0
-    checkpoint_every: int = 10
+    checkpoint_every: int = 1  # every epoch: a restarted agent loses at most one epoch of learning (~3 ms a save)
     controller: str = "agents"
     learner: dict[str, Any] = field(default_factory=dict)  # LearnerSettings overrides
+    scenario: str | None = None  # absolute path of a scenario TOML (timed faults), read by the sim
+    max_restarts: int = 5  # restart policy: at most this many restarts of one agent ...
+    restart_window_s: float = 60.0  # ... within this many seconds, else the run fails
+    # Key of the messages' MAC (codec.py): only holders of config.json can speak on this run's keys.
+    secret: str = field(default_factory=lambda: secrets.token_hex(16), repr=False)
 
     def __post_init__(self) -> None:
         check_id("run id", self.run_id)
-        for name, lo in (("epochs", 1), ("steps", 1), ("deadline_ms", 1), ("checkpoint_every", 0)):
+        ints = (("epochs", 1), ("steps", 1), ("deadline_ms", 1), ("checkpoint_every", 0), ("max_restarts", 0))
+        for name, lo in ints:
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or v < lo:
                 raise ConfigError(f"{name}: expected an integer >= {lo}, got {v!r}")
@@ -57,6 +65,10 @@ class RunConfig:
             raise ConfigError(f"controller: {self.controller!r} is not one of {', '.join(CONTROLLERS)}")
         if not (isinstance(self.action_deg, (int, float)) and 0 < self.action_deg <= 45):
             raise ConfigError(f"action_deg: expected a number in (0, 45], got {self.action_deg!r}")
+        if not (isinstance(self.restart_window_s, (int, float)) and self.restart_window_s > 0):
+            raise ConfigError(f"restart_window_s: expected a number > 0, got {self.restart_window_s!r}")
+        if not (isinstance(self.secret, str) and len(self.secret) >= 16):
+            raise ConfigError("secret: expected a string of at least 16 characters")
         if self.goal is not None and (len(self.goal) != 2 or not all(math.isfinite(g) for g in self.goal)):
             raise ConfigError(f"goal: expected two finite numbers, got {self.goal!r}")
 
@@ -76,8 +88,16 @@ class RunConfig:
     def to_json(self) -> str:
         return json.dumps(dataclasses.asdict(self), indent=2)
 
+    @property
+    def key(self) -> bytes:
+        return self.secret.encode()
+
     def write(self, path: Path) -> None:
-        path.write_text(self.to_json() + "\n")
+        """Owner-only (0600): the file holds the run's secret."""
+        fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
+        with os.fdopen(fd, "w") as f:
+            f.write(self.to_json() + "\n")
+        os.chmod(path, 0o600)
 
 
 def load_run_config(path: str | Path) -> RunConfig:

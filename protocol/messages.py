@@ -10,7 +10,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import ClassVar
 
-SCHEMA_VERSION = 1
+SCHEMA_VERSION = 2  # 2: faults, events, status, bye; payloads carry a MAC (codec.py)
 
 Vec2 = tuple[float, float]
 Vec3 = tuple[float, float, float]
@@ -125,6 +125,85 @@ class Stop:
     reason: str
 
 
-MESSAGE_TYPES: dict[str, type] = {
-    m.KIND: m for m in (Obs, Task, Down, Up, Cmd, EpochStart, EpochDone, Checkpoint, Saved, Stop)
-}
+@dataclass(frozen=True)
+class Bye:
+    """actor -> supervisor (rep/<role>/<id>) on stop: what it counted, for the run's summary."""
+
+    KIND: ClassVar[str] = "bye"
+    steps: int
+    rejected: int
+
+
+@dataclass(frozen=True)
+class Fault:
+    """A fault to inject (vocabulary and checks in `faults.py`).
+
+    anyone -> supervisor on `fault/request` (the CLI, or the sim at a scenario step); the supervisor
+    answers on `rep/fault/<id>` and applies it: process faults itself, joint faults through the sim and
+    link faults through the targets' runtimes, both by forwarding the same message on `ctl/fault`.
+    Durations: `seconds` for freeze and link faults, `steps` for disturb; None means until cleared."""
+
+    KIND: ClassVar[str] = "fault"
+    id: str
+    fault: str
+    targets: list[str]
+    seconds: float | None
+    steps: int | None
+    rate: float | None
+    ms: float | None
+    amplitude_deg: float | None
+
+
+@dataclass(frozen=True)
+class FaultReply:
+    """supervisor -> requester (rep/fault/<id>): `error` is empty when the fault was applied."""
+
+    KIND: ClassVar[str] = "fault_reply"
+    id: str
+    error: str
+    detail: str
+
+
+@dataclass(frozen=True)
+class Event:
+    """anyone -> observers (metrics/event): a fault, detection, restart, re-wiring or hand-back.
+    epoch and step are -1 when the sender does not know them; the supervisor adds wall time."""
+
+    KIND: ClassVar[str] = "event"
+    epoch: int
+    step: int
+    event: str
+    target: str
+    detail: str
+
+
+@dataclass(frozen=True)
+class JointStatus:
+    """sim -> observers (metrics/joints), a few times a second: the robot as `kinswarm status` shows it."""
+
+    KIND: ClassVar[str] = "joints"
+    epoch: int
+    step: int
+    q: dict[str, float]
+    delta: dict[str, float]
+    faults: dict[str, str]
+
+
+@dataclass(frozen=True)
+class SwarmStatus:
+    """supervisor -> observers (metrics/status), a few times a second: one column per field, keyed by actor id."""
+
+    KIND: ClassVar[str] = "status"
+    epoch: int
+    epochs: int
+    role: dict[str, str]
+    alive: dict[str, int]
+    pid: dict[str, int]
+    host: dict[str, str]
+    restarts: dict[str, int]
+    faults: dict[str, list[str]]
+
+
+_ALL = (Obs, Task, Down, Up, Cmd, EpochStart, EpochDone, Checkpoint, Saved, Stop)
+_ALL += (Bye, Fault, FaultReply, Event, JointStatus, SwarmStatus)
+MESSAGE_TYPES: dict[str, type] = {m.KIND: m for m in _ALL}
