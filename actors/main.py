@@ -73,7 +73,7 @@ async def _serve(role: str, ident: str, cfg: RunConfig, connect: str, parent_pid
     assert task is not None
     for sig in (signal.SIGINT, signal.SIGTERM):
         loop.add_signal_handler(sig, task.cancel)
-    node = Node(session, Keys(cfg.run_id), role, ident)
+    node = Node(session, Keys(cfg.run_id), role, ident, cfg.key)
     # The supervisor's liveliness token going away (it died, or its host is gone) ends this actor.
     sup_gone = asyncio.Event()
 

@@ -91,11 +91,12 @@ class Node:
     Several nodes may share one session (the `single` placement); each owns its declarations and
     undeclares them in `close()`."""
 
-    def __init__(self, session: zenoh.Session, keys: Keys, role: str, ident: str) -> None:
+    def __init__(self, session: zenoh.Session, keys: Keys, role: str, ident: str, key: bytes) -> None:
         self.session = session
         self.keys = keys
         self.role = role
         self.ident = ident
+        self.key = key  # the run's MAC key (codec.py)
         self.log = logging.getLogger(f"kinswarm.{role}.{ident}")
         self.mailbox = Mailbox(asyncio.get_running_loop())
         self._pubs: dict[str, Any] = {}
@@ -115,7 +116,7 @@ class Node:
         return pub
 
     def send(self, key: str, msg: Any) -> None:
-        self.publisher(key).put(codec.encode(msg, self.keys.run, self.ident))
+        self.publisher(key).put(codec.encode(msg, self.keys.run, self.ident, self.key))
 
     # -- receiving -------------------------------------------------------------------------------
     def listen(self, key_expr: str) -> None:
@@ -130,7 +131,7 @@ class Node:
     def decode(self, key: str, payload: bytes, expect: type[M]) -> M | None:
         """Decode or log why not and return None: a bad message never crashes an actor."""
         try:
-            return codec.decode(payload, expect, self.keys.run)
+            return codec.decode(payload, expect, self.keys.run, self.key)
         except codec.DecodeError as e:
             self.rejected += 1
             if self.rejected <= 20 or self.rejected % 1000 == 0:

@@ -112,7 +112,7 @@ class SinglePlacement:
     async def start(self, actors: list[ActorId]) -> None:
         keys = Keys(self.cfg.run_id)
         for role, ident in actors:
-            node = Node(self.session, keys, role, ident)
+            node = Node(self.session, keys, role, ident, self.cfg.key)
             self.nodes.append(node)
             actor = build_actor(role, ident, self.cfg, self.topo, node)
             self.tasks[(role, ident)] = asyncio.create_task(actor.run(), name=f"{role}/{ident}")
@@ -168,7 +168,7 @@ class Supervisor:
     async def run(self) -> RunResult:
         t0 = time.perf_counter()
         loop = asyncio.get_running_loop()
-        self.node = node = Node(self.session, self.keys, "supervisor", "main")
+        self.node = node = Node(self.session, self.keys, "supervisor", "main", self.cfg.key)
         node.listen(self.keys.metrics("epoch"))
         node.listen(self.keys.rep_all)
 

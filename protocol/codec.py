@@ -33,7 +33,7 @@ def _field_names(cls: type) -> tuple[str, ...]:
     return tuple(f.name for f in dataclasses.fields(cls))
 
 
-def encode(msg: Any, run: str, src: str) -> bytes:
+def encode(msg: Any, run: str, src: str, key: bytes) -> bytes:
     body = {"v": SCHEMA_VERSION, "kind": msg.KIND, "run": run, "src": src}
     for name in _field_names(type(msg)):
         body[name] = getattr(msg, name)
@@ -123,7 +123,7 @@ def _schema(cls: type) -> tuple[tuple[tuple[str, Check], ...], frozenset[str]]:
     return tuple((k, _checker(v)) for k, v in hints.items()), frozenset(hints) | frozenset(_ENVELOPE)
 
 
-def decode(payload: bytes, expect: type[M], run: str) -> M:
+def decode(payload: bytes, expect: type[M], run: str, key: bytes) -> M:
     """Decode and validate one message of type `expect` for run `run`."""
     if len(payload) > MAX_PAYLOAD:
         raise DecodeError(f"payload of {len(payload)} bytes exceeds {MAX_PAYLOAD}")
