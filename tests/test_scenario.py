@@ -1,0 +1,116 @@
+"""Scenario files: the shipped paper scenarios load; bad files are refused naming the file and field."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+from kinswarm.actors.scenario import ScenarioError, load_scenario
+from kinswarm.protocol.topology import load_topology
+from test_sim_kinematics import compound_tree
+
+SCENARIOS = Path(__file__).resolve().parents[1] / "scenarios"
+
+
+@pytest.fixture
+def topo(chain4):
+    return load_topology(chain4)
+
+
+def timeline(path: Path, topo) -> list[tuple[int | None, int, str, list[str], int | None]]:
+    s = load_scenario(path, topo)
+    return [(e.epoch, e.step, e.fault.fault, e.fault.targets, e.fault.steps) for e in s.entries]
+
+
+def test_paper_scenarios(topo):
+    assert sorted(p.name for p in SCENARIOS.glob("*.toml")) == [
+        "paper-fail-disturb-fail.toml",
+        "paper-locked.toml",
+        "paper-recovery.toml",
+    ]
+    assert timeline(SCENARIOS / "paper-recovery.toml", topo) == [
+        (None, 0, "lock", ["a1", "a2", "a3"], None),
+        (None, 100, "free", ["a3"], None),
+        (None, 500, "free", ["a1"], None),
+        (None, 1000, "free", ["a2"], None),
+    ]
+    assert timeline(SCENARIOS / "paper-fail-disturb-fail.toml", topo) == [
+        (None, 0, "lock", ["a2", "a3"], None),
+        (None, 700, "disturb", ["a2", "a3"], 300),
+        (None, 1000, "lock", ["a2", "a3"], None),
+    ]
+    assert timeline(SCENARIOS / "paper-locked.toml", topo) == [(None, 0, "lock", ["a2", "a3"], None)]
+    for p in SCENARIOS.glob("*.toml"):
+        s = load_scenario(p, topo)
+        assert s.name == p.stem and "--steps 1500" in s.description and "5.3" in p.read_text()
+
+
+def test_optional_fields_and_non_joint_faults(tmp_path, topo):
+    p = tmp_path / "s.toml"
+    p.write_text(
+        'name = "mixed"\n'
+        '[[event]]\nstep = 5\nepoch = 2\nfault = "drop"\ntarget = "all"\nrate = 0.05\nseconds = 30\n'
+        '[[event]]\nstep = 0\nfault = "freeze"\ntarget = "a3"\nseconds = 5\n'
+    )
+    s = load_scenario(p, topo)
+    assert s.description == "" and s.source == str(p)
+    drop, freeze = s.entries
+    assert (drop.epoch, drop.step, drop.fault.targets, drop.fault.rate, drop.fault.seconds) == (
+        2,
+        5,
+        ["all"],
+        0.05,
+        30.0,
+    )
+    assert not drop.is_joint and freeze.fault.seconds == 5.0 and freeze.epoch is None
+
+
+HEAD = 'name = "bad"\n'
+LOCK = '[[event]]\nstep = 0\nfault = "lock"\ntarget = "a2"\n'
+
+
+@pytest.mark.parametrize(
+    "text, where, what",
+    [
+        ('name = "x"\n' + LOCK + "[oops]\n", "oops", "unknown key"),
+        (LOCK, "name", "non-empty string"),
+        (HEAD, "event", "at least one [[event]]"),
+        (HEAD + LOCK.replace("step = 0", "step = -1"), "event[0].step", "integer >= 0"),
+        (HEAD + LOCK.replace("step = 0", "step = 1.5"), "event[0].step", "integer >= 0"),
+        (HEAD + LOCK.replace("step = 0\n", ""), "event[0].step", "missing"),
+        (HEAD + LOCK + LOCK.replace("step = 0", "step = 0\nepoch = true"), "event[1].epoch", "integer >= 0"),
+        (HEAD + LOCK.replace('"lock"', '"explode"'), "event[0]", "unknown fault 'explode'"),
+        (HEAD + LOCK.replace('"a2"', '"a9"'), "event[0]", "'a9' is not an agent"),
+        (HEAD + LOCK.replace('"a2"', "[]"), "event[0].target", "agent id or a list"),
+        (HEAD + LOCK.replace('"a2"', "[1]"), "event[0].target", "agent id or a list"),
+        (HEAD + LOCK + "speed = 3\n", "event[0].speed", "unknown field"),
+        (HEAD + LOCK + "seconds = 3\n", "event[0]", "lock: does not take seconds"),
+        (HEAD + LOCK.replace('"lock"', '"disturb"'), "event[0]", "disturb: needs steps"),
+        (HEAD + LOCK.replace('"lock"', '"disturb"') + "steps = 0\n", "event[0]", "steps must be >= 1"),
+        (HEAD + LOCK.replace('"lock"', '"drop"') + 'rate = "lots"\n', "event[0].rate", "finite number"),
+        (HEAD + LOCK.replace('"lock"', '"drop"') + "rate = 2.0\n", "event[0]", "rate must be in [0, 1]"),
+        (HEAD + "event = [3]\n", "event[0]", "must be a table"),
+        (HEAD + "event = 3\n", "event", "at least one"),
+        (HEAD + "[[event\n", "toml", ""),
+    ],
+)
+def test_bad_scenarios_name_file_and_field(tmp_path, topo, text, where, what):
+    p = tmp_path / "bad.toml"
+    p.write_text(text)
+    with pytest.raises(ScenarioError) as ei:
+        load_scenario(p, topo)
+    assert ei.value.where == where and what in ei.value.what
+    assert str(ei.value).startswith(f"{p}: {where}: ")
+
+
+def test_joint_fault_on_compound_agent_and_missing_file(tmp_path):
+    topo = compound_tree()
+    compound = next(a for a in topo.order if not topo.agents[a].has_dof)
+    p = tmp_path / "c.toml"
+    p.write_text(f'name = "c"\n[[event]]\nstep = 0\nfault = "lock"\ntarget = "{compound}"\n')
+    with pytest.raises(ScenarioError, match="compound agent"):
+        load_scenario(p, topo)
+    p.write_text(f'name = "c"\n[[event]]\nstep = 0\nfault = "kill"\ntarget = "{compound}"\n')
+    assert load_scenario(p, topo).entries[0].fault.fault == "kill"  # processes of compound agents exist
+    with pytest.raises(ScenarioError, match="cannot read"):
+        load_scenario(tmp_path / "nope.toml", topo)
