@@ -1,71 +1,159 @@
 """The simulator actor: the robot, and the clock of the lockstep.
 
 For each step it publishes the task observation to the root and each agent's encoder reading, then
-waits for a `cmd` from every DOF agent — or for the step deadline, after which a missing command
-means that joint holds — applies the increments (clipped to the action size and the joint limits),
-and records the end-effector error. At the end of an epoch it publishes `metrics/epoch`.
+waits for a `cmd` from every DOF agent that is alive — or for the step deadline, after which a missing
+command means that joint holds — applies the increments (clipped to the action size and the joint
+limits), and records the end-effector error. At the end of an epoch it publishes `metrics/epoch`.
+
+It is also where joint faults live (DESIGN §5): a locked joint ignores its agent, a disturbed one
+moves at random; the agents are not told. Faults come live on `ctl/fault` or from the run's scenario
+file; every change is published on `metrics/event`, and the joints' state on `metrics/joints`.
 """
 
 from __future__ import annotations
 
 import asyncio
+import dataclasses
 import math
 import time
+import zlib
+from typing import Any
 
+import numpy as np
+import zenoh
 from kinswarm.actors.config import RunConfig
 from kinswarm.actors.runtime import Node
-from kinswarm.protocol.messages import Cmd, EpochDone, EpochStart, Obs, Stop, Task
+from kinswarm.actors.scenario import ScenarioEntry, load_scenario
+from kinswarm.protocol.faults import DISTURB_AMPLITUDE_DEG, JOINT_FAULTS, check_fault, describe, expand_targets
+from kinswarm.protocol.messages import Bye, Cmd, EpochDone, EpochStart, Event, Fault, JointStatus, Obs, Stop, Task
 from kinswarm.protocol.topology import Topology
 from kinswarm.sim.world import World
+
+# Timers and liveliness changes go through the mailbox under keys no Zenoh key can equal (those start
+# with "ks/"), so every handler runs on the loop, in arrival order.
+DEADLINE, ALIVE, STATUS = "__deadline__", "__alive__", "__status__"
+STATUS_S = 0.5
+
+
+@dataclasses.dataclass(frozen=True)
+class Disturbance:
+    left: int  # steps still to disturb
+    amplitude: float  # radians
+    detail: str  # the fault that started it, for the disturb_end event
 
 
 class SimActor:
     def __init__(self, cfg: RunConfig, topo: Topology, node: Node) -> None:
         self.cfg, self.topo, self.node, self.keys = cfg, topo, node, node.keys
+        # Read before the world exists: a bad file fails the actor without leaking a PyBullet client.
+        self.scenario = load_scenario(cfg.scenario, topo) if cfg.scenario else None
         self.world = World(topo)
         self.dof = topo.dof_agents
+        self.dof_set = frozenset(self.dof)
         self.max_step = cfg.action_rad * (1 + 1e-9)
         self.epoch: EpochStart | None = None
+        self.last_epoch = -1  # the last accepted EpochStart
         self.t = 0
         self.cmds: dict[str, float] = {}
+        self.waiting: set[str] = set()  # agents whose cmd the current step still waits for
+        self.down: set[str] = set()  # agents whose liveliness token went away (and has not come back)
+        self.locked: set[str] = set()
+        self.disturbed: dict[str, Disturbance] = {}
+        self.applied: dict[str, float] = dict.fromkeys(self.dof, 0.0)  # last increment per joint
+        # Its own stream, apart from the agents' [seed, crc32(id)]: disturbances replay with the seed.
+        self.rng = np.random.default_rng([cfg.seed, zlib.crc32(b"sim-disturb")])
         self.errors: list[float] = []
         self.tips: dict[str, tuple[float, float, float]] = {}
         self.missed = 0
+        self.total_steps = 0
         self.started = 0.0
         self._deadline: asyncio.TimerHandle | None = None
+        self._status: asyncio.TimerHandle | None = None
+        self._cmd_prefix = self.keys.cmd_all[:-1]
+        self._due: dict[int, list[tuple[int, ScenarioEntry]]] = {}  # scenario entries by step
+        if self.scenario is not None:
+            for i, entry in enumerate(self.scenario.entries):
+                self._due.setdefault(entry.step, []).append((i, entry))
+            late = sorted({s for s in self._due if s >= cfg.steps})
+            if late:
+                node.log.warning(
+                    "scenario %s: steps %s are beyond --steps %d, never reached", cfg.scenario, late, cfg.steps
+                )
 
     def outputs(self) -> list[str]:
-        return [self.keys.task, *(self.keys.obs(a) for a in self.dof)]
+        out = [self.keys.task, *(self.keys.obs(a) for a in self.dof)]
+        if self.scenario is not None and not all(e.is_joint for e in self.scenario.entries):
+            out.append(self.keys.fault("request"))  # someone must be there to apply kill/freeze/drop
+        return out
 
     async def run(self) -> None:
         node, k = self.node, self.keys
         node.listen(k.ctl_all)
         node.listen(k.cmd_all)
+        push = node.mailbox.push
+
+        def on_alive(sample: Any) -> None:  # zenoh thread
+            parsed = k.parse_alive(str(sample.key_expr))
+            if parsed is not None:
+                push(ALIVE, (b"+" if sample.kind == zenoh.SampleKind.PUT else b"-") + parsed[1].encode())
+
+        watch = node.session.liveliness().declare_subscriber(k.alive("agent", "*"), on_alive, history=True)
+        for key in (k.metrics("event"), k.metrics("joints"), k.rep(node.role, node.ident)):
+            node.publisher(key)  # declared now, so the first put does not wait on the declaration
+        self._status = asyncio.get_running_loop().call_later(STATUS_S, push, STATUS, b"")
         try:
             await node.wait_matched(self.outputs(), timeout=30.0)
             node.declare_alive()
             while True:
                 key, payload = await node.recv()
-                if key.startswith(k.cmd_all[:-1]):
-                    if (m := node.decode(key, payload, Cmd)) is not None:
-                        self._on_cmd(k.last_chunk(key), m)
-                elif key == k.ctl("epoch"):
-                    if (e := node.decode(key, payload, EpochStart)) is not None:
-                        self._on_epoch(e)
-                elif key == k.ctl("stop"):
-                    if node.decode(key, payload, Stop) is not None:
-                        return
-                elif key == "__deadline__":
-                    self._on_deadline(payload)
+                if self.handle(key, payload):
+                    return
         finally:
-            if self._deadline is not None:
-                self._deadline.cancel()
+            for timer in (self._deadline, self._status):
+                if timer is not None:
+                    timer.cancel()
+            watch.undeclare()
             self.world.close()
+
+    def handle(self, key: str, payload: bytes) -> bool:
+        """Dispatch one mailbox item; True means stop."""
+        node, k = self.node, self.keys
+        if key.startswith(self._cmd_prefix):  # the hot path first
+            if (m := node.decode(key, payload, Cmd)) is not None:
+                self._on_cmd(k.last_chunk(key), m)
+        elif key == DEADLINE:
+            self._on_deadline(payload)
+        elif key == ALIVE:
+            self._on_alive(payload[1:].decode(), payload[:1] == b"+")
+        elif key == STATUS:
+            self._on_status()
+        elif key == k.ctl("fault"):
+            if (f := node.decode(key, payload, Fault)) is not None:
+                self.apply_fault(f)
+        elif key == k.ctl("epoch"):
+            if (e := node.decode(key, payload, EpochStart)) is not None:
+                self._on_epoch(e)
+        elif key == k.ctl("stop"):
+            if node.decode(key, payload, Stop) is not None:
+                node.send(k.rep(node.role, node.ident), Bye(steps=self.total_steps, rejected=node.rejected))
+                return True
+        return False
 
     # -- handlers ----------------------------------------------------------------------------------
     def _on_epoch(self, e: EpochStart) -> None:
+        # A forged or replayed EpochStart must not reset the world mid-run or rewind the epoch count.
+        if self.epoch is not None:
+            self.node.log.warning("ignored EpochStart %d: epoch %d is running", e.epoch, self.epoch.epoch)
+            return
+        if e.epoch != self.last_epoch + 1:
+            self.node.log.warning("ignored EpochStart %d: the next epoch is %d", e.epoch, self.last_epoch + 1)
+            return
+        if e.steps < 1:
+            self.node.log.warning("ignored EpochStart %d: %d steps", e.epoch, e.steps)
+            return
         self.epoch = e
-        self.world.reset()
+        self.last_epoch = e.epoch
+        self.world.reset()  # faults persist, angles do not: a locked joint is locked at its initial angle
         self.tips = self.world.tip_poses()
         self.t = 0
         self.errors = []
@@ -77,34 +165,143 @@ class SimActor:
         e = self.epoch
         if e is None or (m.epoch, m.step) != (e.epoch, self.t):
             return  # late (after the deadline) or from another epoch: the joint already held
-        if agent not in self.world.joint_index:
+        if agent not in self.dof_set:
             self.node.log.warning("rejected cmd for %r: not a joint of %s", agent, self.topo.name)
             return
+        # Counted even for a locked joint (the step must not wait); _advance decides what moves.
         self.cmds[agent] = max(-self.max_step, min(self.max_step, m.delta))
-        if len(self.cmds) == len(self.dof):
+        self.waiting.discard(agent)
+        if not self.waiting:
             self._advance()
 
     def _on_deadline(self, token: bytes) -> None:
         e = self.epoch
         if e is not None and token == f"{e.epoch}/{self.t}".encode():
-            missing = sorted(set(self.dof) - set(self.cmds))
-            self.missed += len(missing)
-            self.node.log.warning("step %d/%d: no cmd from %s by the deadline; they hold", e.epoch, self.t, missing)
+            if self.waiting:
+                missing = sorted(self.waiting)
+                self.missed += len(missing)
+                self.node.log.warning("step %d/%d: no cmd from %s by the deadline; they hold", e.epoch, self.t, missing)
             self._advance()
+
+    def _on_alive(self, agent: str, up: bool) -> None:
+        """Agents never seen stay expected (the baseline's joints have no agent tokens); one that comes
+        back is waited for from the next published step, since it may have missed this step's obs."""
+        if agent not in self.dof_set:
+            return
+        if up:
+            if agent in self.down:
+                self.down.discard(agent)
+                self.node.log.info("agent %s is back; waited for from the next step", agent)
+            return
+        if agent not in self.down:
+            self.down.add(agent)
+            self.node.log.warning("agent %s is down; its joint holds and steps go on without it", agent)
+        if self.epoch is not None and agent in self.waiting:
+            self.waiting.discard(agent)
+            if not self.waiting:
+                self._advance()
+
+    def _on_status(self) -> None:
+        epoch, step = self.now()
+        self.node.send(
+            self.keys.metrics("joints"),
+            JointStatus(
+                epoch=epoch,
+                step=step,
+                q=self.world.joint_positions(),
+                delta=dict(self.applied),
+                faults=self.fault_summary(),
+            ),
+        )
+        self._status = asyncio.get_running_loop().call_later(STATUS_S, self.node.mailbox.push, STATUS, b"")
+
+    # -- faults ------------------------------------------------------------------------------------
+    def apply_fault(self, f: Fault) -> None:
+        """Apply a joint fault now (it takes effect at the current step's increments); others are ignored,
+        they are for the supervisor and the runtimes."""
+        if f.fault not in JOINT_FAULTS:
+            return
+        problem = check_fault(f, list(self.topo.order))
+        if problem:
+            self.node.log.warning("ignored fault %s: %s", f.id, problem)
+            return
+        detail = describe(f)
+        for a in expand_targets(f.targets, list(self.dof)):
+            if a not in self.dof_set:
+                self.node.log.warning("ignored fault %s on %s: a compound agent has no joint", f.id, a)
+                continue
+            if f.fault == "lock":
+                self.locked.add(a)
+            elif f.fault == "free":  # the joint obeys its agent again, whatever was wrong with it
+                self.locked.discard(a)
+                self.disturbed.pop(a, None)
+            else:
+                assert f.steps is not None  # check_fault: disturb needs steps
+                amp = f.amplitude_deg if f.amplitude_deg is not None else DISTURB_AMPLITUDE_DEG
+                self.disturbed[a] = Disturbance(f.steps, math.radians(amp), detail)
+            self._event(f.fault, a, detail)
+
+    def fault_summary(self) -> dict[str, str]:
+        out = {a: "locked" for a in self.dof if a in self.locked}
+        for a, d in self.disturbed.items():
+            out[a] = f"disturbed ({d.left} steps left)" + (", then locked" if a in self.locked else "")
+        return out
+
+    def now(self) -> tuple[int, int]:
+        """(epoch, step) for events: the running step, or where the last epoch ended (-1 before any)."""
+        return (self.epoch.epoch if self.epoch is not None else self.last_epoch), self.t
+
+    def _event(self, name: str, target: str, detail: str) -> None:
+        epoch, step = self.now()
+        self.node.log.info("event %s %s at %d/%d: %s", name, target, epoch, step, detail)
+        event = Event(epoch=epoch, step=step, event=name, target=target, detail=detail)
+        self.node.send(self.keys.metrics("event"), event)
+
+    def _apply_due(self, epoch: int) -> None:
+        for i, entry in self._due.get(self.t, ()):
+            if entry.epoch is not None and entry.epoch != epoch:
+                continue
+            f = dataclasses.replace(entry.fault, id=f"scenario-{epoch}-{self.t}-{i}")
+            if entry.is_joint:
+                self.apply_fault(f)
+            else:
+                self.node.log.info("scenario: requesting %s (%s)", describe(f), f.id)
+                self.node.send(self.keys.fault("request"), f)
+
+    def _increments(self) -> dict[str, float]:
+        """The agents' commands, except that locked joints hold and disturbed ones move at random."""
+        d = {a: v for a, v in self.cmds.items() if a not in self.locked and a not in self.disturbed}
+        for a in self.dof:  # in DOF order: the draws, hence the run, replay with the seed
+            if (dist := self.disturbed.get(a)) is not None:
+                d[a] = float(self.rng.uniform(-dist.amplitude, dist.amplitude))
+        return d
+
+    def _count_disturbances(self) -> None:
+        for a in [a for a in self.dof if a in self.disturbed]:
+            d = self.disturbed[a]
+            if d.left > 1:
+                self.disturbed[a] = dataclasses.replace(d, left=d.left - 1)
+            else:
+                del self.disturbed[a]
+                self._event("disturb_end", a, d.detail)
 
     # -- the step ----------------------------------------------------------------------------------
     def _publish_step(self) -> None:
         e = self.epoch
         assert e is not None
+        if self._due:
+            self._apply_due(e.epoch)
         k, send = self.keys, self.node.send
         send(k.task, Task(epoch=e.epoch, step=self.t, goal=e.goal, tips=self.tips))
         q = self.world.joint_positions()
         for a in self.dof:
             send(k.obs(a), Obs(epoch=e.epoch, step=self.t, q=q[a]))
         self.cmds = {}
+        # Nobody expected (every agent down): the deadline runs the step rather than the joints racing.
+        self.waiting = set(self.dof_set - self.down)
         token = f"{e.epoch}/{self.t}".encode()
         loop = asyncio.get_running_loop()
-        self._deadline = loop.call_later(self.cfg.deadline_ms / 1000, self.node.mailbox.push, "__deadline__", token)
+        self._deadline = loop.call_later(self.cfg.deadline_ms / 1000, self.node.mailbox.push, DEADLINE, token)
 
     def _advance(self) -> None:
         e = self.epoch
@@ -112,10 +309,14 @@ class SimActor:
         if self._deadline is not None:
             self._deadline.cancel()
             self._deadline = None
-        self.world.apply_increments(self.cmds)
+        faulted = bool(self.locked or self.disturbed)
+        self.applied = self.world.apply_increments(self._increments() if faulted else self.cmds)
         self.tips = self.world.tip_poses()
         self.errors.append(self.error())
         self.t += 1
+        self.total_steps += 1
+        if self.disturbed:
+            self._count_disturbances()
         if self.t < e.steps:
             self._publish_step()
             return

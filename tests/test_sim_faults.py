@@ -1,0 +1,404 @@
+"""Joint faults, liveliness-aware stepping and the EpochStart guard of the simulator actor.
+
+Most tests drive the actor's handlers directly with a recording node (no sockets); the last one runs
+it in a real Zenoh session against a tiny test controller."""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import math
+import time
+from pathlib import Path
+from typing import Any
+
+import pytest
+from kinswarm.actors.config import RunConfig
+from kinswarm.actors.runtime import Mailbox, Node, open_session
+from kinswarm.protocol.keys import Keys
+from kinswarm.protocol.messages import (
+    Bye,
+    Cmd,
+    EpochDone,
+    EpochStart,
+    Event,
+    Fault,
+    JointStatus,
+    Stop,
+    Task,
+)
+from kinswarm.sim.actor import SimActor
+
+DEG = math.radians(1)
+GOAL = (4.16, 6.18)
+
+
+class RecordingNode:
+    """What SimActor needs of a Node, recording what it sends instead of putting it on the wire."""
+
+    def __init__(self, run: str = "t") -> None:
+        self.keys = Keys(run)
+        self.role, self.ident = "sim", "sim"
+        self.log = logging.getLogger("test.sim")
+        self.mailbox = Mailbox(asyncio.get_running_loop())
+        self.sent: list[tuple[str, Any]] = []
+        self.rejected = 0
+
+    def send(self, key: str, msg: Any) -> None:
+        self.sent.append((key, msg))
+
+    def of(self, kind: type) -> list[Any]:
+        return [m for _, m in self.sent if isinstance(m, kind)]
+
+
+def make_sim(tmp_path: Path, chain4: Path, *, seed: int = 0, scenario: str | None = None, **kw: Any) -> SimActor:
+    cfg = RunConfig(
+        run_id="t",
+        topology=str(chain4),
+        out=str(tmp_path),
+        seed=seed,
+        scenario=scenario,
+        deadline_ms=kw.pop("deadline_ms", 60_000),
+        **kw,
+    )
+    return SimActor(cfg, cfg.topo(), RecordingNode())  # type: ignore[arg-type]
+
+
+def fault(kind: str, *targets: str, **kw: Any) -> Fault:
+    args = dict.fromkeys(("seconds", "steps", "rate", "ms", "amplitude_deg")) | kw
+    return Fault(id="f", fault=kind, targets=list(targets), **args)
+
+
+def step(sim: SimActor, delta: float = DEG, skip: tuple[str, ...] = ()) -> dict[str, float]:
+    """Every waited-for agent but `skip` sends `delta`; returns the angles after the step."""
+    e, t = sim.epoch, sim.t
+    assert e is not None
+    for a in sorted(sim.waiting - set(skip)):
+        sim._on_cmd(a, Cmd(epoch=e.epoch, step=t, delta=delta))
+    assert sim.t == t + 1 or sim.epoch is None, "the step advanced"
+    return sim.world.joint_positions()
+
+
+def events(sim: SimActor) -> list[tuple[str, str, int, int]]:
+    return [(e.event, e.target, e.epoch, e.step) for e in sim.node.of(Event)]  # type: ignore[attr-defined]
+
+
+def test_lock_free_disturb(tmp_path, chain4):
+    async def body() -> None:
+        sim = make_sim(tmp_path, chain4)
+        q0 = sim.topo.initial_angles()
+        sim._on_epoch(EpochStart(epoch=0, steps=50, goal=GOAL))
+        sim.apply_fault(fault("lock", "a2"))
+        for _ in range(5):
+            q = step(sim)
+        assert q["a2"] == q0["a2"], "a locked joint ignores its commands"
+        assert q["a1"] == pytest.approx(q0["a1"] + 5 * DEG) and q["a4"] == pytest.approx(q0["a4"] + 5 * DEG)
+        assert sim.fault_summary() == {"a2": "locked"}
+
+        sim.apply_fault(fault("free", "a2"))
+        q = step(sim)
+        assert q["a2"] == pytest.approx(q0["a2"] + DEG)
+
+        sim.apply_fault(fault("disturb", "a3", steps=3, amplitude_deg=2.0))
+        assert sim.fault_summary() == {"a3": "disturbed (3 steps left)"}
+        before = q["a3"]
+        moves = []
+        for _ in range(3):
+            q = step(sim)
+            moves.append(q["a3"] - before)
+            before = q["a3"]
+        assert all(abs(m) <= math.radians(2.0) + 1e-12 for m in moves)
+        assert all(abs(m - DEG) > 1e-9 for m in moves), "a disturbed joint ignores its commands"
+        assert len(set(moves)) == 3
+        assert sim.fault_summary() == {}
+        q2 = step(sim)
+        assert q2["a3"] == pytest.approx(q["a3"] + DEG), "after the disturbance the joint obeys again"
+        assert events(sim) == [
+            ("lock", "a2", 0, 0),
+            ("free", "a2", 0, 5),
+            ("disturb", "a3", 0, 6),
+            ("disturb_end", "a3", 0, 9),
+        ]
+        assert sim.node.of(Event)[2].detail == "disturb a3 steps=3 amplitude_deg=2"  # type: ignore[attr-defined]
+        assert sim.applied["a3"] == pytest.approx(DEG)
+        sim.world.close()
+
+    asyncio.run(body())
+
+
+def test_disturbed_lock_stays_locked_at_new_angle_and_faults_persist_across_epochs(tmp_path, chain4):
+    async def body() -> None:
+        sim = make_sim(tmp_path, chain4)
+        q0 = sim.topo.initial_angles()
+        sim._on_epoch(EpochStart(epoch=0, steps=6, goal=GOAL))
+        sim.apply_fault(fault("lock", "all"))
+        assert sim.locked == set(sim.dof)
+        sim.apply_fault(fault("disturb", "a1", steps=2))  # default amplitude
+        assert sim.fault_summary()["a1"] == "disturbed (2 steps left), then locked"
+        step(sim)
+        q = step(sim)
+        assert q["a1"] != q0["a1"] and abs(q["a1"] - q0["a1"]) <= 2 * math.radians(2.0)
+        for _ in range(4):
+            q2 = step(sim)
+        assert q2 == q, "locked again at the disturbed angle"
+        assert sim.epoch is None
+        done = sim.node.of(EpochDone)[0]  # type: ignore[attr-defined]
+        assert done.final_angles == q
+
+        sim._on_epoch(EpochStart(epoch=1, steps=3, goal=GOAL))
+        assert sim.world.joint_positions() == q0, "the reset still puts every joint at its initial angle"
+        step(sim)
+        assert sim.world.joint_positions() == q0, "a broken joint stays broken"
+        sim.world.close()
+
+    asyncio.run(body())
+
+
+def test_disturbance_replays_with_the_seed(tmp_path, chain4):
+    async def run(seed: int) -> list[float]:
+        sim = make_sim(tmp_path, chain4, seed=seed)
+        sim._on_epoch(EpochStart(epoch=0, steps=20, goal=GOAL))
+        sim.apply_fault(fault("disturb", "a2", "a4", steps=10, amplitude_deg=5.0))
+        for _ in range(10):
+            q = step(sim)
+        sim.world.close()
+        return [q["a2"], q["a4"]]
+
+    a, b, c = (asyncio.run(run(s)) for s in (7, 7, 8))
+    assert a == b and a != c
+
+
+def test_other_faults_and_bad_faults_are_ignored(tmp_path, chain4):
+    async def body() -> None:
+        sim = make_sim(tmp_path, chain4)
+        sim.apply_fault(fault("kill", "a2"))
+        sim.apply_fault(fault("drop", "a2", rate=0.5))
+        sim.apply_fault(fault("lock", "zz"))  # not an agent
+        sim.apply_fault(fault("disturb", "a1"))  # no steps
+        assert not sim.locked and not sim.disturbed and not sim.node.sent  # type: ignore[attr-defined]
+        sim.world.close()
+
+    asyncio.run(body())
+
+
+def test_scenario_applies_joint_faults_and_forwards_the_others(tmp_path, chain4):
+    sc = tmp_path / "s.toml"
+    sc.write_text(
+        'name = "t"\n'
+        '[[event]]\nstep = 2\nfault = "lock"\ntarget = "a1"\n'
+        '[[event]]\nstep = 3\nepoch = 0\nfault = "kill"\ntarget = "a3"\n'
+        '[[event]]\nstep = 4\nfault = "free"\ntarget = "all"\n'
+    )
+
+    async def body() -> None:
+        sim = make_sim(tmp_path, chain4, scenario=str(sc))
+        assert sim.keys.fault("request") in sim.outputs()
+        for epoch in (0, 1):
+            sim._on_epoch(EpochStart(epoch=epoch, steps=6, goal=GOAL))
+            for _ in range(6):
+                step(sim)
+        node: RecordingNode = sim.node  # type: ignore[assignment]
+        requests = [(k, m) for k, m in node.sent if isinstance(m, Fault)]
+        assert [(k, m.id, m.fault, m.targets) for k, m in requests] == [
+            (sim.keys.fault("request"), "scenario-0-3-1", "kill", ["a3"])
+        ], "the kill is only in epoch 0, and goes to the supervisor"
+        ev = events(sim)
+        assert ev[:5] == [("lock", "a1", 0, 2), *(("free", a, 0, 4) for a in sim.dof)]
+        assert ev[5] == ("lock", "a1", 1, 2), "an entry without an epoch repeats every epoch"
+        q = sim.world.joint_positions()
+        q0 = sim.topo.initial_angles()
+        assert q["a1"] == pytest.approx(q0["a1"] + 4 * DEG)  # locked for steps 2 and 3 of 6
+        sim.world.close()
+
+    asyncio.run(body())
+
+
+def test_epoch_start_guard(tmp_path, chain4):
+    async def body() -> None:
+        sim = make_sim(tmp_path, chain4)
+        node: RecordingNode = sim.node  # type: ignore[assignment]
+        sim._on_epoch(EpochStart(epoch=1, steps=3, goal=GOAL))
+        assert sim.epoch is None and not node.of(Task), "the first epoch must be 0"
+        sim._on_epoch(EpochStart(epoch=0, steps=3, goal=GOAL))
+        step(sim)
+        q = sim.world.joint_positions()
+        for replay in (0, 1):  # mid-run: neither a replay nor the next epoch resets the world
+            sim._on_epoch(EpochStart(epoch=replay, steps=3, goal=(0.0, 0.0)))
+            assert sim.t == 1 and sim.world.joint_positions() == q and sim.epoch.goal == GOAL  # type: ignore[union-attr]
+        step(sim)
+        step(sim)
+        assert sim.epoch is None and len(node.of(EpochDone)) == 1
+        sim._on_epoch(EpochStart(epoch=0, steps=3, goal=GOAL))
+        sim._on_epoch(EpochStart(epoch=2, steps=3, goal=GOAL))
+        sim._on_epoch(EpochStart(epoch=1, steps=0, goal=GOAL))
+        assert sim.epoch is None
+        sim._on_epoch(EpochStart(epoch=1, steps=3, goal=GOAL))
+        assert sim.epoch is not None and sim.epoch.epoch == 1 and sim.t == 0
+        sim.world.close()
+
+    asyncio.run(body())
+
+
+def test_liveliness_aware_stepping(tmp_path, chain4):
+    async def body() -> None:
+        sim = make_sim(tmp_path, chain4)
+        sim._on_alive("a3", True)  # seen alive: changes nothing
+        sim._on_epoch(EpochStart(epoch=0, steps=10, goal=GOAL))
+        assert sim.waiting == set(sim.dof), "agents never seen stay expected"
+        for a in ("a1", "a2", "a4"):
+            sim._on_cmd(a, Cmd(epoch=0, step=0, delta=DEG))
+        assert sim.t == 0
+        sim._on_alive("a3", False)  # down mid-step: stop waiting for it
+        assert sim.t == 1 and sim.down == {"a3"}
+        assert sim.waiting == {"a1", "a2", "a4"}
+        q = step(sim)
+        assert q["a3"] == sim.topo.initial_angles()["a3"], "a down agent's joint holds"
+        sim._on_alive("a3", True)  # back mid-step: waited for from the next step, not this one
+        assert "a3" not in sim.waiting
+        step(sim)
+        assert sim.waiting == set(sim.dof)
+        sim._on_alive("zz", False)  # not a joint: ignored
+        assert sim.down == set()
+        # every agent down: the deadline runs the step (nothing missed), the joints do not race
+        for a in sim.dof:
+            sim._on_alive(a, False)
+        t = sim.t
+        assert sim.t == t and not sim.waiting
+        sim._on_deadline(f"0/{t}".encode())
+        assert sim.t == t + 1 and sim.missed == 0
+        sim._on_alive("a1", True)
+        sim._on_deadline(f"0/{t + 1}".encode())
+        assert sim.missed == 0, "a1 came back mid-step: not missed in that step"
+        sim._on_deadline(f"0/{t + 2}".encode())
+        assert sim.missed == 1, "... but in the next"
+        sim.world.close()
+
+    asyncio.run(body())
+
+
+def test_status_reports_angles_increments_and_faults(tmp_path, chain4):
+    async def body() -> None:
+        sim = make_sim(tmp_path, chain4)
+        sim._on_epoch(EpochStart(epoch=0, steps=10, goal=GOAL))
+        sim.apply_fault(fault("lock", "a2"))
+        step(sim)
+        sim._on_status()
+        sim._status.cancel()  # type: ignore[union-attr]
+        (st,) = sim.node.of(JointStatus)  # type: ignore[attr-defined]
+        assert (st.epoch, st.step) == (0, 1) and st.q == sim.world.joint_positions()
+        assert st.delta["a2"] == 0.0 and st.delta["a1"] == pytest.approx(DEG)
+        assert st.faults == {"a2": "locked"}
+        sim.world.close()
+
+    asyncio.run(body())
+
+
+# -- in a real Zenoh session ---------------------------------------------------------------------
+class TestController:
+    """Stands in for the agents: holds their liveliness tokens and sends +1 degree for each live one."""
+
+    __test__ = False
+
+    def __init__(self, session: Any, cfg: RunConfig) -> None:
+        self.node = Node(session, Keys(cfg.run_id), "controller", "test", cfg.key)
+        self.dof = cfg.topo().dof_agents
+        k = self.node.keys
+        for key in (k.task, k.obs("*"), k.metrics("*"), k.rep_all):
+            self.node.listen(key)
+        self.tokens = {a: session.liveliness().declare_token(k.alive("agent", a)) for a in self.dof}
+        self.got: dict[type, list[Any]] = {}
+        self.on_task: Any = None
+
+    async def wait_for(self, kind: type, pred: Any = lambda m: True, timeout: float = 20.0) -> Any:
+        """Read the mailbox until a message of `kind` satisfying `pred` has arrived (Tasks feed on_task)."""
+        k = self.node.keys
+        kinds = {
+            k.task: Task,
+            k.metrics("epoch"): EpochDone,
+            k.metrics("event"): Event,
+            k.metrics("joints"): JointStatus,
+            k.rep("sim", "sim"): Bye,
+        }
+        deadline = time.monotonic() + timeout
+        while not any(pred(m) for m in self.got.get(kind, [])):
+            key, payload = await asyncio.wait_for(self.node.recv(), deadline - time.monotonic())
+            if key in kinds and (m := self.node.decode(key, payload, kinds[key])) is not None:
+                self.got.setdefault(kinds[key], []).append(m)
+                if isinstance(m, Task) and self.on_task is not None:
+                    self.on_task(m)
+        return next(m for m in self.got[kind] if pred(m))
+
+
+@pytest.mark.timeout(60)
+def test_sim_in_a_zenoh_session(tmp_path, chain4, endpoint):
+    cfg = RunConfig(run_id="zt", topology=str(chain4), out=str(tmp_path), steps=40, deadline_ms=5000)
+
+    async def body() -> None:
+        session = open_session(listen=[endpoint])
+        sim_node = Node(session, Keys(cfg.run_id), "sim", "sim", cfg.key)
+        ctl = TestController(session, cfg)
+        sim = SimActor(cfg, cfg.topo(), sim_node)
+        task = asyncio.create_task(sim.run())
+        k = ctl.node.keys
+        senders = set(ctl.dof)
+        step_wall: dict[int, float] = {}
+
+        def on_task(t: Task) -> None:
+            step_wall[t.step] = time.monotonic()
+            if t.step == 10:
+                ctl.node.send(
+                    k.ctl("fault"),
+                    Fault(
+                        id="live",
+                        fault="lock",
+                        targets=["a2"],
+                        seconds=None,
+                        steps=None,
+                        rate=None,
+                        ms=None,
+                        amplitude_deg=None,
+                    ),
+                )
+            if t.step == 20:  # a3 dies: no more cmds, and its token goes
+                senders.discard("a3")
+                ctl.tokens["a3"].undeclare()
+                ctl.node.send(k.ctl("epoch"), EpochStart(epoch=0, steps=40, goal=(0.0, 0.0)))  # a replay
+            for a in sorted(senders):
+                ctl.node.send(k.cmd(a), Cmd(epoch=t.epoch, step=t.step, delta=DEG))
+
+        ctl.on_task = on_task
+        try:
+            await ctl.node.wait_matched([k.ctl("epoch"), k.ctl("fault"), k.ctl("stop")], timeout=10)
+            while sim_node._token is None:  # the sim is wired
+                await asyncio.sleep(0.01)
+            ctl.node.send(k.ctl("epoch"), EpochStart(epoch=0, steps=40, goal=GOAL))
+            done = await ctl.wait_for(EpochDone)
+            assert done.steps == 40 and len(done.errors) == 40
+            assert done.missed_cmds == 0, "a3 went down: it was not waited for, so not missed"
+            assert max(step_wall[t + 1] - step_wall[t] for t in range(20, 39)) < 2.0, "no step waited for a3"
+            q0 = sim.topo.initial_angles()
+            assert done.final_angles["a3"] == pytest.approx(q0["a3"] + 20 * DEG, abs=1.5 * DEG)
+            assert done.final_angles["a2"] == pytest.approx(q0["a2"] + 10 * DEG, abs=1.5 * DEG)
+            assert done.final_angles["a1"] == pytest.approx(q0["a1"] + 40 * DEG)
+            ev = await ctl.wait_for(Event)
+            assert (ev.event, ev.target, ev.epoch) == ("lock", "a2", 0) and ev.detail == "lock a2"
+            st = await ctl.wait_for(JointStatus, lambda s: s.step == 40)
+            assert st.faults == {"a2": "locked"}
+            assert len(ctl.got[EpochDone]) == 1, "the replayed EpochStart was ignored"
+            ctl.node.send(k.ctl("stop"), Stop(reason="test"))
+            bye = await ctl.wait_for(Bye)
+            assert bye.steps == 40 and bye.rejected == 0
+            await asyncio.wait_for(task, 10)
+        finally:
+            task.cancel()
+            await asyncio.gather(task, return_exceptions=True)
+            for tok in ctl.tokens.values():
+                try:
+                    tok.undeclare()
+                except Exception:
+                    pass
+            ctl.node.close()
+            sim_node.close()
+            session.close()
+
+    asyncio.run(body())
