@@ -1,5 +1,6 @@
-"""What a run leaves behind: `summary.json`, `learning_curve.png`, `arm.png` — rebuilt from the run
-directory alone (`kinswarm report RUN-DIR`)."""
+"""What a run leaves behind: `summary.json`, `learning_curve.png`, `arm.png`, `tracking.png` — rebuilt
+from the run directory alone (`kinswarm report RUN-DIR`). Runs from before faults existed (no
+`events.jsonl`, no per-step `errors` in `metrics.jsonl`) still get the plots their data allows."""
 
 from __future__ import annotations
 
@@ -12,9 +13,20 @@ from kinswarm.actors.config import load_run_config
 from kinswarm.actors.learning.state import joint_frame, link_end
 from kinswarm.protocol.topology import Topology
 
+TRACKED_EPOCHS = 4  # tracking.png: at most this many epochs with events (else the last epoch)
+
 
 def read_metrics(run_dir: Path) -> list[dict[str, Any]]:
-    path = run_dir / "metrics.jsonl"
+    return _read_jsonl(run_dir / "metrics.jsonl")
+
+
+def read_events(run_dir: Path) -> list[dict[str, Any]]:
+    """`events.jsonl` rows (faults, detections, restarts, ...); [] for a run that has none."""
+    path = run_dir / "events.jsonl"
+    return _read_jsonl(path) if path.exists() else []
+
+
+def _read_jsonl(path: Path) -> list[dict[str, Any]]:
     rows = []
     for n, line in enumerate(path.read_text().splitlines(), 1):
         try:
@@ -56,12 +68,23 @@ def write_plots(run_dir: Path) -> list[Path]:
     topo = cfg.topo()
     goal = cfg.resolved_goal(topo)
     rows = read_metrics(run_dir)
+    by_epoch = _events_by_epoch(read_events(run_dir))
     written = []
     if rows:
         ep = [r["epoch"] for r in rows]
         fig, ax = plt.subplots(figsize=(7, 4))
         ax.plot(ep, [r["mean_error"] for r in rows], label="mean error over the epoch")
         ax.plot(ep, [r["final_error"] for r in rows], label="final error (last step)")
+        marked = [r for r in rows if r["epoch"] in by_epoch]
+        if marked:
+            ax.plot(
+                [r["epoch"] for r in marked],
+                [r["final_error"] for r in marked],
+                "o",
+                mfc="none",
+                color="C3",
+                label="epoch with events (faults, restarts, ...)",
+            )
         ax.axhline(0.5, color="grey", ls="--", lw=0.8, label="0.5")
         ax.set_yscale("log")
         ax.set_xlabel("epoch")
@@ -94,7 +117,50 @@ def write_plots(run_dir: Path) -> list[Path]:
         fig.savefig(run_dir / "arm.png", dpi=110)
         plt.close(fig)
         written.append(run_dir / "arm.png")
+
+    tracked = [r for r in rows if r.get("errors")]
+    with_events = [r for r in tracked if r["epoch"] in by_epoch]
+    chosen = with_events[-TRACKED_EPOCHS:] or tracked[-1:]
+    if chosen:
+        fig, axes = plt.subplots(len(chosen), 1, figsize=(8, 2.6 * len(chosen) + 0.6), squeeze=False, sharex=True)
+        for ax, r in zip(axes[:, 0], chosen, strict=True):
+            _tracking(ax, r, by_epoch.get(r["epoch"], []))
+        axes[-1, 0].set_xlabel("step (error after the step's joint actions)")
+        fig.suptitle(f"{cfg.run_id}: end-effector error within an epoch ({cfg.controller})", fontsize=10)
+        fig.tight_layout()
+        fig.savefig(run_dir / "tracking.png", dpi=110)
+        plt.close(fig)
+        written.append(run_dir / "tracking.png")
     return written
+
+
+def _events_by_epoch(events: list[dict[str, Any]]) -> dict[int, list[dict[str, Any]]]:
+    """Events placed in an epoch and step; those the sender could not place (-1) are left out of plots."""
+    out: dict[int, list[dict[str, Any]]] = {}
+    for ev in events:
+        epoch, step = ev.get("epoch", -1), ev.get("step", -1)
+        if isinstance(epoch, int) and isinstance(step, int) and epoch >= 0 and step >= 0:
+            out.setdefault(epoch, []).append(ev)
+    return out
+
+
+def _tracking(ax: Any, row: dict[str, Any], events: list[dict[str, Any]]) -> None:
+    """One epoch's error per step (the paper's Figs. 13-21), a labelled line at every event step."""
+    errors = row["errors"]
+    ax.plot(range(len(errors)), errors, lw=1.0, color="C0")
+    ax.axhline(0.5, color="grey", ls="--", lw=0.8)
+    # One line per step; the events at it in one label: "lock a1,a2,a3".
+    at: dict[int, dict[str, list[str]]] = {}
+    for ev in events:
+        at.setdefault(ev["step"], {}).setdefault(str(ev.get("event", "?")), []).append(str(ev.get("target", "")))
+    top = max(errors) if errors else 1.0
+    for step, kinds in sorted(at.items()):
+        ax.axvline(step, color="C3", lw=0.8, alpha=0.7)
+        label = "; ".join(f"{k} {','.join(dict.fromkeys(t))}" for k, t in kinds.items())
+        ax.text(step, top, f" {label}", rotation=90, va="top", ha="right", fontsize=7, color="C3")
+    ax.set_ylabel("error")
+    ax.set_title(f"epoch {row['epoch']}: final {row['final_error']:.3f}, mean {row['mean_error']:.3f}", fontsize=9)
+    ax.grid(alpha=0.3)
 
 
 def write_summary(run_dir: Path, extra: dict[str, Any]) -> dict[str, Any]:
