@@ -8,6 +8,13 @@ Step t, as seen by agent i:
           defines S_i = <q_i, theta_i, d_i, g_i>, learns from (s(t-1), a(t-1), r(t-1), s(t)), picks
           a(t) by the joint action selection mechanism, sends `up` to its parent and `cmd` to the sim.
 Messages for a newer step supersede an unfinished older one (the sim has moved on past its deadline).
+
+Re-wiring (DESIGN §5): when a descendant's liveliness token goes away (killed, frozen, cut off), the
+nearest live ancestor adopts its children: it reads the lost joint's encoder, composes the frames the
+lost agent would have sent, sends them down and collects the ups addressed to it. The lost joint holds
+(the sim stops waiting for it; to the adopter's learner its action is "keep"). Control is handed back
+at the first step after the token returns. A lost root has no ancestor: its children wait for it (each
+step then ends at the sim's deadline) until the supervisor has restarted it.
 """
 
 from __future__ import annotations
@@ -15,17 +22,18 @@ from __future__ import annotations
 import asyncio
 import math
 import zlib
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from kinswarm.actors.checkpoint import load_checkpoint, save_checkpoint
+from kinswarm.actors.checkpoint import CheckpointError, digest, load_checkpoint, load_latest, save_checkpoint
 from kinswarm.actors.config import RunConfig
 from kinswarm.actors.learning.learner import Learner
 from kinswarm.actors.learning.reward import reach_reward
 from kinswarm.actors.learning.settings import LearnerSettings
 from kinswarm.actors.learning.state import agent_state, joint_frame, link_end
 from kinswarm.actors.runtime import Node
-from kinswarm.protocol.messages import Checkpoint, Cmd, Down, Obs, Saved, Stop, Task, Up
+from kinswarm.protocol.messages import Bye, Checkpoint, Cmd, Down, Event, Fault, Obs, Saved, Stop, Task, Up
 from kinswarm.protocol.topology import Topology
 
 Key = tuple[int, int]  # (epoch, step)
@@ -48,7 +56,9 @@ class _Step:
     q: float
     goal: tuple[float, float]
     reward: float | None
-    ups: dict[str, Up] = field(default_factory=dict)
+    waiting: frozenset[str]  # the live agents whose `up` this step needs: children, or adopted ones' children
+    tips: dict[str, tuple[float, float, float]]  # end effectors of adopted leaves, computed here
+    ups: dict[str, Up] = field(default_factory=dict)  # by sender
 
 
 class Agent:
@@ -60,20 +70,27 @@ class Agent:
         # The paper's neighbourhood: an agent sees the agents one level below it (its DOF children).
         self.visible = [c for c in self.spec.children if topo.agents[c].has_dof]
         self.leaves = topo.subtree_leaves(agent_id)
-        # which child an `up` comes from, by the set of tips it reports (computed once, not per message)
-        self.child_by_tips = {frozenset(topo.subtree_leaves(c)): c for c in self.spec.children}
+        self.descendants = set(_below(topo, agent_id))
+        # who sent an `up` addressed to x (me, or an agent I adopted): the child of x whose subtree holds
+        # exactly the tips reported (computed once per x, not per message)
+        self.child_by_tips: dict[str, dict[frozenset[str], str]] = {}
         self.learner: Learner | None = None
         self.epochs_before = 0  # epochs trained before this run (from --from), for the lr schedule
         if self.spec.has_dof:
             self.learner = Learner(learner_settings(cfg, topo), len(self.visible), agent_seed(cfg.seed, agent_id))
         self.epoch = -1
         self.last_begun: Key = (-1, -1)
+        self.last_finished: Key = (-1, -1)
         self.current: _Step | None = None
-        self.q_in: dict[Key, float] = {}
+        self.q_in: dict[str, dict[Key, float]] = {agent_id: {}}  # encoder readings: mine and adopted ones'
         self.head_in: dict[Key, Down | Task] = {}
         self.ups_early: dict[Key, dict[str, Up]] = {}
         self.D_prev: float | None = None  # root only: D_goal(t-1)
         self.steps_done = 0
+        self.down: set[str] = set()  # descendants whose liveliness token went away
+        self.adopted: tuple[str, ...] = ()  # the lost agents this agent stood in for at its last step
+        self.listening: set[str] = set()  # lost agents whose obs/up keys this agent subscribed to
+        self.restored: Event | None = None  # what a restart restored, announced once alive
 
     # -- wiring ----------------------------------------------------------------------------------
     def subscriptions(self) -> list[str]:
@@ -104,20 +121,71 @@ class Agent:
         self.learner.load_state_dict(arrays)
         self.epochs_before = int(meta.get("epochs_trained", 0))
 
+    def resume(self, directory: Path) -> None:
+        """A restart: the learned state of this run's newest good checkpoint (else the one before it);
+        before the first checkpoint, the run's starting point (`--from`, or fresh)."""
+        if self.learner is None:
+            self.restored = Event(epoch=-1, step=-1, event="restored", target=self.id, detail="no learned state")
+            return
+        try:
+            arrays, meta, used, refused = load_latest(directory / f"{self.id}.npz", agent=self.id)
+        except CheckpointError as e:
+            if self.cfg.from_dir:
+                self.restore(Path(self.cfg.from_dir) / "agents")
+            detail = f"no good checkpoint of this run ({e}); starting from {self.cfg.from_dir or 'scratch'}"
+            self.node.log.warning(detail)
+            self.restored = Event(epoch=-1, step=-1, event="restored", target=self.id, detail=detail)
+            return
+        for reason in refused:
+            self.node.log.warning("checkpoint refused: %s", reason)
+        self.learner.load_state_dict(arrays)
+        self.epochs_before = int(meta.get("epochs_before", 0))
+        detail = (
+            f"{used.name} of epoch {meta.get('run_epoch')}: checkpoint sha256={meta['sha256']} "
+            f"restored sha256={digest(self.learner.state_dict())}"
+        )
+        if refused:
+            detail += f"; refused: {'; '.join(refused)}"
+        epoch = int(meta.get("run_epoch", -1))
+        self.restored = Event(epoch=epoch, step=-1, event="restored", target=self.id, detail=detail)
+
     # -- the loop ----------------------------------------------------------------------------------
     async def run(self) -> None:
         node, k = self.node, self.keys
         for s in self.subscriptions():
             node.listen(s)
-        await node.wait_matched(self.outputs(), timeout=30.0)
-        node.declare_alive()
+        push = node.mailbox.push
+
+        def on_token(sample: object) -> None:  # zenoh thread: `+a3` / `-a3` into the mailbox, in order
+            parsed = k.parse_alive(str(sample.key_expr))  # type: ignore[attr-defined]
+            if parsed is not None and parsed[1] in self.descendants:
+                up = sample.kind == sample.kind.PUT  # type: ignore[attr-defined]
+                push("__alive__", ("+" if up else "-").encode() + parsed[1].encode())
+
+        watch = None
+        if self.descendants:
+            watch = node.session.liveliness().declare_subscriber(k.alive("agent", "*"), on_token, history=True)
+        try:
+            await node.wait_matched([*self.outputs(), k.metrics("event")], timeout=30.0)
+            node.declare_alive()
+            if self.restored is not None:
+                node.send(k.metrics("event"), self.restored)
+            await self._loop()
+        finally:
+            if watch is not None:
+                watch.undeclare()
+
+    async def _loop(self) -> None:
+        node, k = self.node, self.keys
         while True:
             key, payload = await node.recv()
             kind = key[len(k.root) + 1 :]
             if kind.startswith("sim/obs/"):
                 if (m := node.decode(key, payload, Obs)) is not None:
-                    self.q_in[(m.epoch, m.step)] = m.q
-                    self._try_begin((m.epoch, m.step))
+                    agent = kind[len("sim/obs/") :]
+                    if agent in self.q_in:
+                        self.q_in[agent][(m.epoch, m.step)] = m.q
+                        self._try_begin((m.epoch, m.step))
             elif kind.endswith("/down") or kind == "sim/task":
                 m2 = node.decode(key, payload, Task if self.is_root else Down)
                 if m2 is not None:
@@ -125,35 +193,82 @@ class Agent:
                     self._try_begin((m2.epoch, m2.step))
             elif kind.endswith("/up"):
                 if (m3 := node.decode(key, payload, Up)) is not None:
-                    self._on_up(m3, key)
+                    self._on_up(m3, kind[2:-3])
+            elif key == "__alive__":
+                self._on_token(payload.decode())
+            elif kind == "ctl/fault":
+                if (f := node.decode(key, payload, Fault)) is not None:
+                    node.apply_fault(f)
             elif kind == "ctl/checkpoint":
                 if (m4 := node.decode(key, payload, Checkpoint)) is not None:
                     await asyncio.to_thread(self._save, m4)
             elif kind == "ctl/stop":
                 if node.decode(key, payload, Stop) is not None:
+                    node.send(k.rep("bye", self.id), Bye(steps=self.steps_done, rejected=node.rejected))
                     return
             # other ctl verbs are for other actors
 
     # -- handlers ----------------------------------------------------------------------------------
+    def _on_token(self, change: str) -> None:
+        agent = change[1:]
+        if change[0] == "+":
+            self.down.discard(agent)
+            return
+        self.down.add(agent)
+        # subscribe now to what the lost agent heard, so this agent can stand in from the next step
+        if agent not in self.listening:
+            self.listening.add(agent)
+            spec = self.topo.agents[agent]
+            if spec.has_dof:
+                self.q_in.setdefault(agent, {})
+                self.node.listen(self.keys.obs(agent))
+            if spec.children:
+                self.node.listen(self.keys.up(agent))
+
+    def _region(self) -> tuple[list[str], list[str]]:
+        """(adopted, waiting): the lost agents below me down to the live ones, and those live ones."""
+        if not self.down:
+            return [], list(self.spec.children)
+        adopted, waiting = [], []
+        stack = list(self.spec.children)
+        while stack:
+            c = stack.pop()
+            if c in self.down:
+                adopted.append(c)
+                stack.extend(self.topo.agents[c].children)
+            else:
+                waiting.append(c)
+        return adopted, waiting
+
     def _try_begin(self, key: Key) -> None:
         if key <= self.last_begun:
             return  # stale: a newer step has begun
-        if self.spec.has_dof and key not in self.q_in:
+        epoch, step = key
+        if not (0 <= epoch < self.cfg.epochs and 0 <= step < self.cfg.steps):
+            self.node.log.warning("ignored step %s: outside this run's epochs and steps", key)
             return
         head = self.head_in.get(key)
         if head is None:
             return
-        q = self.q_in.get(key, 0.0)
+        adopted, waiting = self._region()
+        needs_q = [self.id] if self.spec.has_dof else []
+        needs_q += [a for a in adopted if self.topo.agents[a].has_dof]
+        if any(key not in self.q_in.get(a, {}) for a in needs_q):
+            return
+        q = {a: self.q_in[a][key] for a in needs_q}
         # drop everything up to this step: newer steps supersede unfinished older ones
-        self.q_in = {kk: v for kk, v in self.q_in.items() if kk > key}
+        for a, readings in self.q_in.items():
+            self.q_in[a] = {kk: v for kk, v in readings.items() if kk > key}
         self.head_in = {kk: v for kk, v in self.head_in.items() if kk > key}
         self.last_begun = key
-        epoch, step = key
         if epoch != self.epoch:
             self.epoch = epoch
             self.D_prev = None
             if self.learner is not None:
-                self.learner.start_epoch(self.epochs_before + epoch)
+                self.learner.start_epoch(self.epochs_before + epoch, t=step)
+        elif self.learner is not None and key != (epoch, self.last_finished[1] + 1):
+            self.learner.resync(step)  # a missed step: no TD update across the gap
+        self._announce(adopted)
 
         if isinstance(head, Task):  # the root: the world's base, the reward from the task observation
             base = self.topo.base
@@ -163,18 +278,64 @@ class Agent:
             self.D_prev = D
         else:
             base, goal, reward = head.base, head.goal, head.reward
-        frame = joint_frame(base, self.spec.offset, q)
+        frame = joint_frame(base, self.spec.offset, q.get(self.id, 0.0))
         end = link_end(frame, self.spec.link_length)
-        for c in self.spec.children:
-            self.node.send(self.keys.down(c), Down(epoch=epoch, step=step, base=end, goal=goal, reward=reward))
-        self.current = _Step(key, frame, end, q, goal, reward, self.ups_early.pop(key, {}))
+        tips: dict[str, tuple[float, float, float]] = {}
+        for child, child_base in self._frames_below(self.id, end, q, tips):
+            self.node.send(
+                self.keys.down(child), Down(epoch=epoch, step=step, base=child_base, goal=goal, reward=reward)
+            )
+        self.current = _Step(
+            key, frame, end, q.get(self.id, 0.0), goal, reward, frozenset(waiting), tips, self.ups_early.pop(key, {})
+        )
         self.ups_early = {kk: v for kk, v in self.ups_early.items() if kk > key}
         self._try_finish()
 
-    def _on_up(self, m: Up, key_expr: str) -> None:
-        child = self._child_of(m) if m.tips else None
+    def _frames_below(
+        self, agent: str, end: tuple[float, float, float], q: dict[str, float], tips: dict
+    ) -> Iterator[tuple[str, tuple[float, float, float]]]:
+        """(child, its base frame) for my children and, through lost agents, for theirs (composing the
+        lost agents' frames from their encoders, as they would have); tips of lost leaves go to `tips`."""
+        for c in self.topo.agents[agent].children:
+            yield c, end
+            if c in self.down:
+                spec = self.topo.agents[c]
+                c_end = link_end(joint_frame(end, spec.offset, q.get(c, 0.0)), spec.link_length)
+                if spec.is_leaf:
+                    tips[c] = c_end
+                yield from self._frames_below(c, c_end, q, tips)
+
+    def _announce(self, adopted: list[str]) -> None:
+        now = tuple(sorted(adopted))
+        if now == self.adopted:
+            return
+        for a in sorted(set(now) - set(self.adopted)):
+            below = ", ".join(self.topo.agents[a].children) or "its joint only"
+            self._event("adopt", a, f"{self.id} stands in for {a} ({below})")
+        for a in sorted(set(self.adopted) - set(now)):
+            self._event("handback", a, f"{self.id} hands control back to {a}")
+        self.adopted = now
+
+    def _event(self, event: str, target: str, detail: str) -> None:
+        epoch, step = self.last_begun
+        self.node.log.info("%s %s: %s", event, target, detail)
+        self.node.send(
+            self.keys.metrics("event"), Event(epoch=epoch, step=step, event=event, target=target, detail=detail)
+        )
+
+    def _on_up(self, m: Up, addressee: str) -> None:
+        if addressee != self.id and addressee not in self.listening:
+            return
+        by_tips = self.child_by_tips.get(addressee)
+        if by_tips is None:
+            by_tips = self.child_by_tips[addressee] = {
+                frozenset(self.topo.subtree_leaves(c)): c for c in self.topo.agents[addressee].children
+            }
+        child = by_tips.get(frozenset(m.tips)) if m.tips else None
         if child is None:
-            self.node.log.warning("rejected up on %s: tips %s are not from one of my children", key_expr, list(m.tips))
+            self.node.log.warning(
+                "rejected up to %s: tips %s are not from one of its children", addressee, list(m.tips)
+            )
             return
         key = (m.epoch, m.step)
         if self.current is not None and self.current.key == key:
@@ -183,31 +344,31 @@ class Agent:
         elif key > self.last_begun:
             self.ups_early.setdefault(key, {})[child] = m
 
-    def _child_of(self, m: Up) -> str | None:
-        """The child whose subtree holds exactly the tips reported."""
-        return self.child_by_tips.get(frozenset(m.tips))
-
     def _try_finish(self) -> None:
         cur = self.current
-        if cur is None or len(cur.ups) < len(self.spec.children):
+        if cur is None or not cur.waiting.issubset(cur.ups):
             return
         self.current = None
         epoch, step = cur.key
         if self.spec.is_leaf:
             tips = {self.id: cur.end}
         else:
-            tips = {leaf: tip for u in cur.ups.values() for leaf, tip in u.tips.items()}
+            tips = dict(cur.tips)
+            for c in cur.waiting:
+                tips.update(cur.ups[c].tips)
         action = -1
         if self.learner is not None:
             tip = _centroid([tips[leaf] for leaf in self.leaves])
             s = agent_state(cur.frame, cur.q, tip, cur.goal)
-            visible_actions = [cur.ups[c].action for c in self.visible]
+            # a lost child's joint holds: to this agent's fictitious play it chose "keep"
+            visible_actions = [cur.ups[c].action if c in cur.ups else 1 for c in self.visible]
             action = self.learner.step(s, cur.reward, visible_actions, learn=self.cfg.learn, explore=self.cfg.explore)
         if not self.is_root:
             self.node.send(self.keys.up(self.spec.parent), Up(epoch=epoch, step=step, tips=tips, action=action))  # type: ignore[arg-type]
         if self.learner is not None:
             delta = (action - 1) * self.cfg.action_rad  # actions 0, 1, 2: decrease, keep, increase
             self.node.send(self.keys.cmd(self.id), Cmd(epoch=epoch, step=step, delta=delta))
+        self.last_finished = cur.key
         self.steps_done += 1
 
     def _save(self, m: Checkpoint) -> None:
@@ -222,6 +383,8 @@ class Agent:
                         "agent": self.id,
                         "topology": self.topo.name,
                         "epochs_trained": self.epochs_before + m.epoch + 1,
+                        "epochs_before": self.epochs_before,
+                        "run_epoch": m.epoch,
                         "seed": self.cfg.seed,
                     },
                 )
@@ -229,6 +392,12 @@ class Agent:
                 error = f"cannot write {path}: {e}"
                 self.node.log.error(error)
         self.node.send(self.keys.rep("agent", self.id), Saved(epoch=m.epoch, path=str(path), error=error))
+
+
+def _below(topo: Topology, agent: str) -> Iterator[str]:
+    for c in topo.agents[agent].children:
+        yield c
+        yield from _below(topo, c)
 
 
 def _centroid(points: list) -> tuple[float, float]:

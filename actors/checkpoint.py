@@ -1,6 +1,7 @@
 """Checkpoints: one `.npz` per agent, written atomically (temp file + fsync + rename + directory fsync),
 carrying a format version and a SHA-256 over every array, so a torn or foreign file is refused with a
-clear error instead of loading corrupted learned state."""
+clear error instead of loading corrupted learned state. The previous checkpoint is kept as
+`<id>.prev.npz`; `load_latest` falls back to it when the newest one is refused."""
 
 from __future__ import annotations
 
@@ -22,7 +23,7 @@ class CheckpointError(ValueError):
     pass
 
 
-def _digest(arrays: dict[str, np.ndarray]) -> str:
+def digest(arrays: dict[str, np.ndarray]) -> str:
     h = hashlib.sha256()
     for name in sorted(arrays):
         a = np.ascontiguousarray(arrays[name])
@@ -36,7 +37,7 @@ def _digest(arrays: dict[str, np.ndarray]) -> str:
 def save_checkpoint(path: Path, arrays: dict[str, np.ndarray], meta: dict) -> None:
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    header = {**meta, "format": FORMAT, "version": FORMAT_VERSION, "sha256": _digest(arrays)}
+    header = {**meta, "format": FORMAT, "version": FORMAT_VERSION, "sha256": digest(arrays)}
     buf = io.BytesIO()
     np.savez(buf, __meta__=np.frombuffer(json.dumps(header).encode(), dtype=np.uint8), **arrays)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
@@ -45,6 +46,8 @@ def save_checkpoint(path: Path, arrays: dict[str, np.ndarray], meta: dict) -> No
             f.write(buf.getvalue())
             f.flush()
             os.fsync(f.fileno())
+        if path.exists():  # keep the last good one: a crash between the renames leaves only .prev
+            os.replace(path, previous(path))
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
@@ -77,8 +80,28 @@ def load_checkpoint(path: Path, *, agent: str | None = None) -> tuple[dict[str, 
         raise CheckpointError(f"{path}: format {meta.get('format')!r}, expected {FORMAT!r}")
     if meta.get("version") != FORMAT_VERSION:
         raise CheckpointError(f"{path}: format version {meta.get('version')!r}, expected {FORMAT_VERSION}")
-    if meta.get("sha256") != _digest(arrays):
+    if meta.get("sha256") != digest(arrays):
         raise CheckpointError(f"{path}: checksum mismatch: the file is corrupted")
     if agent is not None and meta.get("agent") != agent:
         raise CheckpointError(f"{path}: belongs to agent {meta.get('agent')!r}, not {agent!r}")
     return arrays, meta
+
+
+def previous(path: Path) -> Path:
+    """`agents/a1.npz` -> `agents/a1.prev.npz`: the checkpoint before the newest."""
+    path = Path(path)
+    return path.with_name(f"{path.stem}.prev{path.suffix}")
+
+
+def load_latest(path: Path, *, agent: str) -> tuple[dict[str, np.ndarray], dict, Path, list[str]]:
+    """The newest good checkpoint at `path`, else its `.prev`: (arrays, meta, file used, refusals).
+    Raises CheckpointError when neither is good, naming both reasons."""
+    refused: list[str] = []
+    for candidate in (Path(path), previous(path)):
+        try:
+            arrays, meta = load_checkpoint(candidate, agent=agent)
+        except CheckpointError as e:
+            refused.append(str(e))
+            continue
+        return arrays, meta, candidate, refused
+    raise CheckpointError("; ".join(refused))

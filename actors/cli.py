@@ -1,4 +1,5 @@
-"""`kinswarm`: run a learning swarm, run the model-based baseline, rebuild a run's report."""
+"""`kinswarm`: run a learning swarm, run the model-based baseline, inject faults into a running swarm, show its
+status, rebuild a run's report."""
 
 from __future__ import annotations
 
@@ -14,6 +15,7 @@ from pathlib import Path
 from kinswarm.actors.checkpoint import CheckpointError, load_checkpoint
 from kinswarm.actors.config import PLACEMENTS, REWARDS, ConfigError, RunConfig
 from kinswarm.actors.runtime import DEFAULT_LISTEN, open_session, setup_logging
+from kinswarm.protocol.faults import FAULTS
 from kinswarm.protocol.messages import EpochDone
 from kinswarm.protocol.topology import Topology, TopologyError, load_topology
 
@@ -50,6 +52,7 @@ def _add_common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--listen", default=DEFAULT_LISTEN, help=f"the supervisor's endpoint (default {DEFAULT_LISTEN})")
     p.add_argument("--out", type=Path, default=None, help="run directory (default runs/<run-id>)")
     p.add_argument("--deadline-ms", type=int, default=500, help="per-step deadline; a missing cmd holds")
+    p.add_argument("--scenario", type=Path, default=None, help="a TOML timeline of faults (e.g. scenarios/*.toml)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--log-level", default="WARNING")
 
@@ -66,10 +69,32 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument(
         "--checkpoint-every", type=int, default=1, help="epochs between checkpoints (0: last only; default 1)"
     )
+    run.add_argument("--max-restarts", type=int, default=5, help="restarts of one agent within 60 s before giving up")
     base = sub.add_parser("baseline", help="drive the same simulator with the pseudo-inverse controller")
     _add_common(base)
     rep = sub.add_parser("report", help="rebuild a run's summary plots")
     rep.add_argument("run_dir", type=Path)
+    fault = sub.add_parser(
+        "fault",
+        help="inject a fault into a running swarm",
+        description="lock|free|disturb a joint (the robot); kill|freeze|thaw|restart an agent (its process); "
+        "drop|delay|duplicate|corrupt|clear an agent's messages. TARGET: agent ids or `all`.",
+    )
+    fault.add_argument("run_id", metavar="RUN-ID")
+    fault.add_argument("fault", choices=FAULTS, metavar="FAULT")
+    fault.add_argument("targets", nargs="+", metavar="TARGET")
+    fault.add_argument("--for", dest="duration", default=None, help="freeze or message faults: how long (5s, 500ms)")
+    fault.add_argument("--steps", type=int, default=None, help="disturb: for how many steps")
+    fault.add_argument("--rate", type=float, default=None, help="drop/duplicate/corrupt: probability per message")
+    fault.add_argument("--ms", type=float, default=None, help="delay: milliseconds")
+    fault.add_argument("--amplitude", type=float, default=None, help="disturb: degrees per step (default 2)")
+    status = sub.add_parser("status", help="show a running swarm's actors (alive, pid, restarts, faults, joints)")
+    status.add_argument("run_id", metavar="RUN-ID")
+    status.add_argument("--watch", action="store_true", help="refresh live until Ctrl-C")
+    for q in (fault, status):
+        q.add_argument("--run-dir", type=Path, default=None, help="the run's directory (default runs/RUN-ID)")
+        q.add_argument("--connect", default=None, help="the run's endpoint (default: the one it listens on)")
+        q.add_argument("--log-level", default="ERROR")
     return p
 
 
@@ -95,8 +120,14 @@ def _resolve(a: argparse.Namespace, controller: str) -> tuple[RunConfig, Topolog
         deadline_ms=a.deadline_ms,
         checkpoint_every=getattr(a, "checkpoint_every", 0),
         controller=controller,
+        scenario=str(a.scenario.resolve()) if a.scenario else None,
+        max_restarts=getattr(a, "max_restarts", 5),
     )
     cfg.resolved_goal(topo)
+    if a.scenario:  # refuse a bad scenario before anything starts
+        from kinswarm.actors.scenario import load_scenario
+
+        load_scenario(a.scenario, topo)
     if cfg.from_dir:  # refuse a bad checkpoint before anything starts
         for aid in topo.dof_agents:
             load_checkpoint(Path(cfg.from_dir) / "agents" / f"{aid}.npz", agent=aid)
@@ -151,7 +182,10 @@ async def _supervise(cfg: RunConfig, topo: Topology, progress: bool) -> dict:
         {
             "wall_seconds": result.wall_seconds,
             "interrupted": result.interrupted,
+            "error": result.error,
             "rejected_messages": result.rejected,
+            "rejected_by_actor": result.rejected_by,
+            "restarts": result.restarts,
         },
     )
     write_plots(out)
@@ -167,7 +201,40 @@ def run_swarm(cfg: RunConfig, topo: Topology, progress: bool = False) -> dict:
     return asyncio.run(_supervise(cfg, topo, progress))
 
 
+def _control(a: argparse.Namespace) -> int:
+    from kinswarm.actors.control import Client, make_fault, parse_duration, run_config, show_status
+
+    cfg = run_config(a.run_id, a.run_dir)
+    connect = a.connect or cfg.listen
+    if a.command == "status":
+        asyncio.run(show_status(cfg, connect, a.watch))
+        return 0
+    f = make_fault(
+        a.fault,
+        a.targets,
+        seconds=parse_duration(a.duration) if a.duration else None,
+        steps=a.steps,
+        rate=a.rate,
+        ms=a.ms,
+        amplitude_deg=a.amplitude,
+    )
+
+    async def send() -> int:
+        async with Client(cfg, connect) as c:
+            reply = await c.fault(f)
+        if reply.error:
+            print(f"kinswarm: fault refused: {reply.error}", file=sys.stderr)
+            return 2
+        print(f"{a.run_id}: {reply.detail or 'applied'}")
+        return 0
+
+    return asyncio.run(send())
+
+
 def main(argv: list[str] | None = None) -> int:
+    from kinswarm.actors.control import ControlError
+    from kinswarm.actors.scenario import ScenarioError
+
     a = build_parser().parse_args(argv)
     setup_logging(getattr(a, "log_level", "WARNING"))
     sys.setswitchinterval(0.0005)
@@ -178,21 +245,27 @@ def main(argv: list[str] | None = None) -> int:
             for path in write_plots(a.run_dir):
                 print(path)
             return 0
+        if a.command in ("fault", "status"):
+            return _control(a)
         cfg, topo = _resolve(a, "agents" if a.command == "run" else "baseline")
         summary = run_swarm(cfg, topo, progress=not a.no_progress and sys.stderr.isatty())
-    except (TopologyError, ConfigError, CheckpointError) as e:
+    except (TopologyError, ConfigError, CheckpointError, ScenarioError, ControlError, ValueError) as e:
         print(f"kinswarm: error: {e}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("kinswarm: interrupted", file=sys.stderr)
         return 130
     fe = summary["final_error"]
-    last = fe[-20:]
-    within = sum(e <= 0.5 for e in last)
-    print(
-        f"{cfg.run_id}: {len(fe)} epochs, final error {fe[-1]:.3f} (last {len(last)}: {within} within 0.5), "
-        f"{summary['steps_per_second']:.0f} steps/s, {summary['wall_seconds']:.1f} s -> {cfg.out}"
-    )
+    if fe:
+        last = fe[-20:]
+        within = sum(e <= 0.5 for e in last)
+        print(
+            f"{cfg.run_id}: {len(fe)} epochs, final error {fe[-1]:.3f} (last {len(last)}: {within} within 0.5), "
+            f"{summary['steps_per_second']:.0f} steps/s, {summary['wall_seconds']:.1f} s -> {cfg.out}"
+        )
+    if summary.get("error"):
+        print(f"kinswarm: the run failed: {summary['error']}", file=sys.stderr)
+        return 1
     if summary.get("interrupted"):
         return 130
     return 0

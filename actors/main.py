@@ -1,4 +1,4 @@
-"""Actor entry point: `python -m kinswarm.actors.main ROLE ID CONFIG --connect ENDPOINT`.
+"""Actor entry point: `python -m kinswarm.actors.main ROLE ID CONFIG --connect ENDPOINT [--restore]`.
 
 This is the one spawn path of the `process` placement (the supervisor starts it with spawn semantics:
 a fresh interpreter, the Zenoh session opened inside the child). `build_actor` is shared with the
@@ -39,18 +39,22 @@ from kinswarm.protocol.keys import Keys  # noqa: E402
 from kinswarm.protocol.topology import Topology  # noqa: E402
 
 ROLES = ("agent", "sim", "controller")
+SUPERVISOR_GRACE_S = 3.0  # how long an actor waits for a vanished supervisor token to come back
 
 
 class Actor(Protocol):
     async def run(self) -> None: ...
 
 
-def build_actor(role: str, ident: str, cfg: RunConfig, topo: Topology, node: Node) -> Actor:
+def build_actor(role: str, ident: str, cfg: RunConfig, topo: Topology, node: Node, restore: bool = False) -> Actor:
+    """`restore`: a restart -- resume from this run's newest good checkpoint instead of the start."""
     if role == "agent":
         from kinswarm.actors.agent import Agent
 
         agent = Agent(cfg, topo, ident, node)
-        if cfg.from_dir:
+        if restore:
+            agent.resume(Path(cfg.out) / "agents")
+        elif cfg.from_dir:
             agent.restore(Path(cfg.from_dir) / "agents")
         return agent
     if role == "sim":  # imported lazily: agent processes never load PyBullet
@@ -64,7 +68,7 @@ def build_actor(role: str, ident: str, cfg: RunConfig, topo: Topology, node: Nod
     raise ValueError(f"unknown role {role!r}; expected one of {', '.join(ROLES)}")
 
 
-async def _serve(role: str, ident: str, cfg: RunConfig, connect: str, parent_pid: int) -> None:
+async def _serve(role: str, ident: str, cfg: RunConfig, connect: str, parent_pid: int, restore: bool) -> None:
     log = logging.getLogger(f"kinswarm.{role}.{ident}")
     topo = cfg.topo()
     session = open_session(listen=["tcp/127.0.0.1:0"], connect=[connect], must_connect=True)
@@ -74,19 +78,30 @@ async def _serve(role: str, ident: str, cfg: RunConfig, connect: str, parent_pid
     for sig in (signal.SIGINT, signal.SIGTERM):
         loop.add_signal_handler(sig, task.cancel)
     node = Node(session, Keys(cfg.run_id), role, ident, cfg.key)
-    # The supervisor's liveliness token going away (it died, or its host is gone) ends this actor.
-    sup_gone = asyncio.Event()
+    # The supervisor's liveliness token staying away (it died, or its host is gone) ends this actor. A
+    # grace period lets an actor that was frozen past the lease (SIGSTOP) rejoin once its session reconnects.
+    present = {"supervisor": True}
+    lost = asyncio.Event()
 
-    def on_supervisor(sample: Any) -> None:
-        if sample.kind == sample.kind.DELETE:
-            loop.call_soon_threadsafe(sup_gone.set)
+    def on_supervisor(sample: Any) -> None:  # zenoh thread
+        present["supervisor"] = sample.kind == sample.kind.PUT
+        if not present["supervisor"]:
+            loop.call_soon_threadsafe(lost.set)
+
+    async def supervisor_gone() -> None:
+        while True:
+            await lost.wait()
+            lost.clear()
+            await asyncio.sleep(SUPERVISOR_GRACE_S)
+            if not present["supervisor"]:
+                return
 
     watch = session.liveliness().declare_subscriber(node.keys.alive("supervisor", "main"), on_supervisor)
     try:
-        actor = build_actor(role, ident, cfg, topo, node)
+        actor = build_actor(role, ident, cfg, topo, node, restore)
         async with asyncio.TaskGroup() as tg:
             run = tg.create_task(actor.run())
-            gone = tg.create_task(sup_gone.wait())
+            gone = tg.create_task(supervisor_gone())
             done, _ = await asyncio.wait({run, gone}, return_when=asyncio.FIRST_COMPLETED)
             if gone in done:
                 log.warning("supervisor is gone; leaving")
@@ -109,6 +124,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("config", type=Path)
     p.add_argument("--connect", required=True, help="the supervisor's endpoint")
     p.add_argument("--parent", type=int, default=None, help="the supervisor's pid: leave when it is gone")
+    p.add_argument("--restore", action="store_true", help="a restart: resume from the run's newest checkpoint")
     p.add_argument("--log-level", default="INFO")
     a = p.parse_args(argv)
     parent = a.parent if a.parent is not None else os.getppid()
@@ -116,7 +132,7 @@ def main(argv: list[str] | None = None) -> int:
     sys.setswitchinterval(0.0005)  # zenoh callbacks need the GIL promptly (shared notes: p99 10 -> 3 ms)
     try:
         cfg = load_run_config(a.config)
-        asyncio.run(_serve(a.role, a.ident, cfg, a.connect, parent))
+        asyncio.run(_serve(a.role, a.ident, cfg, a.connect, parent, a.restore))
     except Exception as e:  # a clear last word in the actor's log; the supervisor reports it
         logging.getLogger(f"kinswarm.{a.role}.{a.ident}").error("failed: %s: %s", type(e).__name__, e)
         return 2

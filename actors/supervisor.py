@@ -11,11 +11,13 @@ The wire, the messages and the lockstep are the same in both, so the same seed g
 from __future__ import annotations
 
 import asyncio
+import collections
 import json
 import logging
 import math
 import os
 import signal
+import socket
 import subprocess
 import sys
 import time
@@ -28,8 +30,29 @@ import zenoh
 from kinswarm.actors.config import RunConfig
 from kinswarm.actors.main import build_actor
 from kinswarm.actors.runtime import Node
-from kinswarm.protocol.keys import Keys
-from kinswarm.protocol.messages import Checkpoint, EpochDone, EpochStart, Saved, Stop
+from kinswarm.protocol.faults import (
+    ALL,
+    JOINT_FAULTS,
+    LINK_FAULTS,
+    PROCESS_FAULTS,
+    check_fault,
+    describe,
+    expand_targets,
+)
+from kinswarm.protocol.keys import Keys, check_id
+from kinswarm.protocol.messages import (
+    Bye,
+    Checkpoint,
+    EpochDone,
+    EpochStart,
+    Event,
+    Fault,
+    FaultReply,
+    JointStatus,
+    Saved,
+    Stop,
+    SwarmStatus,
+)
 from kinswarm.protocol.topology import Topology
 
 log = logging.getLogger("kinswarm.supervisor")
@@ -50,38 +73,59 @@ def actors_of(cfg: RunConfig, topo: Topology) -> list[ActorId]:
 class ProcessPlacement:
     """One OS process per actor; stdout/stderr of each go to `<out>/logs/<ident>.log`."""
 
+    supports = PROCESS_FAULTS
+
     def __init__(self, config_path: Path, connect: str, logs: Path) -> None:
         self.config_path, self.connect, self.logs = config_path, connect, logs
         self.procs: dict[ActorId, subprocess.Popen] = {}
+        self._reported: set[int] = set()  # pids whose exit was already handed to the supervisor
 
     async def start(self, actors: list[ActorId]) -> None:
         self.logs.mkdir(parents=True, exist_ok=True)
-        for role, ident in actors:
-            with open(self.logs / f"{ident}.log", "ab") as logf:
-                self.procs[(role, ident)] = subprocess.Popen(
-                    [
-                        sys.executable,
-                        "-m",
-                        "kinswarm.actors.main",
-                        role,
-                        ident,
-                        str(self.config_path),
-                        "--connect",
-                        self.connect,
-                    ],
-                    stdin=subprocess.DEVNULL,
-                    stdout=logf,
-                    stderr=subprocess.STDOUT,
-                    start_new_session=True,  # Ctrl-C reaches the supervisor only; it stops them in order
-                )
+        for actor in actors:
+            self.spawn(actor)
 
-    def check(self) -> None:
-        for (role, ident), p in self.procs.items():
-            if p.poll() is not None:
-                tail = _tail(self.logs / f"{ident}.log")
-                raise SwarmError(f"{role} {ident} exited with code {p.returncode}; its log ends:\n{tail}")
+    def spawn(self, actor: ActorId, restore: bool = False) -> None:
+        """The one spawn path: a fresh interpreter running `kinswarm.actors.main` (never fork)."""
+        role, ident = actor
+        argv = [sys.executable, "-m", "kinswarm.actors.main", role, ident, str(self.config_path)]
+        argv += ["--connect", self.connect, "--parent", str(os.getpid())]
+        if restore:
+            argv.append("--restore")
+        with open(self.logs / f"{ident}.log", "ab") as logf:
+            self.procs[actor] = subprocess.Popen(
+                argv,
+                stdin=subprocess.DEVNULL,
+                stdout=logf,
+                stderr=subprocess.STDOUT,
+                start_new_session=True,  # Ctrl-C reaches the supervisor only; it stops them in order
+            )
+
+    def exited(self) -> list[tuple[ActorId, str]]:
+        """Actors whose process ended since the last call, with how."""
+        gone = []
+        for actor, p in self.procs.items():
+            if p.poll() is not None and p.pid not in self._reported:
+                self._reported.add(p.pid)
+                code = p.returncode
+                how = f"killed by {signal.Signals(-code).name}" if code < 0 else f"exit code {code}"
+                gone.append((actor, how))
+        return gone
+
+    def signal(self, actor: ActorId, sig: signal.Signals) -> bool:
+        p = self.procs.get(actor)
+        if p is None or p.poll() is not None:
+            return False
+        p.send_signal(sig)
+        return True
+
+    def log_tail(self, actor: ActorId) -> str:
+        return _tail(self.logs / f"{actor[1]}.log")
 
     async def stop(self, grace: float = 5.0) -> None:
+        for p in self.procs.values():  # a frozen actor cannot leave, nor even die of SIGTERM
+            if p.poll() is None:
+                p.send_signal(signal.SIGCONT)
         deadline = time.monotonic() + grace
         while time.monotonic() < deadline and any(p.poll() is None for p in self.procs.values()):
             await asyncio.sleep(0.05)
@@ -98,30 +142,54 @@ class ProcessPlacement:
 
     @property
     def pids(self) -> dict[str, int]:
-        return {ident: p.pid for (_, ident), p in self.procs.items()}
+        return {ident: p.pid for (_, ident), p in self.procs.items() if p.poll() is None}
 
 
 class SinglePlacement:
-    """Every actor a task in this process, on the supervisor's session."""
+    """Every actor a task in this process, on the supervisor's session. A task can be killed
+    (cancelled) and restarted, but not frozen."""
+
+    supports = ("kill", "restart")
 
     def __init__(self, cfg: RunConfig, topo: Topology, session: zenoh.Session) -> None:
         self.cfg, self.topo, self.session = cfg, topo, session
         self.tasks: dict[ActorId, asyncio.Task] = {}
-        self.nodes: list[Node] = []
+        self.nodes: dict[ActorId, Node] = {}
+        self._reported: set[asyncio.Task] = set()
 
     async def start(self, actors: list[ActorId]) -> None:
-        keys = Keys(self.cfg.run_id)
-        for role, ident in actors:
-            node = Node(self.session, keys, role, ident, self.cfg.key)
-            self.nodes.append(node)
-            actor = build_actor(role, ident, self.cfg, self.topo, node)
-            self.tasks[(role, ident)] = asyncio.create_task(actor.run(), name=f"{role}/{ident}")
+        for actor in actors:
+            self.spawn(actor)
 
-    def check(self) -> None:
-        for (role, ident), t in self.tasks.items():
-            if t.done():
+    def spawn(self, actor: ActorId, restore: bool = False) -> None:
+        role, ident = actor
+        node = Node(self.session, Keys(self.cfg.run_id), role, ident, self.cfg.key)
+        self.nodes[actor] = node
+        built = build_actor(role, ident, self.cfg, self.topo, node, restore)
+        self.tasks[actor] = asyncio.create_task(built.run(), name=f"{role}/{ident}")
+
+    def exited(self) -> list[tuple[ActorId, str]]:
+        gone = []
+        for actor, t in self.tasks.items():
+            if t.done() and t not in self._reported:
+                self._reported.add(t)
+                self.nodes[actor].close()
                 exc = None if t.cancelled() else t.exception()
-                raise SwarmError(f"{role} {ident} ended early: {exc!r}")
+                gone.append((actor, "killed (task cancelled)" if exc is None and t.cancelled() else f"ended: {exc!r}"))
+        return gone
+
+    def signal(self, actor: ActorId, sig: signal.Signals) -> bool:
+        t = self.tasks.get(actor)
+        if t is None or t.done():
+            return False
+        if sig not in (signal.SIGKILL, signal.SIGTERM):
+            raise ValueError(f"{signal.Signals(sig).name} needs --placement process")
+        t.cancel()
+        self.nodes[actor].close()  # its liveliness token goes at once, like a dead process's
+        return True
+
+    def log_tail(self, actor: ActorId) -> str:
+        return "(single placement: see this process's log)"
 
     async def stop(self, grace: float = 5.0) -> None:
         pending = [t for t in self.tasks.values() if not t.done()]
@@ -130,12 +198,15 @@ class SinglePlacement:
             for t in still:
                 t.cancel()
             await asyncio.gather(*still, return_exceptions=True)
-        for node in self.nodes:
+        for node in self.nodes.values():
             node.close()
 
     @property
     def pids(self) -> dict[str, int]:
-        return {ident: os.getpid() for (_, ident) in self.tasks}
+        return {ident: os.getpid() for (_, ident), t in self.tasks.items() if not t.done()}
+
+
+Placement = ProcessPlacement | SinglePlacement
 
 
 # -- the supervisor ------------------------------------------------------------------------------
@@ -143,34 +214,66 @@ class SinglePlacement:
 class RunResult:
     epochs: list[EpochDone] = field(default_factory=list)
     interrupted: bool = False
+    error: str = ""  # why the run failed (restart budget exhausted, the sim died, ...)
     wall_seconds: float = 0.0
-    rejected: int = 0
+    rejected: int = 0  # messages every actor refused (from their Bye) plus the supervisor's own
+    rejected_by: dict[str, int] = field(default_factory=dict)
+    restarts: dict[str, int] = field(default_factory=dict)
+
+
+@dataclass
+class _Restarts:
+    """Restart policy state of one agent: at most max_restarts within window seconds, with backoff."""
+
+    times: collections.deque = field(default_factory=collections.deque)
+    total: int = 0
+    due: float | None = None  # when the pending restart is to happen
+    requested: bool = False  # the exit was a `restart` fault: respawn at once, outside the budget
 
 
 class Supervisor:
+    STATUS_EVERY = 0.5  # seconds between SwarmStatus messages
+    TICK = 0.05  # seconds between checks of exits, restarts and thaws while waiting
+
     def __init__(
         self,
         cfg: RunConfig,
         topo: Topology,
         session: zenoh.Session,
-        placement: ProcessPlacement | SinglePlacement,
+        placement: Placement,
         on_epoch: Callable[[EpochDone], None] | None = None,
     ) -> None:
         self.cfg, self.topo, self.session, self.placement = cfg, topo, session, placement
         self.keys = Keys(cfg.run_id)
         self.out = Path(cfg.out)
         self.on_epoch = on_epoch
+        self.expected = actors_of(cfg, topo)
+        self.agents = list(topo.order) if cfg.controller == "agents" else []
         self.alive: set[ActorId] = set()
         self.node: Node | None = None
         self.result = RunResult()
         self.metrics_file: Any = None
+        self.events_file: Any = None
+        self.t0 = time.monotonic()
+        self.training = False  # liveliness changes are events only once the swarm is up
+        self.epoch = -1
+        self.joints: JointStatus | None = None
+        self.restarts: dict[str, _Restarts] = {a: _Restarts() for a in self.agents}
+        self.frozen: dict[str, float | None] = {}  # agent -> when to thaw it (None: on `thaw`)
+        self.link_faults: dict[str, list[tuple[str, float | None]]] = {}  # agent -> (description, expiry)
+        self.byes: dict[str, Bye] = {}
+        self._next_status = 0.0
 
     async def run(self) -> RunResult:
         t0 = time.perf_counter()
         loop = asyncio.get_running_loop()
         self.node = node = Node(self.session, self.keys, "supervisor", "main", self.cfg.key)
-        node.listen(self.keys.metrics("epoch"))
-        node.listen(self.keys.rep_all)
+        k = self.keys
+        for key in (k.metrics("epoch"), k.metrics("event"), k.metrics("joints"), k.rep("agent", "*")):
+            node.listen(key)
+        node.listen(k.rep("bye", "*"))
+        node.listen(k.rep("sim", "*"))
+        node.listen(k.fault("request"))
 
         def on_alive(sample: Any) -> None:  # zenoh thread
             parsed = self.keys.parse_alive(str(sample.key_expr))
@@ -180,80 +283,275 @@ class Supervisor:
 
         watch = self.session.liveliness().declare_subscriber(self.keys.alive_all, on_alive, history=True)
         node.declare_alive()
-        expected = actors_of(self.cfg, self.topo)
+        self.events_file = open(self.out / "events.jsonl", "a")  # noqa: SIM115 -- closed in finally
         try:
-            await self.placement.start(expected)
-            await self._wait_alive(expected, timeout=60.0)
-            await node.wait_matched([self.keys.ctl("epoch"), self.keys.ctl("checkpoint")], timeout=10.0)
+            await self.placement.start(self.expected)
+            await self._wait_alive(self.expected, timeout=60.0)
+            outputs = [k.ctl(v) for v in ("epoch", "checkpoint", "fault")]
+            await node.wait_matched(outputs, timeout=10.0)
             self.metrics_file = open(self.out / "metrics.jsonl", "a")  # noqa: SIM115 -- closed in finally
+            self.training = True
             for epoch in range(self.cfg.epochs):
                 done = await self._run_epoch(epoch)
                 self.result.epochs.append(done)
                 self._record(done)
                 last = epoch == self.cfg.epochs - 1
                 every = self.cfg.checkpoint_every
-                if (
-                    self.cfg.controller == "agents"
-                    and self.cfg.learn
-                    and (last or (every and (epoch + 1) % every == 0))
-                ):
+                if self.agents and self.cfg.learn and (last or (every and (epoch + 1) % every == 0)):
                     await self._checkpoint(epoch)
         except asyncio.CancelledError:
             self.result.interrupted = True
             log.warning("interrupted: stopping the swarm")
+        except SwarmError as e:
+            self.result.error = str(e)
+            log.error("%s", e)
+            self._event("failed", "swarm", str(e))
         finally:
+            self.training = False
             try:
                 node.send(self.keys.ctl("stop"), Stop(reason="interrupted" if self.result.interrupted else "done"))
+                await self._collect_byes(timeout=3.0)
             except Exception:  # the session may be closing
                 pass
             await self.placement.stop()
             watch.undeclare()
-            self.result.rejected = node.rejected
+            self.result.rejected_by = {"supervisor": node.rejected, **{a: b.rejected for a, b in self.byes.items()}}
+            self.result.rejected = sum(self.result.rejected_by.values())
+            self.result.restarts = {a: r.total for a, r in self.restarts.items()}
             node.close()
-            if self.metrics_file is not None:
-                self.metrics_file.close()
+            for f in (self.metrics_file, self.events_file):
+                if f is not None:
+                    f.close()
             self.result.wall_seconds = time.perf_counter() - t0
         return self.result
 
+    # -- liveliness, exits, restarts -------------------------------------------------------------
     def _alive_changed(self, actor: ActorId, up: bool) -> None:
         if up:
             self.alive.add(actor)
         else:
             self.alive.discard(actor)
+        if self.training and actor[0] != "supervisor":
+            self._event("alive" if up else "lost", actor[1], "liveliness token " + ("back" if up else "gone"))
 
     async def _wait_alive(self, expected: list[ActorId], timeout: float) -> None:
         deadline = time.monotonic() + timeout
         while not set(expected) <= self.alive:
-            self.placement.check()
+            for actor, how in self.placement.exited():
+                raise SwarmError(f"{actor[0]} {actor[1]} {how}; its log ends:\n{self.placement.log_tail(actor)}")
             if time.monotonic() > deadline:
                 missing = sorted(set(expected) - self.alive)
                 raise SwarmError(f"not alive after {timeout:.0f} s: {missing}")
             await asyncio.sleep(0.02)
 
+    def _tick(self) -> None:
+        """Exits -> restart policy; due restarts; due thaws; expired link faults; the status message."""
+        now = time.monotonic()
+        for actor, how in self.placement.exited():
+            self._on_exit(actor, how, now)
+        for agent, r in self.restarts.items():
+            if r.due is not None and r.due <= now:
+                r.due = None
+                self.placement.spawn(("agent", agent), restore=True)
+                self._event("restart", agent, f"restart {r.total} (restores its newest checkpoint)")
+        for agent, when in list(self.frozen.items()):
+            if when is not None and when <= now:
+                self._thaw(agent)
+        for faults in self.link_faults.values():
+            faults[:] = [(d, exp) for d, exp in faults if exp is None or exp > now]
+        if now >= self._next_status:
+            self._next_status = now + self.STATUS_EVERY
+            self._publish_status(now)
+
+    def _on_exit(self, actor: ActorId, how: str, now: float) -> None:
+        role, ident = actor
+        if role != "agent":
+            raise SwarmError(f"{role} {ident} {how}; its log ends:\n{self.placement.log_tail(actor)}")
+        self._event("exited", ident, how)
+        self.frozen.pop(ident, None)
+        r = self.restarts[ident]
+        r.total += 1
+        if r.requested:
+            r.requested, r.due = False, now
+            return
+        while r.times and r.times[0] < now - self.cfg.restart_window_s:
+            r.times.popleft()
+        if len(r.times) >= self.cfg.max_restarts:
+            raise SwarmError(
+                f"agent {ident} exited {len(r.times) + 1} times within {self.cfg.restart_window_s:g} s "
+                f"(restart policy: at most {self.cfg.max_restarts}); giving up"
+            )
+        backoff = min(2.0, 0.1 * 2 ** len(r.times))  # 0.1, 0.2, 0.4 ... 2 s
+        r.times.append(now)
+        r.due = now + backoff
+
+    # -- faults ----------------------------------------------------------------------------------
+    def _on_fault(self, f: Fault) -> None:
+        assert self.node is not None
+        error = check_fault(f, list(self.topo.order))
+        if not error and not self.agents and f.fault not in JOINT_FAULTS:
+            error = f"{f.fault}: this run has no agents (a baseline run); only joint faults apply"
+        if not error and f.fault in PROCESS_FAULTS and f.fault not in self.placement.supports:
+            error = f"{f.fault}: needs --placement process (this run is {self.cfg.placement})"
+        if not error and f.fault in JOINT_FAULTS:
+            compound = [t for t in f.targets if t != ALL and not self.topo.agents[t].has_dof]
+            if compound:
+                error = f"{f.fault}: {', '.join(compound)} has no joint (a compound agent)"
+        detail = ""
+        if not error:
+            targets = expand_targets(
+                f.targets, self.agents if f.fault not in JOINT_FAULTS else list(self.topo.dof_agents)
+            )
+            try:
+                detail = self._apply(f, targets)
+            except ValueError as e:
+                error = str(e)
+        if error:
+            log.warning("fault refused: %s", error)
+        else:
+            self._event("fault", ",".join(f.targets), describe(f) + (f" ({detail})" if detail else ""))
+        try:
+            check_id("fault id", f.id)
+        except ValueError:
+            return  # nowhere to reply
+        self.node.send(self.keys.rep("fault", f.id), FaultReply(id=f.id, error=error, detail=detail))
+
+    def _apply(self, f: Fault, targets: list[str]) -> str:
+        assert self.node is not None
+        if f.fault in JOINT_FAULTS or f.fault in LINK_FAULTS:
+            self.node.send(self.keys.ctl("fault"), f)  # the sim / the targets' runtimes apply it
+            if f.fault == "clear":
+                for t in targets:
+                    self.link_faults.pop(t, None)
+            elif f.fault in LINK_FAULTS:
+                expiry = None if f.seconds is None else time.monotonic() + f.seconds
+                for t in targets:
+                    self.link_faults.setdefault(t, []).append((describe(f), expiry))
+            return ""
+        done, skipped = [], []
+        for t in targets:
+            actor = ("agent", t)
+            if f.fault == "kill":
+                ok = self.placement.signal(actor, signal.SIGKILL)
+            elif f.fault == "restart":
+                ok = self.placement.signal(actor, signal.SIGTERM)
+                self.restarts[t].requested = ok
+            elif f.fault == "freeze":
+                ok = self.placement.signal(actor, signal.SIGSTOP)
+                if ok:
+                    self.frozen[t] = None if f.seconds is None else time.monotonic() + f.seconds
+            else:  # thaw
+                ok = t in self.frozen and self._thaw(t)
+            (done if ok else skipped).append(t)
+        return f"{f.fault}: {', '.join(done) or 'nobody'}" + (f"; not running: {', '.join(skipped)}" if skipped else "")
+
+    def _thaw(self, agent: str) -> bool:
+        self.frozen.pop(agent, None)
+        ok = self.placement.signal(("agent", agent), signal.SIGCONT)
+        if ok:
+            self._event("thaw", agent, "SIGCONT")
+        return ok
+
+    # -- records ---------------------------------------------------------------------------------
+    def _event(self, event: str, target: str, detail: str, epoch: int | None = None, step: int | None = None) -> None:
+        if epoch is None:
+            epoch = self.epoch
+            j = self.joints
+            step = j.step if j is not None and j.epoch == epoch else -1
+        row = {
+            "t": round(time.monotonic() - self.t0, 4),
+            "wall": round(time.time(), 4),
+            "epoch": epoch,
+            "step": step,
+            "event": event,
+            "target": target,
+            "detail": detail,
+        }
+        log.info("event %s", row)
+        if self.events_file is not None and not self.events_file.closed:
+            self.events_file.write(json.dumps(row) + "\n")
+            self.events_file.flush()
+
+    def _publish_status(self, now: float) -> None:
+        assert self.node is not None
+        ids = [ident for _, ident in self.expected]
+        roles = dict((ident, role) for role, ident in self.expected)
+        pids = self.placement.pids
+        faults: dict[str, list[str]] = {i: [] for i in ids}
+        for agent, when in self.frozen.items():
+            faults[agent].append("frozen" + ("" if when is None else f" ({max(0.0, when - now):.1f} s left)"))
+        for agent, fl in self.link_faults.items():
+            faults[agent] += [d + ("" if exp is None else f" ({max(0.0, exp - now):.0f} s left)") for d, exp in fl]
+        if self.joints is not None:
+            for joint, what in self.joints.faults.items():
+                faults.setdefault(joint, []).append(what)
+        status = SwarmStatus(
+            epoch=self.epoch,
+            epochs=self.cfg.epochs,
+            role=roles,
+            alive={i: int((roles[i], i) in self.alive) for i in ids},
+            pid={i: pids.get(i, 0) for i in ids},
+            host={i: socket.gethostname() for i in ids},
+            restarts={i: self.restarts[i].total if i in self.restarts else 0 for i in ids},
+            faults=faults,
+        )
+        self.node.send(self.keys.metrics("status"), status)
+
+    # -- the mailbox -----------------------------------------------------------------------------
+    def _route(self, key: str, payload: bytes) -> Any:
+        """Handle what the supervisor consumes itself; return EpochDone, Saved and Bye to the caller."""
+        assert self.node is not None
+        kind = key[len(self.keys.root) + 1 :]
+        if kind == "metrics/epoch":
+            return self.node.decode(key, payload, EpochDone)
+        if kind.startswith("rep/agent/"):
+            return self.node.decode(key, payload, Saved)
+        if kind.startswith(("rep/bye/", "rep/sim/")):
+            if (bye := self.node.decode(key, payload, Bye)) is not None:
+                self.byes[self.keys.last_chunk(key)] = bye
+            return bye
+        if kind == "metrics/event":
+            if (e := self.node.decode(key, payload, Event)) is not None:
+                self._event(e.event, e.target, e.detail, e.epoch, e.step)
+        elif kind == "metrics/joints":
+            if (j := self.node.decode(key, payload, JointStatus)) is not None:
+                self.joints = j
+        elif kind == "fault/request":
+            if (f := self.node.decode(key, payload, Fault)) is not None:
+                self._on_fault(f)
+        return None
+
     async def _expect(self, kind: type, match: Callable[[Any], bool], timeout: float) -> Any:
-        """Read the supervisor's mailbox until a message of `kind` satisfying `match` arrives."""
+        """Serve the mailbox (faults, events, restarts) until a message of `kind` satisfying `match`."""
         assert self.node is not None
         deadline = time.monotonic() + timeout
         while True:
+            self._tick()
             remaining = deadline - time.monotonic()
             if remaining <= 0:
                 raise SwarmError(f"no {kind.__name__} within {timeout:.0f} s")
             try:
-                key, payload = await asyncio.wait_for(self.node.recv(), timeout=min(remaining, 0.5))
+                key, payload = await asyncio.wait_for(self.node.recv(), timeout=min(remaining, self.TICK))
             except TimeoutError:
-                self.placement.check()
                 continue
-            if key.startswith(self.keys.root + "/metrics/") and kind is EpochDone:
-                m = self.node.decode(key, payload, EpochDone)
-            elif key.startswith(self.keys.root + "/rep/") and kind is Saved:
-                m = self.node.decode(key, payload, Saved)
-            else:
-                continue
-            if m is not None and match(m):
+            m = self._route(key, payload)
+            if isinstance(m, kind) and match(m):
                 return m
+
+    async def _collect_byes(self, timeout: float) -> None:
+        assert self.node is not None
+        want = {ident for role, ident in self.expected if (role, ident) in self.alive}
+        deadline = time.monotonic() + timeout
+        while not want <= set(self.byes) and time.monotonic() < deadline:
+            try:
+                key, payload = await asyncio.wait_for(self.node.recv(), timeout=deadline - time.monotonic())
+            except TimeoutError:
+                break
+            self._route(key, payload)
 
     async def _run_epoch(self, epoch: int) -> EpochDone:
         assert self.node is not None
+        self.epoch = epoch
         goal = self.cfg.resolved_goal(self.topo)
         self.node.send(self.keys.ctl("epoch"), EpochStart(epoch=epoch, steps=self.cfg.steps, goal=goal))
         # generous: every step may run into its deadline and still finish
@@ -268,9 +566,11 @@ class Supervisor:
         directory = self.out / "agents"
         directory.mkdir(parents=True, exist_ok=True)
         self.node.send(self.keys.ctl("checkpoint"), Checkpoint(epoch=epoch, directory=str(directory)))
-        waiting = {a for a in self.topo.order if self.topo.agents[a].has_dof}
+        # an agent that is down right now cannot answer; its previous checkpoint stays its newest
+        waiting = {a for a in self.topo.dof_agents if ("agent", a) in self.alive and a not in self.frozen}
+        deadline = time.monotonic() + 30.0
         while waiting:
-            m = await self._expect(Saved, lambda s: s.epoch == epoch, timeout=30.0)
+            m = await self._expect(Saved, lambda s: s.epoch == epoch, timeout=max(0.1, deadline - time.monotonic()))
             agent = Path(m.path).stem
             if m.error:
                 raise SwarmError(f"agent {agent} could not checkpoint: {m.error}")
@@ -285,6 +585,7 @@ class Supervisor:
             "seconds": d.seconds,
             "missed_cmds": d.missed_cmds,
             "final_angles_deg": {a: round(math.degrees(q), 4) for a, q in d.final_angles.items()},
+            "errors": [round(e, 5) for e in d.errors],
         }
         self.metrics_file.write(json.dumps(row) + "\n")
         self.metrics_file.flush()

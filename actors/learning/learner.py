@@ -41,13 +41,20 @@ class Learner:
         self._pending: tuple[list[int], list[int], np.ndarray, int] | None = None
 
     # -- epochs ---------------------------------------------------------------------------------
-    def start_epoch(self, epoch: int) -> None:
-        """New epoch: t = 0, lr = lr0 (1 - lr_decay)^epoch, pending dropped (no TD across resets)."""
-        if epoch < 0:
-            raise ValueError(f"epoch must be >= 0, got {epoch}")
+    def start_epoch(self, epoch: int, t: int = 0) -> None:
+        """New epoch: lr = lr0 (1 - lr_decay)^epoch, pending dropped (no TD across resets), the schedule
+        T(t) at step t (0, or the step an agent restarted mid-epoch rejoins at)."""
+        if epoch < 0 or t < 0:
+            raise ValueError(f"epoch and t must be >= 0, got {epoch}, {t}")
         self.epoch = int(epoch)
         self.lr = self.settings.lr * (1.0 - self.settings.lr_decay) ** self.epoch
-        self.t = 0
+        self.t = int(t)
+        self._pending = None
+
+    def resync(self, t: int) -> None:
+        """The agent missed steps (lost messages, a freeze): the schedule moves to step t, and the pending
+        transition is dropped, since r(t-1) rewards a joint action this agent did not take part in."""
+        self.t = int(t)
         self._pending = None
 
     # -- one step -------------------------------------------------------------------------------

@@ -1,0 +1,167 @@
+"""Talking to a running swarm from another terminal: `kinswarm fault` and `kinswarm status`.
+
+The client joins the run through the endpoint the supervisor listens on and signs its messages with
+the run's key, read from the run directory's config.json (owner-only): whoever can read that file may
+inject faults; nobody else on the network can.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import math
+import os
+import re
+import secrets
+import sys
+import time
+from pathlib import Path
+
+from kinswarm.actors.config import ConfigError, RunConfig, load_run_config
+from kinswarm.actors.runtime import Node, open_session
+from kinswarm.protocol.faults import check_fault
+from kinswarm.protocol.keys import Keys
+from kinswarm.protocol.messages import Fault, FaultReply, JointStatus, SwarmStatus
+
+_DURATION = re.compile(r"^\s*([0-9]*\.?[0-9]+)\s*(ms|s|m|min|h)?\s*$")
+_UNIT = {"ms": 0.001, "s": 1.0, None: 1.0, "m": 60.0, "min": 60.0, "h": 3600.0}
+
+
+class ControlError(RuntimeError):
+    pass
+
+
+def parse_duration(text: str) -> float:
+    """`5s`, `500ms`, `2m`, `1.5` (seconds) -> seconds."""
+    m = _DURATION.match(text)
+    if not m:
+        raise ValueError(f"expected a duration like 5s, 500ms or 2m, got {text!r}")
+    return float(m.group(1)) * _UNIT[m.group(2)]
+
+
+def run_config(run_id: str, run_dir: Path | None) -> RunConfig:
+    path = (run_dir or Path("runs") / run_id) / "config.json"
+    if not path.exists():
+        raise ControlError(f"{path} not found: it holds the run's key; pass --run-dir DIR (the run's --out)")
+    cfg = load_run_config(path)
+    if cfg.run_id != run_id:
+        raise ConfigError(f"{path} belongs to run {cfg.run_id!r}, not {run_id!r}")
+    return cfg
+
+
+class Client:
+    """A short-lived member of a run: one session, one node, closed on exit."""
+
+    def __init__(self, cfg: RunConfig, connect: str) -> None:
+        self.cfg, self.connect = cfg, connect
+
+    async def __aenter__(self) -> Client:
+        try:
+            self.session = open_session(connect=[self.connect], must_connect=True)
+        except Exception as e:
+            raise ControlError(f"cannot reach {self.connect}: {e}") from None
+        self.node = Node(self.session, Keys(self.cfg.run_id), "cli", f"cli-{os.getpid()}", self.cfg.key)
+        return self
+
+    async def __aexit__(self, *exc: object) -> None:
+        self.node.close()
+        self.session.close()
+
+    async def fault(self, f: Fault, timeout: float = 5.0) -> FaultReply:
+        k = self.node.keys
+        self.node.listen(k.rep("fault", f.id))
+        try:
+            await self.node.wait_matched([k.fault("request")], timeout=timeout)
+        except TimeoutError:
+            raise ControlError(f"no supervisor of run {k.run} answers at {self.connect}") from None
+        self.node.send(k.fault("request"), f)
+        deadline = time.monotonic() + timeout
+        while (remaining := deadline - time.monotonic()) > 0:
+            try:
+                key, payload = await asyncio.wait_for(self.node.recv(), remaining)
+            except TimeoutError:
+                break
+            reply = self.node.decode(key, payload, FaultReply)
+            if reply is not None and reply.id == f.id:
+                return reply
+        raise ControlError(f"the supervisor of run {k.run} did not answer within {timeout:g} s")
+
+    async def statuses(self, timeout: float = 5.0):  # noqa: ANN201 -- an async iterator of (status, joints)
+        k = self.node.keys
+        self.node.listen(k.metrics("status"))
+        self.node.listen(k.metrics("joints"))
+        joints: JointStatus | None = None
+        while True:
+            try:
+                key, payload = await asyncio.wait_for(self.node.recv(), timeout)
+            except TimeoutError:
+                raise ControlError(f"no status from run {k.run} at {self.connect} within {timeout:g} s") from None
+            if key.endswith("/metrics/joints"):
+                joints = self.node.decode(key, payload, JointStatus) or joints
+            elif (status := self.node.decode(key, payload, SwarmStatus)) is not None:
+                yield status, joints
+
+
+def make_fault(
+    fault: str,
+    targets: list[str],
+    *,
+    seconds: float | None = None,
+    steps: int | None = None,
+    rate: float | None = None,
+    ms: float | None = None,
+    amplitude_deg: float | None = None,
+) -> Fault:
+    f = Fault(
+        id=f"cli-{secrets.token_hex(4)}",
+        fault=fault,
+        targets=targets,
+        seconds=seconds,
+        steps=steps,
+        rate=rate,
+        ms=ms,
+        amplitude_deg=amplitude_deg,
+    )
+    error = check_fault(f)
+    if error:
+        raise ControlError(error)
+    return f
+
+
+def render(status: SwarmStatus, joints: JointStatus | None, run_id: str) -> str:
+    """The `kinswarm status` table."""
+    head = f"run {run_id}  epoch {status.epoch + 1}/{status.epochs}"
+    if joints is not None and joints.epoch == status.epoch:
+        head += f"  step {joints.step}"
+    cols = ("actor", "role", "alive", "pid", "host", "restarts", "joint", "action", "faults")
+    rows = []
+    for ident, role in status.role.items():
+        q = joints.q.get(ident) if joints is not None else None
+        d = joints.delta.get(ident) if joints is not None else None
+        rows.append(
+            (
+                ident,
+                role,
+                "yes" if status.alive.get(ident) else "NO",
+                str(status.pid.get(ident) or "-"),
+                status.host.get(ident, "-"),
+                str(status.restarts.get(ident, 0)),
+                "-" if q is None else f"{math.degrees(q):8.2f}°",
+                "-" if d is None else f"{math.degrees(d):+.2f}°",
+                "; ".join(status.faults.get(ident, [])) or "-",
+            )
+        )
+    widths = [max(len(c), *(len(r[i]) for r in rows)) for i, c in enumerate(cols)]
+    line = "  ".join(c.ljust(w) for c, w in zip(cols, widths, strict=True))
+    body = ["  ".join(v.ljust(w) for v, w in zip(r, widths, strict=True)) for r in rows]
+    return "\n".join([head, line, *body])
+
+
+async def show_status(cfg: RunConfig, connect: str, watch: bool) -> None:
+    async with Client(cfg, connect) as c:
+        async for status, joints in c.statuses():
+            table = render(status, joints, cfg.run_id)
+            if not watch:
+                print(table)
+                return
+            sys.stdout.write("\x1b[H\x1b[2J" + table + "\n")  # clear and redraw, like `top`
+            sys.stdout.flush()
