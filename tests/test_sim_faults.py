@@ -51,6 +51,17 @@ class RecordingNode:
         return [m for _, m in self.sent if isinstance(m, kind)]
 
 
+_made: list[SimActor] = []
+
+
+@pytest.fixture(autouse=True)
+def _close_worlds() -> Any:
+    """Each PyBullet world (and its URDF temp dir) goes away with its test, even a failing one."""
+    yield
+    while _made:
+        _made.pop().world.close()
+
+
 def make_sim(tmp_path: Path, chain4: Path, *, seed: int = 0, scenario: str | None = None, **kw: Any) -> SimActor:
     cfg = RunConfig(
         run_id="t",
@@ -61,7 +72,8 @@ def make_sim(tmp_path: Path, chain4: Path, *, seed: int = 0, scenario: str | Non
         deadline_ms=kw.pop("deadline_ms", 60_000),
         **kw,
     )
-    return SimActor(cfg, cfg.topo(), RecordingNode())  # type: ignore[arg-type]
+    _made.append(SimActor(cfg, cfg.topo(), RecordingNode()))  # type: ignore[arg-type]
+    return _made[-1]
 
 
 def fault(kind: str, *targets: str, **kw: Any) -> Fault:
@@ -121,7 +133,6 @@ def test_lock_free_disturb(tmp_path, chain4):
         ]
         assert sim.node.of(Event)[2].detail == "disturb a3 steps=3 amplitude_deg=2"  # type: ignore[attr-defined]
         assert sim.applied["a3"] == pytest.approx(DEG)
-        sim.world.close()
 
     asyncio.run(body())
 
@@ -149,7 +160,6 @@ def test_disturbed_lock_stays_locked_at_new_angle_and_faults_persist_across_epoc
         assert sim.world.joint_positions() == q0, "the reset still puts every joint at its initial angle"
         step(sim)
         assert sim.world.joint_positions() == q0, "a broken joint stays broken"
-        sim.world.close()
 
     asyncio.run(body())
 
@@ -161,7 +171,6 @@ def test_disturbance_replays_with_the_seed(tmp_path, chain4):
         sim.apply_fault(fault("disturb", "a2", "a4", steps=10, amplitude_deg=5.0))
         for _ in range(10):
             q = step(sim)
-        sim.world.close()
         return [q["a2"], q["a4"]]
 
     a, b, c = (asyncio.run(run(s)) for s in (7, 7, 8))
@@ -176,7 +185,6 @@ def test_other_faults_and_bad_faults_are_ignored(tmp_path, chain4):
         sim.apply_fault(fault("lock", "zz"))  # not an agent
         sim.apply_fault(fault("disturb", "a1"))  # no steps
         assert not sim.locked and not sim.disturbed and not sim.node.sent  # type: ignore[attr-defined]
-        sim.world.close()
 
     asyncio.run(body())
 
@@ -208,7 +216,6 @@ def test_scenario_applies_joint_faults_and_forwards_the_others(tmp_path, chain4)
         q = sim.world.joint_positions()
         q0 = sim.topo.initial_angles()
         assert q["a1"] == pytest.approx(q0["a1"] + 4 * DEG)  # locked for steps 2 and 3 of 6
-        sim.world.close()
 
     asyncio.run(body())
 
@@ -234,7 +241,6 @@ def test_epoch_start_guard(tmp_path, chain4):
         assert sim.epoch is None
         sim._on_epoch(EpochStart(epoch=1, steps=3, goal=GOAL))
         assert sim.epoch is not None and sim.epoch.epoch == 1 and sim.t == 0
-        sim.world.close()
 
     asyncio.run(body())
 
@@ -271,7 +277,6 @@ def test_liveliness_aware_stepping(tmp_path, chain4):
         assert sim.missed == 0, "a1 came back mid-step: not missed in that step"
         sim._on_deadline(f"0/{t + 2}".encode())
         assert sim.missed == 1, "... but in the next"
-        sim.world.close()
 
     asyncio.run(body())
 
@@ -288,7 +293,6 @@ def test_status_reports_angles_increments_and_faults(tmp_path, chain4):
         assert (st.epoch, st.step) == (0, 1) and st.q == sim.world.joint_positions()
         assert st.delta["a2"] == 0.0 and st.delta["a1"] == pytest.approx(DEG)
         assert st.faults == {"a2": "locked"}
-        sim.world.close()
 
     asyncio.run(body())
 
