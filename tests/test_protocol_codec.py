@@ -6,17 +6,27 @@ from kinswarm.protocol import codec
 from kinswarm.protocol.keys import Keys, check_id
 from kinswarm.protocol.messages import (
     MESSAGE_TYPES,
+    SCHEMA_VERSION,
+    Bye,
     Checkpoint,
     Cmd,
     Down,
     EpochDone,
     EpochStart,
+    Event,
+    Fault,
+    FaultReply,
+    JointStatus,
     Obs,
     Saved,
     Stop,
+    SwarmStatus,
     Task,
     Up,
 )
+
+KEY = b"0123456789abcdef0123456789abcdef"
+OTHER_KEY = b"fedcba9876543210fedcba9876543210"
 
 SAMPLES = [
     Obs(epoch=1, step=2, q=0.5),
@@ -31,31 +41,62 @@ SAMPLES = [
     Checkpoint(epoch=2, directory="/tmp/x"),
     Saved(epoch=2, path="/tmp/x/a1.npz", error=""),
     Stop(reason="done"),
+    Bye(steps=1200, rejected=3),
+    Fault(id="f1", fault="drop", targets=["a2", "a3"], seconds=30.0, steps=None, rate=0.05, ms=None,
+          amplitude_deg=None),
+    Fault(id="f2", fault="disturb", targets=["all"], seconds=None, steps=300, rate=None, ms=None,
+          amplitude_deg=2.0),
+    FaultReply(id="f1", error="", detail="drop a2,a3 rate=0.05 seconds=30"),
+    Event(epoch=-1, step=-1, event="restart", target="a3", detail="after kill; from epoch 4"),
+    JointStatus(epoch=2, step=40, q={"a1": 0.1, "a2": -0.2}, delta={"a1": 0.0175, "a2": 0.0},
+                faults={"a2": "lock"}),
+    SwarmStatus(epoch=2, epochs=60, role={"sim": "sim", "a1": "agent"}, alive={"sim": 1, "a1": 0},
+                pid={"sim": 100, "a1": 101}, host={"sim": "h", "a1": "h"}, restarts={"sim": 0, "a1": 2},
+                faults={"sim": [], "a1": ["drop rate=0.05"]}),
 ]
 
 
 @pytest.mark.parametrize("msg", SAMPLES, ids=lambda m: type(m).__name__)
 def test_round_trip(msg):
-    assert codec.decode(codec.encode(msg, "run1", "me"), type(msg), "run1") == msg
+    assert codec.decode(codec.encode(msg, "run1", "me", KEY), type(msg), "run1", KEY) == msg
 
 
 def test_every_message_type_has_a_sample():
     assert {type(m) for m in SAMPLES} == set(MESSAGE_TYPES.values())
 
 
-def _raw(**over):
-    body = {"v": 1, "kind": "cmd", "run": "run1", "src": "a1", "epoch": 1, "step": 2, "delta": 0.01}
+def _raw(key=KEY, **over):
+    """A hand-made cmd body, signed with `key` (the run's by default): it passes the MAC, then the checks."""
+    body = {"v": SCHEMA_VERSION, "kind": "cmd", "run": "run1", "src": "a1", "epoch": 1, "step": 2, "delta": 0.01}
     body.update(over)
-    return msgpack.packb({k: v for k, v in body.items() if v is not ...})
+    return codec.sign(msgpack.packb({k: v for k, v in body.items() if v is not ...}), key)
+
+
+GOOD = codec.encode(Cmd(epoch=1, step=2, delta=0.01), "run1", "a1", KEY)
+
+
+def _flip(payload: bytes, i: int) -> bytes:
+    return payload[:i] + bytes([payload[i] ^ 0x01]) + payload[i + 1 :]
 
 
 @pytest.mark.parametrize(
     "payload, reason",
     [
-        (b"\xc1garbage", "not msgpack"),
-        (b"", "not msgpack"),
-        (msgpack.packb([1, 2, 3]), "expected a map"),
-        (_raw(v=2), "schema version 2"),
+        (b"", "too short"),
+        (b"\xc1garbage", "too short"),
+        (b"\xc1garbage that is long enough to carry a MAC", "bad MAC"),
+        (GOOD[:-1], "bad MAC"),  # truncated
+        (GOOD[:-codec.MAC_SIZE], "bad MAC"),  # the MAC cut off: the body alone
+        (msgpack.packb({"v": SCHEMA_VERSION, "kind": "cmd", "run": "run1", "src": "a1", "epoch": 1, "step": 2,
+                        "delta": 0.01}) + b"\0" * codec.MAC_SIZE, "bad MAC"),  # forged: a well-formed body
+        (_flip(GOOD, 5), "bad MAC"),  # one bit of the body flipped in transit
+        (_flip(GOOD, len(GOOD) - 1), "bad MAC"),  # one bit of the MAC flipped
+        (_raw(OTHER_KEY), "bad MAC"),  # another run's key, or an impostor's
+        (_raw(OTHER_KEY, step=3), "not signed with this run's key"),  # a plausible wrong step from an impostor
+        (codec.sign(b"\xc1", KEY), "not msgpack"),
+        (codec.sign(msgpack.packb([1, 2, 3]), KEY), "expected a map"),
+        (_raw(v=1), "schema version 1"),  # signed with the right key: an old actor of this run
+        (_raw(v=SCHEMA_VERSION + 1), f"schema version {SCHEMA_VERSION + 1}"),
         (_raw(kind="obs"), "kind 'obs'"),
         (_raw(kind="nope"), "unknown kind"),
         (_raw(run="other"), "run 'other'"),
@@ -72,23 +113,54 @@ def _raw(**over):
 )
 def test_rejections_name_the_reason(payload, reason):
     with pytest.raises(codec.DecodeError, match=reason):
-        codec.decode(payload, Cmd, "run1")
+        codec.decode(payload, Cmd, "run1", KEY)
+
+
+def test_the_mac_is_checked_before_anything_else():
+    # a body with every fault at once, unsigned: the MAC is the reason given, msgpack never sees it
+    junk = msgpack.packb({"v": 99, "kind": "nope", "run": "other"}) + b"\0" * codec.MAC_SIZE
+    with pytest.raises(codec.DecodeError, match="^bad MAC: not signed with this run's key"):
+        codec.decode(junk, Cmd, "run1", KEY)
+
+
+def test_the_mac_binds_the_key_not_just_the_run():
+    # two runs with the same id but different secrets do not hear each other
+    p = codec.encode(Cmd(epoch=0, step=1, delta=0.0), "run1", "a1", OTHER_KEY)
+    with pytest.raises(codec.DecodeError, match="bad MAC"):
+        codec.decode(p, Cmd, "run1", KEY)
+    assert codec.decode(p, Cmd, "run1", OTHER_KEY) == Cmd(epoch=0, step=1, delta=0.0)
+
+
+@pytest.mark.parametrize("key", [b"", None, "text"])
+def test_a_missing_key_is_a_programming_error(key):
+    with pytest.raises(ValueError, match="MAC key") as e:
+        codec.encode(Cmd(epoch=0, step=1, delta=0.0), "run1", "a1", key)
+    assert not isinstance(e.value, codec.DecodeError)
+    with pytest.raises(ValueError, match="MAC key") as e:
+        codec.decode(GOOD, Cmd, "run1", key)
+    assert not isinstance(e.value, codec.DecodeError)  # not a bad message: a bug in the caller
+
+
+def test_sender_reads_the_claimed_src_past_the_mac():
+    assert codec.sender(GOOD) == "a1"
+    assert codec.sender(_raw(OTHER_KEY, src="impostor")) == "impostor"  # unverified: for log lines only
+    assert codec.sender(b"") == "?" and codec.sender(b"\xc1garbage") == "?"
 
 
 def test_nested_field_errors_name_the_path():
-    good = codec.encode(SAMPLES[4], "r", "x")
-    body = msgpack.unpackb(good)
+    good = codec.encode(SAMPLES[4], "r", "x", KEY)
+    body = msgpack.unpackb(good[: -codec.MAC_SIZE])
     body["tips"]["r2"] = [1.0, "x", 0.0]
     with pytest.raises(codec.DecodeError, match=r"tips\.r2\[1\]: expected a number"):
-        codec.decode(msgpack.packb(body), Up, "r")
+        codec.decode(codec.sign(msgpack.packb(body), KEY), Up, "r", KEY)
     body["tips"]["r2"] = [1.0, 0.0]
     with pytest.raises(codec.DecodeError, match="tips.r2: expected a list of 3"):
-        codec.decode(msgpack.packb(body), Up, "r")
+        codec.decode(codec.sign(msgpack.packb(body), KEY), Up, "r", KEY)
 
 
 def test_ints_on_the_wire_are_accepted_as_floats():
     # other msgpack clients may send 1 for 1.0
-    m = codec.decode(_raw(delta=1), Cmd, "run1")
+    m = codec.decode(_raw(delta=1), Cmd, "run1", KEY)
     assert m.delta == 1.0 and isinstance(m.delta, float)
 
 
