@@ -5,21 +5,32 @@ and clean shutdown.
 Zenoh callbacks run on a zenoh-owned thread. They only append `(key, bytes)` to a deque and wake the
 event loop once per burst (`call_soon_threadsafe` per message caps a subscriber near 85k msg/s; one
 wake-up per burst is an order of magnitude cheaper). Everything else happens on the loop.
+
+Link faults (DESIGN §5, `Node.apply_fault`): drop, delay, duplicate and corrupt act on a node's step
+links only — what it sends and receives under `sim/` and `a/` — never on ctl/, rep/, metrics/, fault/ or
+liveliness, so a faulted swarm stays controllable. With none active, sending and receiving cost one
+attribute check more than without the feature; with some active, received step messages are handed to
+the loop one by one and faulted there, so the RNG, counters and timers are only ever touched on the loop.
 """
 
 from __future__ import annotations
 
 import asyncio
 import collections
+import dataclasses
 import json
 import logging
+import random
 import time
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass
 from typing import Any, TypeVar
 
 import zenoh
 from kinswarm.protocol import codec
+from kinswarm.protocol.faults import ALL, LINK_FAULTS, check_fault, describe
 from kinswarm.protocol.keys import Keys
+from kinswarm.protocol.messages import Fault
 
 DEFAULT_LISTEN = "tcp/127.0.0.1:7447"
 LEASE_MS = 1000
@@ -85,8 +96,22 @@ class Mailbox:
         return len(self._items)
 
 
+LINK_COUNTS = ("dropped", "delayed", "duplicated", "corrupted")
+
+
+@dataclass
+class LinkFault:
+    """One active link fault of a node: at most one per kind; a new one of the same kind replaces it."""
+
+    kind: str  # drop, delay, duplicate or corrupt
+    rate: float  # probability per message (1.0 for delay)
+    ms: float  # delay only
+    description: str
+    expiry: asyncio.TimerHandle | None = None
+
+
 class Node:
-    """One actor's handle on the wire: mailbox, publishers, subscriptions, liveliness token.
+    """One actor's handle on the wire: mailbox, publishers, subscriptions, liveliness token, link faults.
 
     Several nodes may share one session (the `single` placement); each owns its declarations and
     undeclares them in `close()`."""
@@ -98,11 +123,19 @@ class Node:
         self.ident = ident
         self.key = key  # the run's MAC key (codec.py)
         self.log = logging.getLogger(f"kinswarm.{role}.{ident}")
-        self.mailbox = Mailbox(asyncio.get_running_loop())
+        self._loop = asyncio.get_running_loop()
+        self.mailbox = Mailbox(self._loop)
         self._pubs: dict[str, Any] = {}
         self._subs: list[Any] = []
         self._token: Any = None
+        self._closed = False
         self.rejected = 0
+        # link faults: empty on the fast path (the one check); touched only on the loop
+        self._link_faults: dict[str, LinkFault] = {}
+        self._step_prefixes = (f"{keys.root}/sim/", f"{keys.root}/a/")
+        self.fault_rng = random.Random(f"link-faults/{ident}")  # seeded from the ident: faulted runs are reproducible
+        self.link_counts: dict[str, int] = dict.fromkeys(LINK_COUNTS, 0)  # what the faults did, for reports
+        self.on_fault_expired: Callable[[str], None] | None = None  # told the description when one expires
 
     # -- sending ---------------------------------------------------------------------------------
     def publisher(self, key: str) -> Any:
@@ -116,14 +149,51 @@ class Node:
         return pub
 
     def send(self, key: str, msg: Any) -> None:
-        self.publisher(key).put(codec.encode(msg, self.keys.run, self.ident, self.key))
+        payload = codec.encode(msg, self.keys.run, self.ident, self.key)
+        if self._link_faults and key.startswith(self._step_prefixes):
+            for delay, p in self._fault(payload):
+                if delay:  # never sleep: the loop puts it later
+                    self._loop.call_later(delay, self._put_late, key, p)
+                else:
+                    self.publisher(key).put(p)
+            return
+        self.publisher(key).put(payload)
+
+    def _put_late(self, key: str, payload: bytes) -> None:
+        if not self._closed:
+            self.publisher(key).put(payload)
 
     # -- receiving -------------------------------------------------------------------------------
     def listen(self, key_expr: str) -> None:
         push = self.mailbox.push
-        self._subs.append(
-            self.session.declare_subscriber(key_expr, lambda s: push(str(s.key_expr), s.payload.to_bytes()))
-        )
+
+        def on_sample(s: Any) -> None:  # zenoh thread
+            if self._link_faults:
+                self._receive_faulty(str(s.key_expr), s.payload.to_bytes())
+            else:
+                push(str(s.key_expr), s.payload.to_bytes())
+
+        self._subs.append(self.session.declare_subscriber(key_expr, on_sample))
+
+    def _receive_faulty(self, key: str, payload: bytes) -> None:  # zenoh thread
+        if not key.startswith(self._step_prefixes):
+            self.mailbox.push(key, payload)
+            return
+        try:  # fault it on the loop: the RNG, counters and timers live there
+            self._loop.call_soon_threadsafe(self._deliver_faulty, key, payload)
+        except RuntimeError:  # loop closed during shutdown
+            pass
+
+    def _deliver_faulty(self, key: str, payload: bytes) -> None:  # loop
+        for delay, p in self._fault(payload):
+            if delay:
+                self._loop.call_later(delay, self._push_late, key, p)
+            else:
+                self.mailbox.push(key, p)
+
+    def _push_late(self, key: str, payload: bytes) -> None:
+        if not self._closed:
+            self.mailbox.push(key, payload)
 
     async def recv(self) -> tuple[str, bytes]:
         return await self.mailbox.get()
@@ -144,6 +214,77 @@ class Node:
                 )
             return None
 
+    # -- link faults -----------------------------------------------------------------------------
+    def apply_fault(self, f: Fault) -> str:
+        """Apply a link fault to this node; return what was done in one line, or "" when `f` is not a
+        link fault for this node (`all` targets every agent-role node). Call it on the loop."""
+        if f.fault not in LINK_FAULTS:
+            return ""
+        if self.ident not in f.targets and not (ALL in f.targets and self.role == "agent"):
+            return ""
+        error = check_fault(f)
+        if error:  # the supervisor checks before forwarding: this is a bug or a hand-made message
+            self.log.warning("ignored link fault %s: %s", f.id, error)
+            return ""
+        if f.fault == "clear":
+            was = sorted(self._link_faults)
+            self._clear_link_faults()
+            desc = f"clear {self.ident} ({', '.join(was) or 'no link fault'} active)"
+        else:
+            rate = 1.0 if f.rate is None else f.rate  # duplicate and corrupt default to every message
+            shown = dataclasses.replace(f, targets=[self.ident], rate=None if f.fault == "delay" else rate)
+            lf = LinkFault(kind=f.fault, rate=rate, ms=f.ms or 0.0, description=describe(shown))
+            old = self._link_faults.get(lf.kind)
+            if old is not None and old.expiry is not None:
+                old.expiry.cancel()
+            if f.seconds is not None:
+                lf.expiry = self._loop.call_later(f.seconds, self._expire, lf)
+            self._link_faults[lf.kind] = lf
+            desc = lf.description
+        self.log.warning("link fault: %s", desc)
+        return desc
+
+    @property
+    def link_faults(self) -> list[str]:
+        """The active link faults, one description each (for status reports)."""
+        return [lf.description for lf in self._link_faults.values()]
+
+    def _expire(self, lf: LinkFault) -> None:
+        if self._link_faults.get(lf.kind) is lf:
+            del self._link_faults[lf.kind]
+            self.log.warning("link fault expired: %s", lf.description)
+            if self.on_fault_expired is not None:
+                self.on_fault_expired(lf.description)
+
+    def _clear_link_faults(self) -> None:
+        for lf in self._link_faults.values():
+            if lf.expiry is not None:
+                lf.expiry.cancel()
+        self._link_faults.clear()
+
+    def _fault(self, payload: bytes) -> list[tuple[float, bytes]]:
+        """What the active faults make of one step message: (delay in s, payload) per copy; [] if dropped."""
+        faults, rng, counts = self._link_faults, self.fault_rng, self.link_counts
+        f = faults.get("drop")
+        if f is not None and rng.random() < f.rate:
+            counts["dropped"] += 1
+            return []
+        f = faults.get("corrupt")
+        if f is not None and rng.random() < f.rate:
+            payload = rng.randbytes(len(payload))  # garbage of the same length: the receiver's MAC check fails
+            counts["corrupted"] += 1
+        copies = [payload]
+        f = faults.get("duplicate")
+        if f is not None and rng.random() < f.rate:
+            copies.append(payload)
+            counts["duplicated"] += 1
+        f = faults.get("delay")
+        delay = 0.0
+        if f is not None and f.ms > 0:
+            delay = f.ms / 1000
+            counts["delayed"] += len(copies)
+        return [(delay, p) for p in copies]
+
     # -- readiness -------------------------------------------------------------------------------
     async def wait_matched(self, keys: Iterable[str], timeout: float) -> None:
         """Wait until every given publisher has a matching subscriber: a put before that is lost."""
@@ -161,6 +302,8 @@ class Node:
         self._token = self.session.liveliness().declare_token(self.keys.alive(self.role, self.ident))
 
     def close(self) -> None:
+        self._closed = True  # late puts and pushes still on the loop's timers become no-ops
+        self._clear_link_faults()
         for d in [self._token, *self._subs, *self._pubs.values()]:
             if d is not None:
                 try:
