@@ -63,6 +63,10 @@ class SwarmError(RuntimeError):
     pass
 
 
+class _NoMessage(SwarmError):
+    """The awaited message did not come in time."""
+
+
 def actors_of(cfg: RunConfig, topo: Topology) -> list[ActorId]:
     if cfg.controller == "baseline":
         return [("sim", "sim"), ("controller", "baseline")]
@@ -529,7 +533,7 @@ class Supervisor:
             self._tick()
             remaining = deadline - time.monotonic()
             if remaining <= 0:
-                raise SwarmError(f"no {kind.__name__} within {timeout:.0f} s")
+                raise _NoMessage(f"no {kind.__name__} within {timeout:.0f} s")
             try:
                 key, payload = await asyncio.wait_for(self.node.recv(), timeout=min(remaining, self.TICK))
             except TimeoutError:
@@ -566,11 +570,25 @@ class Supervisor:
         directory = self.out / "agents"
         directory.mkdir(parents=True, exist_ok=True)
         self.node.send(self.keys.ctl("checkpoint"), Checkpoint(epoch=epoch, directory=str(directory)))
-        # an agent that is down right now cannot answer; its previous checkpoint stays its newest
-        waiting = {a for a in self.topo.dof_agents if ("agent", a) in self.alive and a not in self.frozen}
+        # An agent that is down, or dies before answering, cannot answer: its previous checkpoint stays
+        # its newest, and a restarted one resumes from that.
+        before = {a: r.total for a, r in self.restarts.items()}
+        waiting = set(self.topo.dof_agents)
         deadline = time.monotonic() + 30.0
         while waiting:
-            m = await self._expect(Saved, lambda s: s.epoch == epoch, timeout=max(0.1, deadline - time.monotonic()))
+            waiting = {
+                a
+                for a in waiting
+                if ("agent", a) in self.alive and a not in self.frozen and self.restarts[a].total == before[a]
+            }
+            if not waiting:
+                break
+            if time.monotonic() > deadline:
+                raise SwarmError(f"no checkpoint from {', '.join(sorted(waiting))} within 30 s")
+            try:
+                m = await self._expect(Saved, lambda s: s.epoch == epoch, timeout=0.5)
+            except _NoMessage:
+                continue
             agent = Path(m.path).stem
             if m.error:
                 raise SwarmError(f"agent {agent} could not checkpoint: {m.error}")
