@@ -34,6 +34,7 @@ from kinswarm.protocol.messages import Fault
 
 DEFAULT_LISTEN = "tcp/127.0.0.1:7447"
 LEASE_MS = 1000
+HANDSHAKE_MS = 2000
 M = TypeVar("M")
 
 
@@ -53,6 +54,10 @@ def zenoh_config(
     c.insert_json5("connect/endpoints", json.dumps(list(connect)))
     c.insert_json5("scouting/multicast/enabled", "false")
     c.insert_json5("transport/link/tx/lease", str(lease_ms))
+    # A handshake with a frozen (SIGSTOPped) peer never completes; the 10 s default then also held up
+    # every new session's close (`kinswarm status` took 10 s during a freeze, 0.5 s with 2 s here).
+    c.insert_json5("transport/unicast/open_timeout", str(HANDSHAKE_MS))
+    c.insert_json5("transport/unicast/accept_timeout", str(HANDSHAKE_MS))
     if must_connect:  # an actor whose supervisor is unreachable fails instead of retrying forever
         c.insert_json5("connect/timeout_ms", "10000")
         c.insert_json5("connect/exit_on_failure", "true")
