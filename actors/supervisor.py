@@ -602,6 +602,7 @@ class Supervisor:
             "steps": d.steps,
             "seconds": d.seconds,
             "missed_cmds": d.missed_cmds,
+            "max_step_seconds": d.max_step_seconds,
             "final_angles_deg": {a: round(math.degrees(q), 4) for a, q in d.final_angles.items()},
             "errors": [round(e, 5) for e in d.errors],
         }

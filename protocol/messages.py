@@ -96,6 +96,7 @@ class EpochDone:
     final_angles: dict[str, float]
     missed_cmds: int
     seconds: float
+    max_step_seconds: float  # the longest step: a missing cmd makes it as long as the deadline, never longer
 
 
 @dataclass(frozen=True)

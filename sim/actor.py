@@ -67,6 +67,8 @@ class SimActor:
         self.missed = 0
         self.total_steps = 0
         self.started = 0.0
+        self.step_started = 0.0
+        self.longest_step = 0.0
         self._deadline: asyncio.TimerHandle | None = None
         self._status: asyncio.TimerHandle | None = None
         self._cmd_prefix = self.keys.cmd_all[:-1]
@@ -159,6 +161,7 @@ class SimActor:
         self.errors = []
         self.missed = 0
         self.started = time.perf_counter()
+        self.longest_step = 0.0
         self._publish_step()
 
     def _on_cmd(self, agent: str, m: Cmd) -> None:
@@ -297,6 +300,7 @@ class SimActor:
         for a in self.dof:
             send(k.obs(a), Obs(epoch=e.epoch, step=self.t, q=q[a]))
         self.cmds = {}
+        self.step_started = time.perf_counter()
         # Nobody expected (every agent down): the deadline runs the step rather than the joints racing.
         self.waiting = set(self.dof_set - self.down)
         token = f"{e.epoch}/{self.t}".encode()
@@ -313,6 +317,7 @@ class SimActor:
         self.applied = self.world.apply_increments(self._increments() if faulted else self.cmds)
         self.tips = self.world.tip_poses()
         self.errors.append(self.error())
+        self.longest_step = max(self.longest_step, time.perf_counter() - self.step_started)
         self.t += 1
         self.total_steps += 1
         if self.disturbed:
@@ -331,6 +336,7 @@ class SimActor:
                 final_angles=self.world.joint_positions(),
                 missed_cmds=self.missed,
                 seconds=time.perf_counter() - self.started,
+                max_step_seconds=self.longest_step,
             ),
         )
         self.epoch = None

@@ -37,7 +37,7 @@ SAMPLES = [
     Cmd(epoch=1, step=9, delta=-0.0174),
     EpochStart(epoch=5, steps=500, goal=(1.0, 2.0)),
     EpochDone(epoch=5, steps=2, final_error=0.1, mean_error=0.2, errors=[0.3, 0.1],
-              final_angles={"a1": 0.1}, missed_cmds=0, seconds=0.5),
+              final_angles={"a1": 0.1}, missed_cmds=0, seconds=0.5, max_step_seconds=0.01),
     Checkpoint(epoch=2, directory="/tmp/x"),
     Saved(epoch=2, path="/tmp/x/a1.npz", error=""),
     Stop(reason="done"),
