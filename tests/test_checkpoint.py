@@ -49,3 +49,22 @@ def test_foreign_npz_and_wrong_agent(tmp_path):
         load_checkpoint(q, agent="a1")
     with pytest.raises(CheckpointError, match="no such checkpoint"):
         load_checkpoint(tmp_path / "none.npz")
+
+
+def test_a_torn_newest_checkpoint_falls_back_to_the_previous_one(tmp_path):
+    from kinswarm.actors.checkpoint import load_latest, previous
+
+    p = tmp_path / "a1.npz"
+    save_checkpoint(p, arrays(), {"agent": "a1", "run_epoch": 4})
+    newer = {k: v + 1 for k, v in arrays().items()}
+    save_checkpoint(p, newer, {"agent": "a1", "run_epoch": 5})
+    assert previous(p).is_file()
+    got, meta, used, refused = load_latest(p, agent="a1")
+    assert used == p and meta["run_epoch"] == 5 and not refused
+    p.write_bytes(p.read_bytes()[:100])  # torn
+    got, meta, used, refused = load_latest(p, agent="a1")
+    assert used == previous(p) and meta["run_epoch"] == 4 and "a1.npz" in refused[0]
+    np.testing.assert_array_equal(got["phi"], arrays()["phi"])
+    previous(p).write_bytes(b"not a checkpoint")
+    with pytest.raises(CheckpointError, match="a1.prev.npz"):
+        load_latest(p, agent="a1")
