@@ -20,6 +20,7 @@ from kinswarm.protocol.messages import EpochDone
 from kinswarm.protocol.topology import Topology, TopologyError, load_topology
 
 log = logging.getLogger("kinswarm")
+EXPERIMENT_NAMES = ("convergence", "optimality", "generalisation", "robustness", "cost", "all")
 
 
 def _goal(text: str) -> tuple[float, float]:
@@ -91,6 +92,20 @@ def build_parser() -> argparse.ArgumentParser:
     status = sub.add_parser("status", help="show a running swarm's actors (alive, pid, restarts, faults, joints)")
     status.add_argument("run_id", metavar="RUN-ID")
     status.add_argument("--watch", action="store_true", help="refresh live until Ctrl-C")
+    exp = sub.add_parser(
+        "experiment",
+        help="reproduce one of the paper's experiments (or all): report.md, figures, results.json",
+        description="Runs the paper's experiments on the same actors and wire as `kinswarm run` (single "
+        "placement) and writes DIR/NAME/report.md with figures and a paper-vs-kinswarm table, and "
+        "DIR/NAME/results.json.",
+    )
+    exp.add_argument("name", choices=EXPERIMENT_NAMES, metavar="NAME", help=", ".join(EXPERIMENT_NAMES))
+    exp.add_argument("--seeds", type=int, default=3, help="seeds 0..N-1 (default 3)")
+    exp.add_argument("--quick", action="store_true", help="a smoke version (seconds, not conclusions)")
+    exp.add_argument("--out", type=Path, default=Path("runs/experiments"), help="default runs/experiments")
+    exp.add_argument("--jobs", type=int, default=1, help="runs in parallel worker processes (default 1)")
+    exp.add_argument("--test-set", type=int, default=0, help="generalisation: the K-th block of 100 Halton goals")
+    exp.add_argument("--log-level", default="ERROR")
     for q in (fault, status):
         q.add_argument("--run-dir", type=Path, default=None, help="the run's directory (default runs/RUN-ID)")
         q.add_argument("--connect", default=None, help="the run's endpoint (default: the one it listens on)")
@@ -231,6 +246,17 @@ def _control(a: argparse.Namespace) -> int:
     return asyncio.run(send())
 
 
+def _experiment(a: argparse.Namespace, argv: list[str]) -> int:
+    from kinswarm.experiments import run_experiment
+
+    results = run_experiment(
+        a.name, seeds=a.seeds, quick=a.quick, out=a.out, jobs=a.jobs, test_set=a.test_set, argv=list(argv)
+    )
+    for name in results:
+        print(a.out / name / "report.md")
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     from kinswarm.actors.control import ControlError
     from kinswarm.actors.scenario import ScenarioError
@@ -247,6 +273,8 @@ def main(argv: list[str] | None = None) -> int:
             return 0
         if a.command in ("fault", "status"):
             return _control(a)
+        if a.command == "experiment":
+            return _experiment(a, argv if argv is not None else sys.argv[1:])
         cfg, topo = _resolve(a, "agents" if a.command == "run" else "baseline")
         summary = run_swarm(cfg, topo, progress=not a.no_progress and sys.stderr.isatty())
     except (TopologyError, ConfigError, CheckpointError, ScenarioError, ControlError, ValueError) as e:

@@ -1,0 +1,224 @@
+"""What every experiment shares: the context (seeds, size, output), running specs (in parallel worker
+processes when --jobs > 1), statistics over seeds, and the report (report.md + results.json)."""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import platform
+import statistics
+import sys
+import time
+from collections.abc import Callable, Iterable, Sequence
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass, field
+from multiprocessing import get_context
+from pathlib import Path
+from typing import Any
+
+from kinswarm.actors.learning.settings import LearnerSettings
+
+from .swarm import RunOutcome, Spec, learner_overrides, run_spec
+
+PLACEMENT_NOTE = (
+    "All swarm runs use `kinswarm run`'s machinery — the same supervisor, agent and simulator actors "
+    "exchanging the same messages over Zenoh — in `single` placement (every actor an asyncio task in one "
+    "process, one Zenoh session) for speed; `process` placement gives bit-identical errors for the same "
+    "seed (tests/test_swarm.py)."
+)
+DEFAULTS = LearnerSettings()
+
+
+@dataclass
+class Context:
+    name: str
+    out: Path  # DIR/NAME
+    runs: Path  # DIR/runs: shared by the experiments, so `all` reuses runs between them
+    seeds: int
+    quick: bool
+    jobs: int = 1
+    test_set: int = 0
+    argv: list[str] = field(default_factory=list)
+    started: float = field(default_factory=time.perf_counter)
+
+    @property
+    def seed_list(self) -> list[int]:
+        return list(range(self.seeds))
+
+    def command(self) -> str:
+        return "kinswarm " + " ".join(self.argv) if self.argv else f"kinswarm experiment {self.name}"
+
+
+def settings(**kw: Any) -> tuple[tuple[str, Any], ...]:
+    """LearnerSettings overrides, leaving out values equal to the defaults (so equal runs share a cache key)."""
+    return learner_overrides(**{k: v for k, v in kw.items() if getattr(DEFAULTS, k) != v})
+
+
+def _progress(total: int, desc: str) -> Any:
+    if not sys.stderr.isatty():
+        return None
+    from tqdm import tqdm
+
+    return tqdm(total=total, desc=desc, unit="run", dynamic_ncols=True)
+
+
+def _run_one(args: tuple[Spec, str]) -> RunOutcome:
+    spec, runs = args
+    return run_spec(spec, Path(runs))
+
+
+def run_specs(ctx: Context, specs: Sequence[Spec], desc: str = "") -> list[RunOutcome]:
+    """Run (or reuse) every spec; in `ctx.jobs` spawned worker processes when > 1. Results in spec order."""
+    ctx.runs.mkdir(parents=True, exist_ok=True)
+    bar = _progress(len(specs), f"{ctx.name} {desc}".strip())
+    out: list[RunOutcome] = []
+    try:
+        if ctx.jobs <= 1 or len(specs) <= 1:
+            for s in specs:
+                out.append(run_spec(s, ctx.runs))
+                if bar is not None:
+                    bar.update(1)
+        else:
+            with ProcessPoolExecutor(max_workers=ctx.jobs, mp_context=get_context("spawn")) as pool:
+                for r in pool.map(_run_one, [(s, str(ctx.runs)) for s in specs]):
+                    out.append(r)
+                    if bar is not None:
+                        bar.update(1)
+    finally:
+        if bar is not None:
+            bar.close()
+    return out
+
+
+# -- statistics --------------------------------------------------------------------------------------
+def mean_std(values: Iterable[float]) -> tuple[float, float]:
+    """Mean and sample standard deviation (ddof = 1; 0 for a single value); NaNs are left out."""
+    v = [float(x) for x in values if not math.isnan(float(x))]
+    if not v:
+        return math.nan, math.nan
+    return statistics.fmean(v), statistics.stdev(v) if len(v) > 1 else 0.0
+
+
+def pm(values: Iterable[float], digits: int = 3) -> str:
+    m, s = mean_std(values)
+    if math.isnan(m):
+        return "—"
+    return f"{m:.{digits}f} ± {s:.{digits}f}"
+
+
+def frac_within(errors: Sequence[float], tol: float = 0.5) -> float:
+    return sum(e <= tol for e in errors) / len(errors) if errors else math.nan
+
+
+def settled_epoch(final_errors: Sequence[float], tol: float = 0.5, share: float = 0.8) -> float:
+    """First epoch from which the final error is <= tol in that epoch and in >= `share` of the epochs after
+    it (NaN if never): "the epoch by which the swarm has converged"."""
+    n = len(final_errors)
+    ok = [e <= tol for e in final_errors]
+    for i in range(n):
+        if ok[i] and sum(ok[i:]) >= share * (n - i):
+            return float(i)
+    return math.nan
+
+
+# -- the report --------------------------------------------------------------------------------------
+class Report:
+    """report.md (title, settings, tables, figures, commands) and results.json, written together."""
+
+    def __init__(self, ctx: Context, title: str, section: str) -> None:
+        self.ctx, self.title, self.section = ctx, title, section
+        self.parts: list[str] = []
+        self.results: dict[str, Any] = {}
+        ctx.out.mkdir(parents=True, exist_ok=True)
+
+    def text(self, *lines: str) -> None:
+        self.parts.append("\n".join(lines))
+
+    def table(self, header: Sequence[str], rows: Iterable[Sequence[Any]]) -> None:
+        lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+        lines += ["| " + " | ".join(str(c) for c in r) + " |" for r in rows]
+        self.parts.append("\n".join(lines))
+
+    def figure(self, name: str, caption: str) -> None:
+        self.parts.append(f"![{caption}]({name})\n\n*{caption}*")
+
+    def write(self, settings_used: dict[str, Any], runs: Sequence[RunOutcome] = ()) -> Path:
+        ctx = self.ctx
+        wall = time.perf_counter() - ctx.started
+        run_wall = sum(float(r.summary.get("wall_seconds", 0.0)) for r in runs)
+        head = [
+            f"# {self.title}",
+            "",
+            f"Paper section: {self.section}. Generated by `{ctx.command()}`"
+            + (" (**quick** smoke version: too small for conclusions)." if ctx.quick else "."),
+            "",
+            f"- seeds: {ctx.seed_list} (tables: mean ± std over seeds, sample std)",
+            f"- wall time of this command: {wall:.0f} s ({ctx.jobs} worker process(es)); the {len(runs)} swarm "
+            f"runs it used took {run_wall:.0f} s of run time (runs reused from a shared cache count too)",
+            f"- machine: {os.cpu_count()} cores, Python {platform.python_version()}, {platform.machine()}",
+            f"- placement: {PLACEMENT_NOTE}",
+            f"- runs: `{_rel(ctx.runs)}/` (each with config.json, metrics.jsonl, summary.json, spec.json)",
+        ]
+        body = "\n\n".join(["\n".join(head), *self.parts])
+        body += "\n\n## Settings\n\n```json\n" + json.dumps(settings_used, indent=1, default=list) + "\n```\n"
+        (ctx.out / "report.md").write_text(body)
+        res = {
+            "experiment": ctx.name,
+            "command": ctx.command(),
+            "quick": ctx.quick,
+            "seeds": ctx.seed_list,
+            "wall_seconds": round(wall, 1),
+            "run_seconds": round(run_wall, 1),
+            "placement": "single",
+            "settings": settings_used,
+            **self.results,
+        }
+        (ctx.out / "results.json").write_text(json.dumps(_clean(res), indent=1, default=list) + "\n")
+        return ctx.out / "report.md"
+
+
+def _rel(p: Path) -> str:
+    try:
+        return str(p.resolve().relative_to(Path.cwd().resolve()))
+    except ValueError:
+        return str(p)
+
+
+def _clean(x: Any) -> Any:
+    """JSON without NaN (null instead) and with plain floats."""
+    if isinstance(x, dict):
+        return {str(k): _clean(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_clean(v) for v in x]
+    if isinstance(x, float):
+        return None if math.isnan(x) or math.isinf(x) else round(x, 6)
+    if hasattr(x, "item") and callable(x.item):  # numpy scalars
+        return _clean(x.item())
+    return x
+
+
+def plt_module() -> Any:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def band(ax: Any, curves: Sequence[Sequence[float]], label: str, color: str | None = None, log: bool = True) -> None:
+    """Mean over seeds with a ±std band (clipped above 0 on a log axis)."""
+    import numpy as np
+
+    n = min(len(c) for c in curves)
+    a = np.array([list(c)[:n] for c in curves], dtype=float)
+    m = a.mean(axis=0)
+    s = a.std(axis=0, ddof=1) if len(a) > 1 else np.zeros(n)
+    x = np.arange(n)
+    (line,) = ax.plot(x, m, label=label, color=color, lw=1.4)
+    lo = np.maximum(m - s, 1e-3) if log else m - s
+    ax.fill_between(x, lo, m + s, color=line.get_color(), alpha=0.2, lw=0)
+
+
+Runner = Callable[[Context], dict[str, Any]]

@@ -1,0 +1,319 @@
+"""§5.2, Figs. 10-12: train on quad-tree goal sets, test the frozen swarm on unseen Halton goals.
+
+Level-L trains one swarm on the 4^L centres of a quad-tree over the task space (goals.py), one goal per
+epoch, every goal REPS times in a seeded order (Level-4: once each), then evaluates it frozen (`--from T
+--learn off --explore off`: no learning, greedy actions) on 100 test goals — block K of the Halton
+sequence in bases 2 and 3 (`--test-set K`; Level-3 is also tested on block K+1, a second unseen set).
+Higher levels also train for more epochs; a control trains Level-1's 4 goals for Level-2's epoch budget,
+which separates the number of goals from the amount of training. Also reported, labelled as what it is:
+an untrained swarm *learning* within one episode per test goal (not a generalisation test).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from .common import Context, Report, frac_within, mean_std, plt_module, pm, run_specs, settings
+from .goals import HALF, TEST_SIZE, halton, quadtree, training_order
+from .swarm import RunOutcome, Spec
+
+PAPER = {1: (0.3814, 0.5596), 3: (0.2366, 0.2036)}  # §5.2: Level-1 and Level-3 mean / STD
+REPS = 2  # epochs per training goal (Level-4: 1, its 256 goals are already 256 epochs)
+EVAL_STEPS = 200  # steps per test goal: the frozen swarm has stopped by then (the report shows the error at 100)
+SCRATCH_GOALS = 20  # test goals per seed for the learning-on (from scratch) episodes
+# The configuration these runs use: the default learner, shaped reward (the README's).
+LEARNER = settings()
+
+
+def reps_for(level: int) -> int:
+    return 1 if level >= 4 else REPS
+
+
+def stats(errors: list[float]) -> dict[str, float]:
+    a = np.asarray(errors, dtype=float)
+    return {
+        "mean": float(a.mean()),
+        "std": float(a.std(ddof=1)) if len(a) > 1 else 0.0,
+        "median": float(np.median(a)),
+        "frac_within_0_5": frac_within(errors),
+        "max": float(a.max()),
+    }
+
+
+def run(ctx: Context) -> dict[str, Any]:
+    q = ctx.quick
+    levels = (1,) if q else (1, 2, 3, 4)
+    train_steps, eval_steps = (100, 100) if q else (500, EVAL_STEPS)
+    n_test = 8 if q else TEST_SIZE
+    k = ctx.test_set
+    test_sets = {k: halton(k)[:n_test], k + 1: halton(k + 1)[:n_test]}
+    second_level = 1 if q else 3
+    control_epochs = None if q else REPS * 4**2  # Level-1's goals for Level-2's epochs
+
+    # (label, level, epochs) of every training configuration
+    trainings: list[tuple[str, int, int]] = [(f"Level-{L}", L, reps_for(L) * 4**L) for L in levels]
+    if control_epochs:
+        trainings.append((f"Level-1, {control_epochs} epochs (control)", 1, control_epochs))
+    if q:
+        trainings = [("Level-1", 1, 4)]
+    train_specs = {}
+    for label, level, epochs in trainings:
+        for seed in ctx.seed_list:
+            goals = training_order(quadtree(level), math.ceil(epochs / 4**level), seed)[:epochs]
+            train_specs[(label, seed)] = Spec(
+                f"gen-train-L{level}-e{epochs}",
+                seed=seed,
+                epochs=epochs,
+                steps=train_steps,
+                goals=goals,
+                learner=LEARNER,
+                checkpoint=True,
+            )
+    trained = dict(zip(train_specs, run_specs(ctx, [*train_specs.values()], "train"), strict=True))
+
+    eval_specs: dict[tuple[str, int, int], Spec] = {}
+    for label, level, _ in trainings:
+        sets = [k, k + 1] if label == f"Level-{second_level}" else [k]
+        for block in sets:
+            for seed in ctx.seed_list:
+                eval_specs[(label, block, seed)] = Spec(
+                    f"gen-test{block}-L{level}",
+                    seed=seed,
+                    epochs=len(test_sets[block]),
+                    steps=eval_steps,
+                    goals=tuple(test_sets[block]),
+                    learner=LEARNER,
+                    from_dir=str(trained[(label, seed)].out),
+                    learn=False,
+                    explore=False,
+                )
+    scratch_specs = {
+        (i, seed): Spec(f"gen-scratch-g{i}", seed=seed, epochs=1, steps=train_steps, goals=(g,), learner=LEARNER)
+        for seed in ctx.seed_list
+        for i, g in enumerate(test_sets[k][: 2 if q else SCRATCH_GOALS])
+    }
+    done = run_specs(ctx, [*eval_specs.values(), *scratch_specs.values()], "test")
+    evals = dict(zip(eval_specs, done[: len(eval_specs)], strict=True))
+    scratch = dict(zip(scratch_specs, done[len(eval_specs) :], strict=True))
+
+    per: dict[str, Any] = {}
+    for (label, block, _seed), r in evals.items():
+        entry = per.setdefault(label, {}).setdefault(f"test_set_{block}", {"per_seed": [], "errors": []})
+        entry["errors"].append(r.final_errors)
+        half = [x["errors"][len(x["errors"]) // 2 - 1] for x in r.rows]
+        entry.setdefault("mean_at_half_episode", []).append(float(np.mean(half)))
+        entry["per_seed"].append(stats(r.final_errors))
+    for sets in per.values():
+        for entry in sets.values():
+            ps = entry["per_seed"]
+            for key in ("mean", "std", "median", "frac_within_0_5"):
+                m, s = mean_std(p[key] for p in ps)
+                entry[key] = m
+                entry[f"{key}_std_over_seeds"] = s
+            entry["pooled"] = stats([e for errs in entry["errors"] for e in errs])
+    scratch_err = [r.final_errors[-1] for r in scratch.values()]
+    train_err = {
+        label: [float(np.mean(trained[(label, s)].final_errors[-min(4**level, epochs) :])) for s in ctx.seed_list]
+        for label, level, epochs in trainings
+    }
+
+    rep = Report(ctx, "Generalisation: quad-tree training goals, unseen Halton test goals", "5.2, Figs. 10-12")
+    rep.results.update(
+        {
+            "levels": {label: {"level": lv, "training_epochs": ep} for label, lv, ep in trainings},
+            "task_space": [[-HALF, HALF], [-HALF, HALF]],
+            "test_sets": {str(b): [list(g) for g in pts] for b, pts in test_sets.items()},
+            "train_steps": train_steps,
+            "eval_steps": eval_steps,
+            "per_level": per,
+            "training_final_error_last_pass": train_err,
+            "learning_on_scratch": {"final_error": scratch_err, **stats(scratch_err)},
+            "paper": {f"Level-{lv}": {"mean": m, "std": s} for lv, (m, s) in PAPER.items()},
+        }
+    )
+    rep.text(
+        "## Result",
+        "",
+        f"Task space: the square [−{HALF:g}, {HALF:g}]² around the base (every point reachable; the start tip "
+        f"(10.05, 4.62) lies outside it). Training: one goal per epoch of {train_steps} steps, every goal "
+        f"{REPS}× (Level-4: 1×) in a seeded order. Test: the frozen swarm, one episode of {eval_steps} steps per "
+        f"test goal from the start configuration, error = end-effector distance at the episode's end. Per level: "
+        f"mean, STD, median and the fraction within 0.5 over the {n_test} test goals, each then mean ± std over "
+        "seeds.",
+    )
+    header = [
+        "training",
+        "epochs",
+        "test set",
+        "paper mean / STD",
+        "mean",
+        "STD",
+        "median",
+        "within 0.5",
+        f"mean at step {eval_steps // 2}",
+    ]
+    rows = []
+    for label, level, epochs in trainings:
+        for block, entry in sorted(per[label].items()):
+            paper = PAPER.get(level) if "control" not in label and block == f"test_set_{k}" else None
+            rows.append(
+                [
+                    label,
+                    epochs,
+                    block.rsplit("_", 1)[-1],
+                    f"{paper[0]} / {paper[1]}" if paper else "—",
+                    f"{entry['mean']:.3f} ± {entry['mean_std_over_seeds']:.3f}",
+                    f"{entry['std']:.3f} ± {entry['std_std_over_seeds']:.3f}",
+                    f"{entry['median']:.3f} ± {entry['median_std_over_seeds']:.3f}",
+                    f"{100 * entry['frac_within_0_5']:.0f} ± {100 * entry['frac_within_0_5_std_over_seeds']:.0f} %",
+                    pm(entry["mean_at_half_episode"]),
+                ]
+            )
+    rep.table(header, rows)
+    rep.text(
+        f"Learning on, from scratch (**not** a generalisation test): an untrained swarm given one "
+        f"{train_steps}-step learning episode per test goal ({len(scratch_err) // max(ctx.seeds, 1)} goals × "
+        f"{ctx.seeds} seeds) ends within 0.5 in {100 * frac_within(scratch_err):.0f} % of them (mean error "
+        f"{np.mean(scratch_err):.3f}, median {np.median(scratch_err):.3f})."
+    )
+    _verdict(rep, per, trainings, k, q)
+    _figures(ctx, rep, trainings, per, evals, trained, test_sets, k)
+    rep.write(
+        {
+            "topology": "examples/chain4.toml",
+            "reward": "shaped (default)",
+            "learner": dict(LEARNER) or "defaults",
+            "reps_per_goal": REPS,
+            "train_steps": train_steps,
+            "eval_steps": eval_steps,
+            "test_set": k,
+            "test_goals": n_test,
+        },
+        [*trained.values(), *done],
+    )
+    return rep.results
+
+
+def _verdict(rep: Report, per: dict, trainings: list, k: int, quick: bool) -> None:
+    lines = ["## Paper | kinswarm", ""]
+    for label, level, _ in trainings:
+        if level not in PAPER or "control" in label:
+            continue
+        e = per[label][f"test_set_{k}"]
+        pm_, ps_ = PAPER[level]
+        ok = e["mean"] <= pm_
+        lines.append(
+            f"- {label}: paper mean {pm_} (STD {ps_}); kinswarm {e['mean']:.3f} ± {e['mean_std_over_seeds']:.3f} "
+            f"(STD {e['std']:.3f}), {100 * e['frac_within_0_5']:.0f} % within 0.5 — "
+            + ("**as good or better**" if ok else "**worse than the paper**")
+        )
+    for label, entry in per.items():
+        if f"test_set_{k + 1}" in entry:
+            e2 = entry[f"test_set_{k + 1}"]
+            lines.append(
+                f"- {label} on the second test set (block {k + 1}): mean {e2['mean']:.3f} ± "
+                f"{e2['mean_std_over_seeds']:.3f}, {100 * e2['frac_within_0_5']:.0f} % within 0.5."
+            )
+    ctl = [t for t in trainings if "control" in t[0]]
+    if ctl:
+        c = per[ctl[0][0]][f"test_set_{k}"]
+        lines.append(
+            f"- Goals vs epochs: Level-1's 4 goals trained for {ctl[0][2]} epochs reach mean {c['mean']:.3f}, "
+            f"{100 * c['frac_within_0_5']:.0f} % within 0.5 (Level-2's 16 goals in the same epochs: "
+            f"{per['Level-2'][f'test_set_{k}']['mean']:.3f}, "
+            f"{100 * per['Level-2'][f'test_set_{k}']['frac_within_0_5']:.0f} %)."
+        )
+    rep.text(*lines)
+
+
+def _figures(
+    ctx: Context,
+    rep: Report,
+    trainings: list,
+    per: dict,
+    evals: dict[tuple[str, int, int], RunOutcome],
+    trained: dict,
+    test_sets: dict,
+    k: int,
+) -> None:
+    plt = plt_module()
+    # Fig. 12: mean and STD per level.
+    main = [t for t in trainings if "control" not in t[0]]
+    fig, ax = plt.subplots(figsize=(6, 4))
+    xs = [t[1] for t in main]
+    for key, fmt, label in (("mean", "o-", "kinswarm mean"), ("std", "s--", "kinswarm STD")):
+        ax.errorbar(
+            xs,
+            [per[t[0]][f"test_set_{k}"][key] for t in main],
+            [per[t[0]][f"test_set_{k}"][f"{key}_std_over_seeds"] for t in main],
+            fmt=fmt,
+            capsize=3,
+            label=label,
+        )
+    ax.plot(list(PAPER), [m for m, _ in PAPER.values()], "k*", ms=10, label="paper mean")
+    ax.plot(list(PAPER), [s for _, s in PAPER.values()], "kx", ms=9, label="paper STD")
+    ax.set_xticks(xs, [f"L{x}\n({4**x} goals)" for x in xs])
+    ax.set_ylabel("test error over 100 goals")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    ax.set_title("Fig. 12 analogue: error on unseen goals per training level (± std over seeds)", fontsize=9)
+    fig.tight_layout()
+    fig.savefig(ctx.out / "levels.png", dpi=100)
+    plt.close(fig)
+    rep.figure("levels.png", "Fig. 12 analogue: mean and STD of the test error per level")
+
+    # Fig. 11: error map (seed 0), lowest and highest level.
+    show = [main[0], main[-1]] if len(main) > 1 else main
+    fig, axes = plt.subplots(1, len(show), figsize=(5.4 * len(show), 4.8), squeeze=False)
+    for ax, (label, level, _) in zip(axes[0], show, strict=True):
+        r = evals[(label, k, 0)]
+        pts = np.array(test_sets[k])
+        err = np.array(r.final_errors)
+        sc = ax.scatter(
+            pts[:, 0],
+            pts[:, 1],
+            c=np.clip(err, 1e-3, None),
+            cmap="viridis_r",
+            s=36,
+            norm=_lognorm(),
+            edgecolors="k",
+            linewidths=0.3,
+        )
+        tg = np.array(quadtree(level))
+        ax.plot(tg[:, 0], tg[:, 1], "r+", ms=6, label="training goals")
+        ax.plot(0, 0, "ks", ms=6, label="base")
+        ax.plot(10.05, 4.62, "k^", ms=6, label="start tip")
+        ax.add_patch(plt.Rectangle((-HALF, -HALF), 2 * HALF, 2 * HALF, fill=False, ls=":", color="grey"))
+        ax.set_aspect("equal")
+        ax.set_title(f"{label}: final error per test goal (seed 0)", fontsize=9)
+        ax.legend(fontsize=7, loc="lower left")
+        fig.colorbar(sc, ax=ax, label="final error")
+    fig.tight_layout()
+    fig.savefig(ctx.out / "error_map.png", dpi=100)
+    plt.close(fig)
+    rep.figure("error_map.png", "Fig. 11 analogue: error over the task space for the lowest and highest level")
+
+    # Error distributions per level.
+    fig, ax = plt.subplots(figsize=(7, 3.8))
+    for i, (label, _, _) in enumerate(trainings):
+        errs = np.sort(np.concatenate([np.asarray(e) for e in per[label][f"test_set_{k}"]["errors"]]))
+        ax.plot(np.clip(errs, 1e-3, None), np.arange(1, len(errs) + 1) / len(errs), color=f"C{i}", label=label)
+    ax.axvline(0.5, color="grey", ls="--", lw=0.8)
+    ax.set_xscale("log")
+    ax.set_xlabel("final error on a test goal")
+    ax.set_ylabel("fraction of test goals (all seeds)")
+    ax.legend(fontsize=7)
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(ctx.out / "cdf.png", dpi=100)
+    plt.close(fig)
+    rep.figure("cdf.png", "Cumulative distribution of the test errors per training configuration")
+
+
+def _lognorm() -> Any:
+    from matplotlib.colors import LogNorm
+
+    return LogNorm(vmin=1e-2, vmax=10)

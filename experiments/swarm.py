@@ -1,0 +1,269 @@
+"""Runs for the experiments: `kinswarm run`'s machinery (the same Supervisor, actors and wire, `single`
+placement), plus two things the experiments need and `kinswarm run` does not offer:
+
+- a goal per epoch (generalisation trains on several goals in one run): a Supervisor subclass that
+  sends each epoch's `EpochStart` with the next goal of a list; agents and sim are untouched (the goal
+  reaches them on the wire, as always);
+- an observer of the step messages (`sim/task`, `sim/obs/*`) for the end-effector path and the joint
+  effort (optimality), subscribed on the run's session before any actor exists, so nothing is missed.
+
+Each run is described by a `Spec`, lives in its own directory with `spec.json`, and is reused when that
+directory already holds a finished run of the same spec, or of the same spec with more epochs (the first
+epochs of a longer run are bit-identical to a shorter run: lockstep and seeded RNGs).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import dataclasses
+import hashlib
+import json
+import math
+import shutil
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from kinswarm.actors.config import RunConfig
+from kinswarm.actors.report import read_metrics, write_summary
+from kinswarm.actors.runtime import open_session
+from kinswarm.actors.supervisor import SinglePlacement, Supervisor
+from kinswarm.protocol import codec
+from kinswarm.protocol.keys import Keys
+from kinswarm.protocol.messages import EpochDone, Obs, Task
+from kinswarm.protocol.topology import Topology, load_topology
+
+ROOT = Path(__file__).resolve().parent.parent
+CHAIN4 = ROOT / "examples" / "chain4.toml"
+LISTEN = "tcp/127.0.0.1:0"  # single placement: nobody connects, so any free port (no races between workers)
+# No fault here is a missing actor, so a missed step deadline could only come from a loaded machine; it would
+# make a joint hold and the run depend on the load. A long deadline keeps every run a function of its seed.
+DEADLINE_MS = 10_000
+
+Goal = tuple[float, float]
+
+
+@dataclass(frozen=True)
+class Spec:
+    """One swarm run. `goals`: a goal per epoch, cycled (None: the topology's goal); `observe`: record
+    every step's tips and joint angles (trace.npz)."""
+
+    name: str
+    seed: int = 0
+    epochs: int = 60
+    steps: int = 500
+    reward: str = "shaped"
+    learner: tuple[tuple[str, Any], ...] = ()  # LearnerSettings overrides, as sorted (name, value) pairs
+    goals: tuple[Goal, ...] | None = None
+    topology: str = str(CHAIN4)
+    from_dir: str | None = None
+    learn: bool = True
+    explore: bool = True
+    scenario: str | None = None
+    controller: str = "agents"
+    observe: bool = False
+    # Another run starts from this one's checkpoints (`--from`): only a run of exactly these epochs will do.
+    # Not part of the identity: it changes nothing in the run.
+    checkpoint: bool = False
+
+    def identity(self, with_epochs: bool = True) -> str:
+        d = dataclasses.asdict(self)
+        d.pop("name")
+        d.pop("checkpoint")
+        if not with_epochs:
+            d.pop("epochs")
+        return hashlib.sha256(json.dumps(d, sort_keys=True, default=list).encode()).hexdigest()[:16]
+
+    def config(self, out: Path) -> RunConfig:
+        goal = self.goals[0] if self.goals else None
+        return RunConfig(
+            run_id=f"x{self.identity()}",
+            topology=self.topology,
+            out=str(out),
+            epochs=self.epochs,
+            steps=self.steps,
+            seed=self.seed,
+            goal=goal,
+            reward=self.reward,
+            placement="single",
+            listen=LISTEN,
+            from_dir=self.from_dir,
+            learn=self.learn,
+            explore=self.explore,
+            deadline_ms=DEADLINE_MS,
+            checkpoint_every=0,  # the last epoch only: what --from needs
+            controller=self.controller,
+            learner=dict(self.learner),
+            scenario=self.scenario,
+        )
+
+
+def learner_overrides(**kw: Any) -> tuple[tuple[str, Any], ...]:
+    """Hashable LearnerSettings overrides (tuples for the sequence-valued ones)."""
+    return tuple(sorted((k, tuple(v) if isinstance(v, list) else v) for k, v in kw.items()))
+
+
+class GoalsSupervisor(Supervisor):
+    """The Supervisor, with epoch e aimed at goals[e % len(goals)]."""
+
+    def __init__(self, *args: Any, goals: tuple[Goal, ...] | None = None, **kw: Any) -> None:
+        super().__init__(*args, **kw)
+        self.goals = goals
+
+    async def _run_epoch(self, epoch: int) -> EpochDone:
+        if self.goals:
+            self.cfg = dataclasses.replace(self.cfg, goal=self.goals[epoch % len(self.goals)])
+        return await super()._run_epoch(epoch)
+
+
+@dataclass
+class RunOutcome:
+    spec: Spec
+    out: Path
+    summary: dict[str, Any]
+    rows: list[dict[str, Any]] = field(default_factory=list)  # metrics.jsonl, the first spec.epochs rows
+
+    @property
+    def final_errors(self) -> list[float]:
+        return [r["final_error"] for r in self.rows]
+
+    @property
+    def mean_errors(self) -> list[float]:
+        return [r["mean_error"] for r in self.rows]
+
+    def trace(self) -> dict[str, np.ndarray]:
+        with np.load(self.out / "trace.npz") as z:
+            return {k: z[k] for k in z.files}
+
+
+async def _supervise(cfg: RunConfig, topo: Topology, goals: tuple[Goal, ...] | None, observe: bool) -> Any:
+    session = open_session(listen=[cfg.listen])
+    captured: list[tuple[str, bytes]] = []
+    subs = []
+
+    def keep(sample: Any) -> None:  # zenoh thread: only append; decoded after the run
+        captured.append((str(sample.key_expr), sample.payload.to_bytes()))
+
+    if observe:  # declared before any actor exists: the first step is not missed
+        keys = Keys(cfg.run_id)
+        subs = [session.declare_subscriber(key, keep) for key in (keys.task, keys.obs("*"))]
+    sup = GoalsSupervisor(cfg, topo, session, SinglePlacement(cfg, topo, session), goals=goals)
+    try:
+        result = await sup.run()
+    finally:
+        for s in subs:
+            s.undeclare()
+        session.close()
+    return result, captured
+
+
+def _write_trace(path: Path, cfg: RunConfig, topo: Topology, captured: list[tuple[str, bytes]]) -> None:
+    """trace.npz: per (epoch, step) the end-effector tip (before the step's actions) and every joint angle."""
+    dof = list(topo.dof_agents)
+    tips: dict[tuple[int, int], tuple[float, float]] = {}
+    qs: dict[tuple[int, int], dict[str, float]] = {}
+    obs_prefix = Keys(cfg.run_id).obs("")
+    for key, payload in captured:
+        if key.startswith(obs_prefix):
+            m = codec.decode(payload, Obs, cfg.run_id, cfg.key)
+            qs.setdefault((m.epoch, m.step), {})[key[len(obs_prefix) :]] = m.q
+        else:
+            t = codec.decode(payload, Task, cfg.run_id, cfg.key)
+            pts = list(t.tips.values())
+            tips[(t.epoch, t.step)] = (sum(p[0] for p in pts) / len(pts), sum(p[1] for p in pts) / len(pts))
+    steps = sorted(k for k in tips if k in qs and len(qs[k]) == len(dof))
+    np.savez_compressed(
+        path,
+        epoch=np.array([k[0] for k in steps], dtype=np.int64),
+        step=np.array([k[1] for k in steps], dtype=np.int64),
+        tip=np.array([tips[k] for k in steps], dtype=np.float64).reshape(-1, 2),
+        q=np.array([[qs[k][a] for a in dof] for k in steps], dtype=np.float64).reshape(-1, len(dof)),
+        agents=np.array(dof),
+    )
+
+
+def _finished(run_dir: Path) -> dict[str, Any] | None:
+    try:
+        spec = json.loads((run_dir / "spec.json").read_text())
+        summary = json.loads((run_dir / "summary.json").read_text())
+    except (OSError, json.JSONDecodeError):
+        return None
+    if summary.get("error") or summary.get("interrupted"):
+        return None
+    return {"spec": spec, "summary": summary}
+
+
+def find_cached(spec: Spec, runs: Path) -> Path | None:
+    """A finished run of this spec, or of the same spec with at least as many epochs (its prefix is this run)."""
+    if not runs.is_dir():
+        return None
+    want = spec.identity(with_epochs=False)
+    best: tuple[int, Path] | None = None
+    for d in runs.iterdir():
+        done = _finished(d) if d.is_dir() else None
+        if done is None or done["spec"].get("identity_wo_epochs") != want:
+            continue
+        epochs = int(done["spec"]["epochs"])
+        if epochs == spec.epochs or (epochs > spec.epochs and not spec.observe and not spec.checkpoint):
+            if best is None or epochs < best[0]:
+                best = (epochs, d)
+    return None if best is None else best[1]
+
+
+def run_spec(spec: Spec, runs: Path) -> RunOutcome:
+    """Run one spec under `runs/` (or reuse a finished run of it) and return its outcome."""
+    cached = find_cached(spec, runs)
+    if cached is None:
+        out = (runs / f"{spec.name}-{spec.identity()[:8]}").resolve()
+        if out.exists():  # an unfinished earlier attempt
+            shutil.rmtree(out)
+        out.mkdir(parents=True)
+        cfg = spec.config(out)
+        topo = load_topology(cfg.topology)
+        cfg.write(out / "config.json")
+        (out / "metrics.jsonl").write_text("")
+        if spec.goals:
+            (out / "goals.json").write_text(json.dumps([list(g) for g in spec.goals]) + "\n")
+        result, captured = asyncio.run(_supervise(cfg, topo, spec.goals, spec.observe))
+        summary = write_summary(
+            out,
+            {"wall_seconds": result.wall_seconds, "interrupted": result.interrupted, "error": result.error},
+        )
+        if result.error or result.interrupted:
+            raise RuntimeError(f"run {spec.name} (seed {spec.seed}) failed: {result.error or 'interrupted'}")
+        if spec.observe:
+            _write_trace(out / "trace.npz", cfg, topo, captured)
+        record = {**dataclasses.asdict(spec), "identity_wo_epochs": spec.identity(with_epochs=False)}
+        (out / "spec.json").write_text(json.dumps(record, indent=1, default=list) + "\n")  # last: marks it done
+        cached = out
+    summary = json.loads((cached / "summary.json").read_text())
+    rows = read_metrics(cached)[: spec.epochs]
+    return RunOutcome(spec, cached, summary, rows)
+
+
+def chain_topology(n: int, path: Path, link: float | None = None) -> Path:
+    """A planar n-joint chain like examples/chain4.toml (reach 12, start angles 0, 10, 20, ... deg)."""
+    length = 12.0 / n if link is None else link
+    lines = [
+        f"# A planar {n}-joint chain for the cost experiment (reach {n * length:g}).",
+        "[robot]",
+        f'name = "chain{n}"',
+        "base = [0.0, 0.0, 0.0]",
+        "",
+        "[defaults]",
+        f"link_length = {length!r}",
+        "limits_deg = [-180.0, 180.0]",
+    ]
+    for i in range(1, n + 1):
+        lines += ["", "[[agent]]", f'id = "a{i}"', f"initial_deg = {10.0 * (i - 1) % 90!r}"]
+        if i > 1:
+            lines.append(f'parent = "a{i - 1}"')
+    x = y = h = 0.0
+    for i in range(n):
+        h += math.radians(10.0 * i % 90)
+        x += length * math.cos(h)
+        y += length * math.sin(h)
+    lines += ["", "[task]", f"goal = [{round(0.5 * x, 3)}, {round(0.5 * y + 2.0, 3)}]"]
+    path.write_text("\n".join(lines) + "\n")
+    return path
