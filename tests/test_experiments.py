@@ -1,0 +1,111 @@
+"""`kinswarm experiment`: every quick version end to end through the CLI (report.md, figures, results.json),
+the goal sets, the run cache, the cost formulas; the full versions are `-m slow`."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import pytest
+from kinswarm.actors.cli import main as kinswarm
+from kinswarm.experiments import EXPERIMENTS
+from kinswarm.experiments.common import mean_std, settled_epoch
+from kinswarm.experiments.cost import CentralisedFuzzyQ, eq13, eq15, measure_centralised
+from kinswarm.experiments.goals import halton, quadtree, training_order
+from kinswarm.experiments.swarm import Spec, run_spec
+
+FIGURES = {
+    "convergence": ["convergence.png"],
+    "optimality": ["solutions.png", "ls_distance.png", "effort.png", "paths.png"],
+    "generalisation": ["levels.png", "error_map.png", "cdf.png"],
+    "robustness": ["tracking.png"],
+    "cost": ["cost.png"],
+}
+
+
+def _check_report(out: Path, name: str) -> dict:
+    report = (out / name / "report.md").read_text()
+    assert "paper" in report.lower() and "| " in report  # a table
+    assert "kinswarm experiment" in report and "seeds:" in report and "wall time" in report
+    assert "single" in report  # the placement is said
+    for fig in FIGURES[name]:
+        assert (out / name / fig).stat().st_size > 1000, fig
+        assert f"]({fig})" in report
+    results = json.loads((out / name / "results.json").read_text())
+    assert results["experiment"] == name and results["quick"] is True
+    return results
+
+
+@pytest.mark.parametrize("name", EXPERIMENTS)
+@pytest.mark.timeout(90)
+def test_quick_experiment(tmp_path, name):
+    assert kinswarm(["experiment", name, "--quick", "--seeds", "1", "--out", str(tmp_path)]) == 0
+    results = _check_report(tmp_path, name)
+    if name == "generalisation":
+        level = results["per_level"]["Level-1"]
+        for block in ("test_set_0", "test_set_1"):
+            for key in ("mean", "std", "median", "frac_within_0_5"):
+                assert math.isfinite(level[block][key])
+    if name == "robustness":
+        assert set(results["per_scenario"]) == {"paper-recovery", "paper-fail-disturb-fail", "paper-locked"}
+        assert set(results["per_scenario"]["paper-locked"]) == {"frozen", "learning", "scratch", "baseline"}
+    if name == "cost":
+        assert results["centralised_limit_n"] == 4  # 2^24 rules per step: refused, never allocated
+
+
+def test_unknown_experiment_is_refused(capsys):
+    with pytest.raises(SystemExit):
+        kinswarm(["experiment", "nonsense"])
+    assert "invalid choice" in capsys.readouterr().err
+
+
+def test_goal_sets():
+    assert [len(quadtree(level)) for level in (1, 2, 3, 4)] == [4, 16, 64, 256]
+    assert quadtree(1) == [(-4.0, -4.0), (4.0, -4.0), (-4.0, 4.0), (4.0, 4.0)]
+    a, b = halton(0), halton(1)
+    assert len(a) == len(b) == 100 and not set(a) & set(b)
+    assert a[0] == (0.0, pytest.approx(-8 + 16 / 3, abs=1e-5))  # Halton point 1: (1/2, 1/3)
+    assert all(-8 <= x <= 8 and -8 <= y <= 8 for x, y in a + b)
+    order = training_order(quadtree(1), 3, seed=0)
+    assert len(order) == 12 and all(order[4 * i : 4 * i + 4].count(g) == 1 for i in range(3) for g in quadtree(1))
+    assert order == training_order(quadtree(1), 3, seed=0) != training_order(quadtree(1), 3, seed=1)
+
+
+def test_statistics():
+    assert mean_std([1.0, 3.0]) == (2.0, pytest.approx(math.sqrt(2)))
+    assert mean_std([2.0]) == (2.0, 0.0)
+    assert settled_epoch([3, 2, 0.4, 0.3, 1.0, 0.2, 0.1]) == 2.0
+    assert math.isnan(settled_epoch([3, 2, 1]))
+
+
+def test_paper_cost_formulas():
+    # §6: n = 4, |S| = 8^6, |A| = 3, L = 1500 -> 2.9e12 (nested) and 4.6e28 (centralised)
+    assert eq13(4) == pytest.approx(2.9e12, rel=0.01)
+    assert eq15(4) == pytest.approx(4.6e28, rel=0.02)
+    assert CentralisedFuzzyQ.fired(3) == 2**18
+    row = measure_centralised(5, steps=3)
+    assert row["fits"] is False and "GiB" in row["why"]
+
+
+@pytest.mark.timeout(60)
+def test_run_cache_reuses_a_longer_run(tmp_path):
+    """The first epochs of a longer run are the shorter run (lockstep, seeded): the cache serves them, but
+    never where checkpoints or a trace are needed."""
+    goals = ((4.0, 4.0), (-4.0, 4.0))
+    long = run_spec(Spec("c", epochs=2, steps=40, goals=goals), tmp_path)
+    short = run_spec(Spec("c", epochs=1, steps=40, goals=goals), tmp_path)
+    assert short.out == long.out and short.final_errors == long.final_errors[:1]
+    own = run_spec(Spec("c", epochs=1, steps=40, goals=goals, checkpoint=True), tmp_path)
+    assert own.out != long.out and own.final_errors == short.final_errors  # bit-identical, as promised
+    assert json.loads((long.out / "goals.json").read_text()) == [list(g) for g in goals]
+    assert long.rows[1]["final_error"] != long.rows[0]["final_error"]  # a different goal per epoch
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(4 * 3600)
+def test_all_experiments_full(tmp_path):
+    """The full reports (docs/results/ holds the committed ones): `kinswarm experiment all --seeds 3`."""
+    assert kinswarm(["experiment", "all", "--seeds", "3", "--jobs", "2", "--out", str(tmp_path)]) == 0
+    gen = json.loads((tmp_path / "generalisation" / "results.json").read_text())
+    assert gen["per_level"]["Level-3"]["test_set_0"]["frac_within_0_5"] > 0.5
