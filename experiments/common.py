@@ -11,7 +11,7 @@ import statistics
 import sys
 import time
 from collections.abc import Callable, Iterable, Sequence
-from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field
 from multiprocessing import get_context
 from pathlib import Path
@@ -80,11 +80,16 @@ def run_specs(ctx: Context, specs: Sequence[Spec], desc: str = "") -> list[RunOu
                 if bar is not None:
                     bar.update(1)
         else:
+            # longest first, so one long run does not start last and hold up the batch
+            order = sorted(range(len(specs)), key=lambda i: -specs[i].epochs * specs[i].steps)
+            got: dict[int, RunOutcome] = {}
             with ProcessPoolExecutor(max_workers=ctx.jobs, mp_context=get_context("spawn")) as pool:
-                for r in pool.map(_run_one, [(s, str(ctx.runs)) for s in specs]):
-                    out.append(r)
+                futures = {pool.submit(_run_one, (specs[i], str(ctx.runs))): i for i in order}
+                for f in as_completed(futures):
+                    got[futures[f]] = f.result()
                     if bar is not None:
                         bar.update(1)
+            out = [got[i] for i in range(len(specs))]
     finally:
         if bar is not None:
             bar.close()
