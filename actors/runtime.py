@@ -6,6 +6,15 @@ Zenoh callbacks run on a zenoh-owned thread. They only append `(key, bytes)` to 
 event loop once per burst (`call_soon_threadsafe` per message caps a subscriber near 85k msg/s; one
 wake-up per burst is an order of magnitude cheaper). Everything else happens on the loop.
 
+Local delivery (the `single` placement): step messages (keys under `sim/` and `a/`) that a Node sends
+are handed straight to the Nodes of the same session that listen on them — still encoded, signed and
+decoded by the receiver like any other message, and still faulted — instead of a round trip through
+Zenoh's local routing, whose delivery threads run the subscriber callback, take the GIL from the event
+loop and wake it through its self-pipe (measured: ~2/3 of a single-placement step). Zenoh still carries
+every such message to the other sessions (other processes, observers, `kinswarm` tools) and to
+non-Node subscribers of the same session; a Node's step subscriptions hear only other sessions through
+Zenoh (`allowed_origin=REMOTE`), so nothing arrives twice.
+
 Link faults (DESIGN §5, `Node.apply_fault`): drop, delay, duplicate and corrupt act on a node's step
 links only — what it sends and receives under `sim/` and `a/` — never on ctl/, rep/, metrics/, fault/ or
 liveliness, so a faulted swarm stays controllable. With none active, sending and receiving cost one
@@ -89,6 +98,12 @@ class Mailbox:
             except RuntimeError:  # loop closed during shutdown: nobody is listening any more
                 pass
 
+    def push_local(self, key: str, payload: bytes) -> None:  # the loop's own thread: no self-pipe write
+        was_empty = not self._items
+        self._items.append((key, payload))
+        if was_empty:
+            self._ready.set()
+
     async def get(self) -> tuple[str, bytes]:
         while not self._items:
             self._ready.clear()
@@ -99,6 +114,44 @@ class Mailbox:
 
     def __len__(self) -> int:
         return len(self._items)
+
+
+class LocalBus:
+    """The step subscriptions of the Nodes sharing one session, for local delivery (see the module doc)."""
+
+    def __init__(self) -> None:
+        self.nodes = 0  # open Nodes on the session; the bus goes with the last
+        self._listeners: list[tuple[zenoh.KeyExpr, Node]] = []
+        self._routes: dict[str, tuple[Node, ...]] = {}  # key -> its listeners, one entry per matching listen
+
+    def add(self, key_expr: str, node: Node) -> None:
+        self._listeners.append((zenoh.KeyExpr(key_expr), node))
+        self._routes.clear()
+
+    def remove(self, node: Node) -> None:
+        self._listeners = [(e, n) for e, n in self._listeners if n is not node]
+        self._routes.clear()
+
+    def __bool__(self) -> bool:
+        return bool(self._listeners)
+
+    def route(self, key: str) -> tuple[Node, ...]:
+        nodes = self._routes.get(key)
+        if nodes is None:
+            k = zenoh.KeyExpr(key)
+            nodes = self._routes[key] = tuple(n for e, n in self._listeners if e.intersects(k))
+        return nodes
+
+
+_BUSES: dict[int, tuple[zenoh.Session, LocalBus]] = {}  # by id(session); the entry keeps the session alive
+
+
+def _bus(session: zenoh.Session) -> LocalBus:
+    entry = _BUSES.get(id(session))
+    if entry is None or entry[0] is not session:
+        entry = _BUSES[id(session)] = (session, LocalBus())
+    entry[1].nodes += 1
+    return entry[1]
 
 
 LINK_COUNTS = ("dropped", "delayed", "duplicated", "corrupted")
@@ -141,6 +194,7 @@ class Node:
         self.fault_rng = random.Random(f"link-faults/{ident}")  # seeded from the ident: faulted runs are reproducible
         self.link_counts: dict[str, int] = dict.fromkeys(LINK_COUNTS, 0)  # what the faults did, for reports
         self.on_fault_expired: Callable[[str], None] | None = None  # told the description when one expires
+        self._bus = _bus(session)
 
     # -- sending ---------------------------------------------------------------------------------
     def publisher(self, key: str) -> Any:
@@ -160,13 +214,20 @@ class Node:
                 if delay:  # never sleep: the loop puts it later
                     self._loop.call_later(delay, self._put_late, key, p)
                 else:
-                    self.publisher(key).put(p)
+                    self._emit(key, p)
             return
+        self._emit(key, payload)
+
+    def _emit(self, key: str, payload: bytes) -> None:
+        """Put on Zenoh (other sessions, observers); hand a step message to this session's listening Nodes."""
         self.publisher(key).put(payload)
+        if self._bus:
+            for node in self._bus.route(key) if key.startswith(self._step_prefixes) else ():
+                node._deliver_local(key, payload)
 
     def _put_late(self, key: str, payload: bytes) -> None:
         if not self._closed:
-            self.publisher(key).put(payload)
+            self._emit(key, payload)
 
     # -- receiving -------------------------------------------------------------------------------
     def listen(self, key_expr: str) -> None:
@@ -178,7 +239,25 @@ class Node:
             else:
                 push(str(s.key_expr), s.payload.to_bytes())
 
-        self._subs.append(self.session.declare_subscriber(key_expr, on_sample))
+        if key_expr.startswith(self._step_prefixes):  # this session's Nodes deliver here directly (_emit)
+            self._bus.add(key_expr, self)
+            sub = self.session.declare_subscriber(key_expr, on_sample, allowed_origin=zenoh.Locality.REMOTE)
+        else:
+            sub = self.session.declare_subscriber(key_expr, on_sample)
+        self._subs.append(sub)
+
+    def _deliver_local(self, key: str, payload: bytes) -> None:  # the sending Node's thread
+        if self._closed:
+            return
+        if asyncio._get_running_loop() is not self._loop:  # another loop or thread: as from Zenoh
+            if self._link_faults:
+                self._receive_faulty(key, payload)
+            else:
+                self.mailbox.push(key, payload)
+        elif self._link_faults:
+            self._deliver_faulty(key, payload)
+        else:
+            self.mailbox.push_local(key, payload)
 
     def _receive_faulty(self, key: str, payload: bytes) -> None:  # zenoh thread
         if not key.startswith(self._step_prefixes):
@@ -307,6 +386,11 @@ class Node:
         self._token = self.session.liveliness().declare_token(self.keys.alive(self.role, self.ident))
 
     def close(self) -> None:
+        if not self._closed:
+            self._bus.remove(self)
+            self._bus.nodes -= 1
+            if not self._bus.nodes and _BUSES.get(id(self.session), (None,))[0] is self.session:
+                del _BUSES[id(self.session)]
         self._closed = True  # late puts and pushes still on the loop's timers become no-ops
         self._clear_link_faults()
         for d in [self._token, *self._subs, *self._pubs.values()]:

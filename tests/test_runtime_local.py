@@ -1,0 +1,98 @@
+"""Local delivery: step messages between Nodes of one session skip Zenoh's local routing (runtime.py),
+yet arrive exactly once, still reach other sessions and non-Node subscribers, and still get faulted."""
+
+from __future__ import annotations
+
+import asyncio
+import time
+
+import pytest
+from kinswarm.actors.runtime import Node, open_session
+from kinswarm.protocol.keys import Keys
+from kinswarm.protocol.messages import Cmd, EpochStart, Fault
+
+KEYS = Keys("lt")
+KEY = b"k" * 32
+STEP = KEYS.cmd("a2")
+CTL = KEYS.ctl("epoch")
+
+
+async def drain(node: Node, quiet: float = 0.3) -> list[tuple[str, bytes]]:
+    got = []
+    while True:
+        try:
+            got.append(await asyncio.wait_for(node.recv(), timeout=quiet))
+        except TimeoutError:
+            return got
+
+
+def steps(node: Node, got: list[tuple[str, bytes]]) -> list[int]:
+    return [m.step for k, p in got if k == STEP and (m := node.decode(k, p, Cmd)) is not None]
+
+
+@pytest.mark.timeout(60)
+def test_local_nodes_hear_each_other_once_and_others_still_hear_them(endpoint):
+    async def body() -> None:
+        a, b = open_session(listen=[endpoint]), open_session(connect=[endpoint])
+        raw: list[str] = []
+        try:
+            tx = Node(a, KEYS, "agent", "a2", KEY)
+            rx = Node(a, KEYS, "sim", "sim", KEY)  # same session: local delivery
+            far = Node(b, KEYS, "agent", "a1", KEY)  # another session: through Zenoh
+            for n in (rx, far):
+                n.listen(KEYS.cmd_all)
+                n.listen(KEYS.ctl_all)
+            sub = a.declare_subscriber(KEYS.cmd_all, lambda s: raw.append(str(s.key_expr)))  # not a Node
+            await tx.wait_matched([STEP, CTL], timeout=10.0)
+            await asyncio.sleep(0.3)  # the remote subscriptions reach tx's session
+            for i in range(50):
+                tx.send(STEP, Cmd(epoch=0, step=i, delta=0.0))
+                tx.send(CTL, EpochStart(epoch=i, steps=1, goal=(0.0, 0.0)))
+            local, remote = await drain(rx), await drain(far)
+            assert steps(rx, local) == list(range(50))  # once each, in order
+            assert steps(far, remote) == list(range(50))
+            assert sum(k == CTL for k, _ in local) == 50 and sum(k == CTL for k, _ in remote) == 50
+            assert len(raw) == 50
+            # a remote sender still reaches the local Node (its step subscription hears other sessions)
+            far.send(STEP, Cmd(epoch=1, step=7, delta=0.0))
+            assert steps(rx, await drain(rx)) == [7]
+            assert steps(far, await drain(far)) == [7]  # as with Zenoh, a Node hears what it says on its keys
+            # a closed Node hears nothing more; the others still do
+            rx.close()
+            tx.send(STEP, Cmd(epoch=1, step=8, delta=0.0))
+            assert steps(far, await drain(far)) == [8]
+            assert await drain(rx, quiet=0.1) == []
+            sub.undeclare()
+        finally:
+            b.close()
+            a.close()
+
+    asyncio.run(body())
+
+
+@pytest.mark.timeout(60)
+@pytest.mark.parametrize("side", ["sender", "receiver"])
+def test_local_delivery_is_faulted(endpoint, side):
+    async def body() -> None:
+        a = open_session(listen=[endpoint])
+        try:
+            tx = Node(a, KEYS, "agent", "a2", KEY)
+            rx = Node(a, KEYS, "agent", "a1", KEY)
+            rx.listen(KEYS.cmd_all)
+            await tx.wait_matched([STEP], timeout=10.0)
+            faulted = tx if side == "sender" else rx
+            fields = dict.fromkeys(("seconds", "steps", "rate", "ms", "amplitude_deg"))
+            f = Fault(id="t", fault="delay", targets=[faulted.ident], **{**fields, "ms": 200.0})  # type: ignore[arg-type]
+            assert faulted.apply_fault(f)
+            dup = Fault(id="d", fault="duplicate", targets=[faulted.ident], **{**fields, "rate": 1.0})  # type: ignore[arg-type]
+            assert faulted.apply_fault(dup)
+            t0 = time.monotonic()
+            tx.send(STEP, Cmd(epoch=0, step=3, delta=0.0))
+            first = await asyncio.wait_for(rx.recv(), timeout=5)
+            assert time.monotonic() - t0 >= 0.18
+            assert steps(rx, [first, *await drain(rx)]) == [3, 3]
+            assert faulted.link_counts["duplicated"] == 1
+        finally:
+            a.close()
+
+    asyncio.run(body())
