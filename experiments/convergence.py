@@ -32,7 +32,7 @@ def configs(quick: bool) -> list[tuple[str, str, dict[str, Any]]]:
 
 
 def run(ctx: Context) -> dict[str, Any]:
-    epochs, steps = (3, 100) if ctx.quick else (40, 500)  # the paper's Fig. 5 story is over by epoch 20
+    epochs, steps = (3, 100) if ctx.quick else (30, 500)  # the paper's Fig. 5 story is over by epoch 20
     cfgs = configs(ctx.quick)
     specs = {
         (label, seed): Spec(

@@ -25,7 +25,7 @@ from kinswarm.actors.learning.fuzzy import FuzzyPartition
 from kinswarm.actors.learning.learner import Learner
 from kinswarm.actors.learning.settings import LearnerSettings
 
-from .common import Context, Report, plt_module, run_specs
+from .common import Context, Report, mean_std, plt_module, pm, run_specs
 from .swarm import Spec, chain_topology
 
 MEMORY_BUDGET = 2 * 2**30  # bytes the centralised learner may use (a quarter of a small machine's memory)
@@ -171,29 +171,35 @@ def run(ctx: Context) -> dict[str, Any]:
     central_steps = 5 if ctx.quick else 50
     topo_dir = ctx.out / "topologies"
     topo_dir.mkdir(parents=True, exist_ok=True)
+    topos = {n: str(chain_topology(n, topo_dir / f"chain{n}.toml").resolve()) for n in ns}
     specs = {
-        n: Spec(
-            f"cost-chain{n}",
-            seed=0,
-            epochs=1,
-            steps=swarm_steps,
-            topology=str(chain_topology(n, topo_dir / f"chain{n}.toml").resolve()),
-        )
+        (n, seed): Spec(f"cost-chain{n}", seed=seed, epochs=1, steps=swarm_steps, topology=topos[n])
         for n in ns
+        for seed in ctx.seed_list
     }
     outs = dict(zip(specs, run_specs(ctx, [*specs.values()], "swarms"), strict=True))
+    # Timings are of a shared machine: every number is a list over seeds (runs and random walks).
     nested: dict[int, dict[str, Any]] = {}
-    for n, r in outs.items():
-        mem = [_checkpoint_memory(r.out / "agents" / f"a{i}.npz", f"a{i}", 1 if i < n else 0) for i in range(1, n + 1)]
-        sec, worst = time_nested_learner(n, learner_steps)
+    for n in ns:
+        runs = [outs[(n, seed)] for seed in ctx.seed_list]
+        timed = [time_nested_learner(n, learner_steps, seed) for seed in ctx.seed_list]
         nested[n] = {
-            "swarm_seconds_per_step": 1.0 / r.summary["steps_per_second"],
-            "learner_seconds_per_step": sec,
-            "memory_per_agent_bytes": mem,
-            "memory_per_agent_after_random_walk_bytes": worst,
+            "swarm_seconds_per_step": [1.0 / r.summary["steps_per_second"] for r in runs],
+            "learner_seconds_per_step": [sec for sec, _ in timed],
+            "memory_per_agent_bytes": [_mean_agent_memory(r.out, n) for r in runs],
+            "memory_per_agent_after_random_walk_bytes": [worst for _, worst in timed],
             "rules_fired_per_agent": LearnerSettings().top_k ** 6,
         }
-    central = {n: measure_centralised(n, central_steps) for n in central_ns}
+    central: dict[int, dict[str, Any]] = {}
+    for n in central_ns:
+        rows = [measure_centralised(n, central_steps, seed) for seed in ctx.seed_list]
+        central[n] = rows[0]
+        if rows[0]["fits"]:
+            central[n] = {
+                **rows[0],
+                "seconds_per_step": [r["seconds_per_step"] for r in rows],
+                "memory_bytes": [r["memory_bytes"] for r in rows],
+            }
     limit = next((n for n in central_ns if not central[n]["fits"]), None)
 
     rep = Report(ctx, "Cost: nested swarm vs a centralised fuzzy Q-learner", "6, Eqs. 13-15")
@@ -211,6 +217,8 @@ def run(ctx: Context) -> dict[str, Any]:
     rep.text(
         "## Measured",
         "",
+        "Times are mean ± std over the seeds' runs and random walks on a shared 2-core machine (other work ran "
+        "alongside: read them as orders of magnitude). "
         f"Nested: {swarm_steps}-step runs of the real swarm on planar n-joint chains (reach 12, generated "
         f"topologies in `topologies/`); learner compute timed over {learner_steps} steps of a random walk. "
         f"Centralised: top-2 activation over 6n variables, timed over up to {central_steps} steps; memory "
@@ -222,12 +230,16 @@ def run(ctx: Context) -> dict[str, Any]:
         rows.append(
             [
                 n,
-                f"{1e3 * nd['swarm_seconds_per_step']:.2f}" if nd else "—",
-                f"{1e3 * nd['learner_seconds_per_step']:.2f}" if nd else "—",
-                f"{np.mean(nd['memory_per_agent_bytes']) / 1024:.0f}" if nd else "—",
+                pm([1e3 * x for x in nd["swarm_seconds_per_step"]], 2) if nd else "—",
+                pm([1e3 * x for x in nd["learner_seconds_per_step"]], 2) if nd else "—",
+                pm([x / 1024 for x in nd["memory_per_agent_bytes"]], 0) if nd else "—",
                 f"{cd['rules_fired']:,}" if cd else "—",
-                (f"{1e3 * cd['seconds_per_step']:.1f}" if cd["fits"] else "does not fit") if cd else "—",
-                (f"{cd['memory_bytes'] / 2**20:.1f} after {cd['steps']} steps" if cd["fits"] else cd["why"])
+                (pm([1e3 * x for x in cd["seconds_per_step"]], 1) if cd["fits"] else "does not fit") if cd else "—",
+                (
+                    f"{pm([x / 2**20 for x in cd['memory_bytes']], 1)} after {cd['steps']} steps"
+                    if cd["fits"]
+                    else cd["why"]
+                )
                 if cd
                 else "—",
                 f"{eq13(n):.2g}",
@@ -255,7 +267,8 @@ def run(ctx: Context) -> dict[str, Any]:
         f"formulas here give {eq13(4):.2g} vs {eq15(4):.2g} (Eq. 13's approximation with K = 9/8: "
         f"{eq13_approx(4):.2g}). These count a dense sweep over every state; kinswarm's agents touch only "
         f"the {LearnerSettings().top_k ** 6} rules that fire, so a nested step costs "
-        f"{1e3 * nested[max(ns)]['learner_seconds_per_step']:.2f} ms of learner compute at n = {max(ns)}, "
+        f"{1e3 * mean_std(nested[max(ns)]['learner_seconds_per_step'])[0]:.2f} ms of learner compute at "
+        f"n = {max(ns)}, "
         "growing linearly in n, while the centralised learner's fired rules grow as 2^(6n): "
         + (
             f"it stops fitting at n = {limit} ({central[limit]['why']})."
@@ -280,6 +293,12 @@ def run(ctx: Context) -> dict[str, Any]:
     return rep.results
 
 
+def _mean_agent_memory(run_dir: Path, n: int) -> float:
+    """Mean learned-state memory of a chain's agents a1..an (a1..a(n-1) see one child, an none)."""
+    sizes = [_checkpoint_memory(run_dir / "agents" / f"a{i}.npz", f"a{i}", int(i < n)) for i in range(1, n + 1)]
+    return float(np.mean(sizes))
+
+
 def _checkpoint_memory(path: Path, agent: str, n_visible: int) -> int:
     arrays, _ = load_checkpoint(path, agent=agent)
     lr = Learner(LearnerSettings(), n_visible, 0)
@@ -292,10 +311,15 @@ def _figure(ctx: Context, rep: Report, nested: dict, central: dict) -> None:
     fig, axes = plt.subplots(1, 2, figsize=(11, 4))
     ns = sorted(nested)
     ax = axes[0]
-    ax.plot(ns, [1e3 * nested[n]["swarm_seconds_per_step"] for n in ns], "o-", label="nested: swarm step (wire)")
-    ax.plot(ns, [1e3 * nested[n]["learner_seconds_per_step"] for n in ns], "s-", label="nested: learners' compute")
+    for key, fmt, label in (
+        ("swarm_seconds_per_step", "o-", "nested: swarm step (wire)"),
+        ("learner_seconds_per_step", "s-", "nested: learners' compute"),
+    ):
+        ms = [mean_std(nested[n][key]) for n in ns]
+        ax.errorbar(ns, [1e3 * m for m, _ in ms], [1e3 * s for _, s in ms], fmt=fmt, capsize=3, label=label)
     cn = [n for n in sorted(central) if central[n]["fits"]]
-    ax.plot(cn, [1e3 * central[n]["seconds_per_step"] for n in cn], "^-", label="centralised: compute")
+    ms = [mean_std(central[n]["seconds_per_step"]) for n in cn]
+    ax.errorbar(cn, [1e3 * m for m, _ in ms], [1e3 * s for _, s in ms], fmt="^-", capsize=3, label="centralised")
     ax.set_yscale("log")
     ax.set_xlabel("n (joints)")
     ax.set_ylabel("ms per step")

@@ -25,7 +25,10 @@ from .swarm import RunOutcome, Spec
 PAPER = {1: (0.3814, 0.5596), 3: (0.2366, 0.2036)}  # §5.2: Level-1 and Level-3 mean / STD
 REPS = 2  # epochs per training goal (Level-4: 1, its 256 goals are already 256 epochs)
 EVAL_STEPS = 200  # steps per test goal: the frozen swarm has stopped by then (the report shows the error at 100)
-SCRATCH_GOALS = 20  # test goals per seed for the learning-on (from scratch) episodes
+SCRATCH_GOALS = 10  # test goals per seed for the learning-on (from scratch) episodes
+# Level-4 (256 goals, 256 epochs a seed) is left out of the full run to keep `all` near an hour on 2 cores;
+# `LEVELS` takes it back. The paper found no gain from Level-3 to Level-4.
+LEVELS = (1, 2, 3)
 # The level sweep's learner: a coarser grid and q_i out of the state. q_i cannot be removed by a setting, so
 # it gets 2 sets over +-1000 rad: its memberships are 0.5 +- 0.002 for every angle, i.e. the learner cannot tell
 # angles apart. Measured on Level-3, seed 0 (2 epochs per goal, 100 test goals): default grid mean 0.94 / 67 %
@@ -62,7 +65,7 @@ def stats(errors: list[float]) -> dict[str, float]:
 
 def run(ctx: Context) -> dict[str, Any]:
     q = ctx.quick
-    levels = (1,) if q else (1, 2, 3, 4)
+    levels = (1,) if q else LEVELS
     train_steps, eval_steps = (100, 100) if q else (500, EVAL_STEPS)
     n_test = 8 if q else TEST_SIZE
     k = ctx.test_set
@@ -95,7 +98,7 @@ def run(ctx: Context) -> dict[str, Any]:
     eval_specs: dict[tuple[str, int, int], Spec] = {}
     for t in trainings:
         label, level = t.label, t.level
-        sets = [k, k + 1] if level == second_level and "control" not in label else [k]
+        sets = [k, k + 1] if level == second_level and t.main else [k]
         for block in sets:
             for seed in ctx.seed_list:
                 eval_specs[(label, block, seed)] = Spec(
