@@ -8,6 +8,11 @@ learned state; with the MAC only holders of the run's config can speak on its ke
 `decode` never lets garbage through: a bad MAC, wrong version, run, kind, missing or extra fields, wrong
 types, non-finite numbers — each raises `DecodeError` with the reason, which the receiving actor logs
 before dropping the message. Learned state is only ever touched by values that passed here.
+
+The step messages take a fast path first (`_fast`): straight-line checks generated once per message type,
+accepting only exact types (a float field must hold a finite float, not an int) and returning the same
+message the general path would. Anything it does not accept goes through the general path, which
+accepts or rejects with the reason — so the fast path changes the speed of decoding, never its outcome.
 """
 
 from __future__ import annotations
@@ -151,6 +156,72 @@ def _schema(cls: type) -> tuple[tuple[tuple[str, Check], ...], frozenset[str]]:
     return tuple((k, _checker(v)) for k, v in hints.items()), frozenset(hints) | frozenset(_ENVELOPE)
 
 
+def _fast_field(name: str, tp: Any, lines: list[str]) -> bool:
+    """Append checks of field `name` (local variable `name`, `_` on failure) to `lines`; False if `tp` has none."""
+    finite = "type({x}) is float and {x} - {x} == 0.0"  # a finite float: x - x is nan for inf and nan
+
+    def vec(x: str, n: int) -> list[str]:
+        items = ", ".join(f"{x}{i}" for i in range(n))
+        checks = " and ".join(finite.format(x=f"{x}{i}") for i in range(n))
+        return [
+            f"if type({x}) is not list or len({x}) != {n}: return None",
+            f"{items}{',' if n == 1 else ''} = {x}",
+            f"if not ({checks}): return None",
+        ]
+
+    def vec_len(t: Any) -> int | None:
+        args = get_args(t)
+        return len(args) if get_origin(t) is tuple and args and all(a is float for a in args) else None
+
+    origin = get_origin(tp)
+    if tp is int:
+        lines.append(f"if type({name}) is not int: return None")
+    elif tp is float:
+        lines.append(f"if not ({finite.format(x=name)}): return None")
+    elif tp is str:
+        lines.append(f"if type({name}) is not str: return None")
+    elif origin in (types.UnionType, typing.Union) and set(get_args(tp)) == {float, type(None)}:
+        lines.append(f"if {name} is not None and not ({finite.format(x=name)}): return None")
+    elif (n := vec_len(tp)) is not None:
+        lines += vec(name, n)
+        lines.append(f"{name} = tuple({name})")
+    elif origin is dict and get_args(tp)[0] is str and (n := vec_len(get_args(tp)[1])) is not None:
+        lines.append(f"if type({name}) is not dict: return None")
+        lines.append(f"for k, v in {name}.items():")
+        lines.append("    if type(k) is not str: return None")
+        lines += ["    " + line for line in vec("v", n)]
+        lines.append(f"{name} = {{k: tuple(v) for k, v in {name}.items()}}")
+    else:
+        return False
+    return True
+
+
+@cache
+def _fast(cls: type) -> Any:
+    """The fast path for `cls`: body -> message, or None for "ask the general path"; None if `cls` has none.
+
+    Generated source, e.g. for Cmd: `if len(b) != 7 or b.get("v") != 2 or ... : return None`,
+    `epoch = b.get("epoch")`, `if type(epoch) is not int: return None`, ..., then the message."""
+    hints = {k: v for k, v in typing.get_type_hints(cls, vars(messages)).items() if k != "KIND"}
+    if hasattr(cls, "__post_init__") or getattr(cls, "__slots__", None) is not None:
+        return None  # built field by field below: only for plain dataclasses
+    n = len(hints) + len(_ENVELOPE)
+    lines = [
+        f"if len(b) != {n} or b.get('v') != {SCHEMA_VERSION!r} or b.get('kind') != {cls.KIND!r}"  # type: ignore[attr-defined]
+        " or b.get('run') != run or type(b.get('src')) is not str: return None"
+    ]
+    for name, tp in hints.items():
+        lines.append(f"{name} = b.get({name!r})")
+        if not _fast_field(name, tp, lines):
+            return None
+    # what the dataclass __init__ does, without its per-field object.__setattr__ (the messages are frozen)
+    lines += ["m = new(cls)", "d = m.__dict__", *(f"d[{k!r}] = {k}" for k in hints), "return m"]
+    src = "def fast(b, run):\n" + "".join(f"    {line}\n" for line in lines)
+    scope: dict[str, Any] = {"new": object.__new__, "cls": cls}
+    exec(compile(src, f"<codec fast path for {cls.__name__}>", "exec"), scope)
+    return scope["fast"]
+
+
 def decode(payload: bytes, expect: type[M], run: str, key: bytes) -> M:
     """Verify the MAC with `key`, then decode and validate one message of type `expect` for run `run`."""
     n = len(payload)
@@ -169,13 +240,15 @@ def decode(payload: bytes, expect: type[M], run: str, key: bytes) -> M:
         body = msgpack.unpackb(packed, raw=False, strict_map_key=True)
     except Exception as e:  # msgpack raises several unrelated types for garbage
         raise DecodeError(f"not msgpack: {type(e).__name__}: {e}"[:200]) from None
+    if type(body) is dict and (fast := _fast(expect)) is not None and (m := fast(body, run)) is not None:
+        return m
     if not isinstance(body, dict):
         raise DecodeError(f"expected a map, got {type(body).__name__}")
     if body.get("v") != SCHEMA_VERSION:
         raise DecodeError(f"schema version {body.get('v')!r}, expected {SCHEMA_VERSION}")
     kind = body.get("kind")
     if kind != expect.KIND:  # type: ignore[attr-defined]
-        known = "" if kind in MESSAGE_TYPES else " (unknown kind)"
+        known = "" if isinstance(kind, str) and kind in MESSAGE_TYPES else " (unknown kind)"  # a list is unhashable
         raise DecodeError(f"kind {kind!r}{known}, expected {expect.KIND!r}")  # type: ignore[attr-defined]
     if body.get("run") != run:
         raise DecodeError(f"run {body.get('run')!r}, expected {run!r}")

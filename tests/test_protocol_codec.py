@@ -176,3 +176,48 @@ def test_keys_live_under_the_run_prefix():
 def test_ids_that_would_change_a_key_are_refused(bad):
     with pytest.raises(ValueError):
         check_id("run id", bad)
+
+
+def _outcome(payload, kind):
+    try:
+        m = codec.decode(payload, kind, "run1", KEY)
+        return ("ok", m, {k: type(v) for k, v in vars(m).items()})
+    except codec.DecodeError as e:
+        return ("rejected", str(e))
+
+
+def _variants():
+    """Bodies near the step messages' fast path: good ones, and ones each of its checks must send on."""
+    step = [m for m in SAMPLES if isinstance(m, (Obs, Task, Down, Up, Cmd, EpochStart, Stop))]
+    for msg in step:
+        body = msgpack.unpackb(codec.encode(msg, "run1", "me", KEY)[: -codec.MAC_SIZE])
+        yield type(msg), body
+        for name, value in body.items():
+            for other in (1, True, 2.5, math.inf, -math.nan, None, "x", [1.0, 2.0, 3.0], {"a4": [1.0, 2.0, 3.0]}):
+                yield type(msg), {**body, name: other}
+            if isinstance(value, list):
+                yield type(msg), {**body, name: [*value[:-1], 1]}  # an int among floats
+                yield type(msg), {**body, name: [*value, 0.0]}
+                yield type(msg), {**body, name: [*value[:-1], math.inf]}
+            if isinstance(value, dict):
+                for k, v in value.items():
+                    yield type(msg), {**body, name: {**value, k: [*v[:-1], 7]}}
+                    yield type(msg), {**body, name: {**value, k: v[:-1]}}
+                    yield type(msg), {**body, name: {**value, k: [*v[:-1], math.nan]}}
+                    yield type(msg), {**body, name: {1: v}}
+                yield type(msg), {**body, name: {}}
+        yield type(msg), {k: v for k, v in body.items() if k != list(body)[-1]}  # a field missing
+        yield type(msg), {**body, "extra": 1}
+
+
+def test_the_fast_path_decides_exactly_as_the_general_path(monkeypatch):
+    payloads = [(kind, codec.sign(msgpack.packb(body, strict_types=False), KEY)) for kind, body in _variants()]
+    fast = [_outcome(p, kind) for kind, p in payloads]
+    assert sum(o[0] == "ok" for o in fast) > 20 and sum(o[0] == "rejected" for o in fast) > 100
+    monkeypatch.setattr(codec, "_fast", lambda cls: None)  # the general path alone
+    assert [_outcome(p, kind) for kind, p in payloads] == fast
+
+
+def test_the_fast_path_covers_the_step_messages():
+    for kind in (Obs, Task, Down, Up, Cmd):
+        assert codec._fast(kind) is not None, kind
