@@ -50,6 +50,8 @@ class SimActor:
         self.world = World(topo)
         self.dof = topo.dof_agents
         self.dof_set = frozenset(self.dof)
+        self._obs_first = [a for a in self.dof if a == topo.root]  # the root's reading goes out with the task
+        self._obs_after = [a for a in self.dof if a != topo.root]
         self.max_step = cfg.action_rad * (1 + 1e-9)
         self.epoch: EpochStart | None = None
         self.last_epoch = -1  # the last accepted EpochStart
@@ -295,9 +297,13 @@ class SimActor:
         if self._due:
             self._apply_due(e.epoch)
         k, send = self.keys, self.node.send
-        send(k.task, Task(epoch=e.epoch, step=self.t, goal=e.goal, tips=self.tips))
         q = self.world.joint_positions()
-        for a in self.dof:
+        # The root begins once it holds both the task and its own reading: put them back to back, so they
+        # reach it in one burst (one wake-up); the others' readings are needed only a hop later.
+        for a in self._obs_first:
+            send(k.obs(a), Obs(epoch=e.epoch, step=self.t, q=q[a]))
+        send(k.task, Task(epoch=e.epoch, step=self.t, goal=e.goal, tips=self.tips))
+        for a in self._obs_after:
             send(k.obs(a), Obs(epoch=e.epoch, step=self.t, q=q[a]))
         self.cmds = {}
         self.step_started = time.perf_counter()
