@@ -163,7 +163,9 @@ class Report:
             f"runs it used took {run_wall:.0f} s of run time (runs reused from a shared cache count too)",
             f"- machine: {os.cpu_count()} cores, Python {platform.python_version()}, {platform.machine()}",
             f"- placement: {PLACEMENT_NOTE}",
-            f"- runs: `{_rel(ctx.runs)}/` (each with config.json, metrics.jsonl, summary.json, spec.json)",
+            f"- runs: `{_rel(ctx.runs)}/` (each with config.json, metrics.jsonl, summary.json, spec.json); "
+            f"`kinswarm experiment {ctx.name} --seeds {ctx.seeds}{' --quick' if ctx.quick else ''} --out "
+            f"{_rel(ctx.out.parent)}` redoes only this experiment, reusing every finished run there",
         ]
         body = "\n\n".join(["\n".join(head), *self.parts])
         body += "\n\n## Settings\n\n```json\n" + json.dumps(settings_used, indent=1, default=list) + "\n```\n"

@@ -96,19 +96,17 @@ def run(ctx: Context) -> dict[str, Any]:
         ],
         rows,
     )
-    s35 = mean_std(per["paper, s = 0.35"]["settled_epoch"])[0]
-    s75 = mean_std(per["paper, s = 0.75"]["settled_epoch"])[0]
-    verdict = (
-        "holds (s = 0.75 settles earlier)"
-        if not math.isnan(s35) and not math.isnan(s75) and s75 < s35
-        else "**is not reproduced**"
-    )
+    # A seed that never settles counts as never: s = 0.75 must settle in as many seeds, and earlier.
+    a, b = per["paper, s = 0.35"]["settled_epoch"], per["paper, s = 0.75"]["settled_epoch"]
+    n35, n75 = sum(not math.isnan(x) for x in a), sum(not math.isnan(x) for x in b)
+    faster = n75 >= n35 and n75 > 0 and (n35 == 0 or mean_std(b)[0] < mean_std(a)[0])
+    verdict = "holds (s = 0.75 settles earlier)" if faster else "**is not reproduced**"
     rep.text(
         "## Paper | kinswarm",
         "",
         f"The paper's claim that s = 0.75 converges faster than s = 0.35 (Fig. 5: by epoch 3 vs after epoch 20) "
-        f"{verdict} with the paper's reward here (settled at {pm(per['paper, s = 0.75']['settled_epoch'], 1)} vs "
-        f"{pm(per['paper, s = 0.35']['settled_epoch'], 1)}). With Eq. 10 as printed the swarm is rewarded for "
+        f"{verdict} with the paper's reward here: s = 0.75 settled in {n75} of {len(b)} seeds (at "
+        f"{pm(b, 1)}), s = 0.35 in {n35} of {len(a)} (at {pm(a, 1)}). With Eq. 10 as printed the swarm is rewarded for "
         "standing still inside D_min (see the README), which is what the paper-reward rows measure; the shaped "
         "reward rows are kinswarm's default.",
     )

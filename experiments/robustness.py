@@ -128,8 +128,8 @@ def run(ctx: Context) -> dict[str, Any]:
         ),
         "",
         "The frozen trained swarm has learned one solution path for the intact arm; with learning off it cannot "
-        "adapt, so in the locked scenarios it fails where it needs a different solution — the paper's robustness is "
-        "a property of the swarm that keeps learning ('learning' and 'scratch' rows).",
+        "adapt, so where the faults demand a different solution it fails. Recovery there comes only from a swarm "
+        "that keeps learning, and not in every seed ('seeds within 0.5'): the paper shows one run per scenario.",
     )
     _figures(ctx, rep, outs, faults, steps)
     rep.write(
