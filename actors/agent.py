@@ -4,9 +4,15 @@ Step t, as seen by agent i:
   begin   when it holds its encoder reading q_i (sim/obs) and its base frame (the parent's `down`;
           the root reads the task observation instead and computes the reward r(t-1) there):
           compose the joint frame, send each child its base frame, the goal and r(t-1).
-  finish  when every child has answered `up` (a leaf finishes at once): with the subtree's tips it
-          defines S_i = <q_i, theta_i, d_i, g_i>, learns from (s(t-1), a(t-1), r(t-1), s(t)), picks
-          a(t) by the joint action selection mechanism, sends `up` to its parent and `cmd` to the sim.
+  finish  when every child has answered `up` (a leaf finishes at once): it sends `up` to its parent at
+          once (the subtree's tips, and its own action of step t-1), then, with the tips, defines
+          S_i = <q_i, theta_i, d_i, g_i>, counts the children's actions of step t-1 (carried by their
+          `up` of step t), learns from (s(t-1), a(t-1), r(t-1), s(t)), picks a(t) by the joint action
+          selection mechanism and sends `cmd` to the sim. After the last step of an epoch it sends one more
+          `up` (step = steps) with that step's action, so the parent's counts are whole before a checkpoint.
+Sending `up` before learning takes the learners of all but the root off the step's critical path: they
+run while the pass goes on up. The parent learns exactly what it would with the actions a step earlier:
+its choice at t needs only the counts up to t-1 (Eq. 7) and the joint action of t-1 (Eq. 6).
 Messages for a newer step supersede an unfinished older one (the sim has moved on past its deadline).
 
 Re-wiring (DESIGN §5): when a descendant's liveliness token goes away (killed, frozen, cut off), the
@@ -91,6 +97,12 @@ class Agent:
         self.adopted: tuple[str, ...] = ()  # the lost agents this agent stood in for at its last step
         self.listening: set[str] = set()  # lost agents whose obs/up keys this agent subscribed to
         self.restored: Event | None = None  # what a restart restored, announced once alive
+        self.decided: tuple[Key, int] | None = None  # my last chosen step and action (sent up a step later)
+        # the step whose visible children's actions the learner still awaits, and which of them were lost then
+        self.observing: tuple[Key, frozenset[str]] | None = None
+        # actions at an epoch's last step from the children's closing `up`, by that step: one child's may come
+        # before this agent has finished the step (another child is still on its way)
+        self.closing: dict[Key, dict[str, int]] = {}
 
     # -- wiring ----------------------------------------------------------------------------------
     def subscriptions(self) -> list[str]:
@@ -337,6 +349,10 @@ class Agent:
                 "rejected up to %s: tips %s are not from one of its children", addressee, list(m.tips)
             )
             return
+        if m.step == self.cfg.steps:  # a child's closing `up`: its action at the epoch's last step
+            if addressee == self.id:
+                self._on_closing(child, m)
+            return
         key = (m.epoch, m.step)
         if self.current is not None and self.current.key == key:
             self.current.ups[child] = m
@@ -356,20 +372,66 @@ class Agent:
             tips = dict(cur.tips)
             for c in cur.waiting:
                 tips.update(cur.ups[c].tips)
-        action = -1
+        if not self.is_root:  # first: the parent's state needs only the tips
+            d = self.decided
+            prev = d[1] if d is not None and d[0] == (epoch, step - 1) else -1
+            self.node.send(self.keys.up(self.spec.parent), Up(epoch=epoch, step=step, tips=tips, action=prev))  # type: ignore[arg-type]
         if self.learner is not None:
+            self._observe(cur)
             tip = _centroid([tips[leaf] for leaf in self.leaves])
             s = agent_state(cur.frame, cur.q, tip, cur.goal)
-            # a lost child's joint holds: to this agent's fictitious play it chose "keep"
-            visible_actions = [cur.ups[c].action if c in cur.ups else 1 for c in self.visible]
-            action = self.learner.step(s, cur.reward, visible_actions, learn=self.cfg.learn, explore=self.cfg.explore)
-        if not self.is_root:
-            self.node.send(self.keys.up(self.spec.parent), Up(epoch=epoch, step=step, tips=tips, action=action))  # type: ignore[arg-type]
-        if self.learner is not None:
+            action = self.learner.decide(s, cur.reward, learn=self.cfg.learn, explore=self.cfg.explore)
+            self.decided = (cur.key, action)
+            if self.visible:
+                # a lost child's joint holds: to this agent's fictitious play it chose "keep"
+                self.observing = (cur.key, frozenset(c for c in self.visible if c not in cur.ups))
+                if step == self.cfg.steps - 1:
+                    self.closing = {k: v for k, v in self.closing.items() if k >= cur.key}
+                    self._try_close()
+            else:
+                self.learner.observe([])
+            if step == self.cfg.steps - 1 and not self.is_root:  # the closing `up`, before the epoch can end
+                self.node.send(
+                    self.keys.up(self.spec.parent),  # type: ignore[arg-type]
+                    Up(epoch=epoch, step=self.cfg.steps, tips=tips, action=action),
+                )
             delta = (action - 1) * self.cfg.action_rad  # actions 0, 1, 2: decrease, keep, increase
             self.node.send(self.keys.cmd(self.id), Cmd(epoch=epoch, step=step, delta=delta))
         self.last_finished = cur.key
         self.steps_done += 1
+
+    def _observe(self, cur: _Step) -> None:
+        """Hand the learner its visible children's actions of the step before `cur`, which their `up` of
+        `cur` carried; without all of them (a child lost or restarted since) that transition is dropped."""
+        obs, self.observing = self.observing, None
+        epoch, step = cur.key
+        if obs is None or obs[0] != (epoch, step - 1):
+            return  # none awaited: the epoch's first step, or after a gap (_try_begin resynced the learner)
+        acts = [1 if c in obs[1] else (cur.ups[c].action if c in cur.ups else -1) for c in self.visible]
+        self._observed(acts, step)
+
+    def _observed(self, acts: list[int], step: int) -> None:
+        assert self.learner is not None
+        if all(0 <= a < self.learner.n_actions for a in acts):
+            self.learner.observe(acts)
+        else:
+            self.learner.resync(step)
+
+    def _on_closing(self, child: str, m: Up) -> None:
+        if self.learner is None or child not in self.visible or (m.epoch, m.step - 1) < self.last_finished:
+            return
+        self.closing.setdefault((m.epoch, m.step - 1), {})[child] = m.action
+        self._try_close()
+
+    def _try_close(self) -> None:
+        """Observe an epoch's last step once every visible child's closing action is in."""
+        obs = self.observing
+        acts = self.closing.get(obs[0]) if obs is not None else None
+        if obs is None or acts is None or not all(c in obs[1] or c in acts for c in self.visible):
+            return
+        self.observing = None
+        del self.closing[obs[0]]
+        self._observed([1 if c in obs[1] else acts[c] for c in self.visible], obs[0][1] + 1)
 
     def _save(self, m: Checkpoint) -> None:
         path = Path(m.directory) / f"{self.id}.npz"

@@ -10,7 +10,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import ClassVar
 
-SCHEMA_VERSION = 2  # 2: faults, events, status, bye; payloads carry a MAC (codec.py)
+SCHEMA_VERSION = 3  # 2: faults, events, status, bye; payloads carry a MAC (codec.py). 3: Up.action is the
+# sender's action of the step before (sent before it learns), plus a closing Up after an epoch's last step
 
 Vec2 = tuple[float, float]
 Vec3 = tuple[float, float, float]
@@ -51,10 +52,12 @@ class Down:
 
 @dataclass(frozen=True)
 class Up:
-    """child -> parent (bottom-up pass): the subtree's end-effector tips and the child's own action.
+    """child -> parent (bottom-up pass): the subtree's end-effector tips at `step`, and the child's own
+    action at step - 1, sent before the child learns at `step` so that learning leaves the pass.
 
     `action` is the index in the agent's action set (0 decrease, 1 keep, 2 increase); -1 when the child
-    took none (a compound agent)."""
+    took none at step - 1 (a compound agent, the epoch's first step, a step it missed). After the last step
+    of an epoch the child sends one more, with `step` = the epoch's length and that last step's action."""
 
     KIND: ClassVar[str] = "up"
     epoch: int

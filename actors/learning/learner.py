@@ -19,6 +19,9 @@ class Learner:
 
     Call order within one step of the bottom-up pass: visible agents choose first, then this agent
     calls step() with s(t), the reward r(t-1) of the previous joint action and the visible actions at t.
+    step() is decide() then observe(); an agent that learns the visible actions at t only later (the
+    swarm's up pass carries them a step late) calls decide() at t and observe() before decide() at t+1,
+    which computes exactly what step() does.
     """
 
     def __init__(self, settings: LearnerSettings, n_visible: int, seed: int | Sequence[int]) -> None:
@@ -37,8 +40,10 @@ class Learner:
         self.epoch = 0
         self.lr = settings.lr
         self.t = 0
-        # (rules, their phi rows or -1, w = O / sum O, joint action) of s(t-1), a(t-1); rules and rows as lists
+        # (rules, their phi rows or -1, w = O / sum O, joint action or -1 until observed) of s(t-1), a(t-1);
+        # rules and rows as lists
         self._pending: tuple[list[int], list[int], np.ndarray, int] | None = None
+        self._own = 0  # a(t) of the pending transition
 
     # -- epochs ---------------------------------------------------------------------------------
     def start_epoch(self, epoch: int, t: int = 0) -> None:
@@ -79,11 +84,21 @@ class Learner:
         explore: bool = True,
     ) -> int:
         """Learn from the previous transition, choose this agent's action a(t) (0 dec, 1 keep, 2 inc)."""
+        self._check_visible(visible_actions)  # validate before any state changes
+        a = self.decide(state, reward, learn=learn, explore=explore)
+        self.observe(visible_actions)
+        return a
+
+    def _check_visible(self, visible_actions: Sequence[int]) -> None:
         if len(visible_actions) != self.n_visible:
             raise ValueError(f"expected {self.n_visible} visible actions, got {len(visible_actions)}")
-        for j, b in enumerate(visible_actions):  # validate before any state changes
+        for j, b in enumerate(visible_actions):
             if not 0 <= b < self.n_actions:
                 raise ValueError(f"visible action {b!r} of agent {j} is not in [0, {self.n_actions})")
+
+    def decide(self, state: np.ndarray, reward: float | None, learn: bool = True, explore: bool = True) -> int:
+        """(a)-(b) of step(): the TD update of the previous transition, if observe() completed its joint
+        action, then the choice of a(t). The visible actions at t are for observe()."""
         st = self.settings
         rules, O = self.fuzzy.activate(state)  # noqa: E741 -- the paper's O^i
         rules_list = rules.tolist()
@@ -93,7 +108,7 @@ class Learner:
         q_now = self.q.q_list(rows, w)  # Q(s(t), .), Eq. 2
 
         # (a) TD update of the previous transition with s(t) as s' (Eqs. 5-6).
-        if learn and reward is not None and self._pending is not None:
+        if learn and reward is not None and self._pending is not None and self._pending[3] >= 0:
             p_rules, p_rows_list, p_w, p_joint = self._pending
             p_rows = self.q.touch_list(p_rules, p_rows_list)  # creates phi = 0 rows: Q(s, a) below is unchanged
             q_sa = float(p_w @ self.q.phi[p_rows, p_joint])  # Q(s(t-1), a(t-1)), Eq. 2
@@ -110,14 +125,22 @@ class Learner:
         pi = jasm.boltzmann(E, T)
         a = jasm.select_action(pi, jasm.explore_probability(T, st.T_max, st.epsilon), self.rng, explore)
 
+        # (d) remember s(t) for the next update; observe() adds the joint action.
+        self._pending = (rules_list, rows, w, -1)
+        self._own = a
+        self.t += 1
+        return a
+
+    def observe(self, visible_actions: Sequence[int]) -> None:
+        """(c)-(d) of step(): what the visible agents did at the step just decided."""
+        self._check_visible(visible_actions)
         # (c) fictitious play: count what the visible agents did (Eq. 7 next time).
         for j, b in enumerate(visible_actions):
             self.counts[j, b] += 1.0
-
-        # (d) remember (s(t), joint action(t)) for the next update.
-        self._pending = (rules_list, rows, w, self.joint_index(a, visible_actions))
-        self.t += 1
-        return a
+        # (d) the joint action(t) of the pending (s(t), joint action(t)).
+        if self._pending is not None:
+            p_rules, p_rows, p_w, _ = self._pending
+            self._pending = (p_rules, p_rows, p_w, self.joint_index(self._own, visible_actions))
 
     # -- introspection / checkpoints ------------------------------------------------------------
     @property
