@@ -208,7 +208,9 @@ def find_cached(spec: Spec, runs: Path) -> Path | None:
         if epochs == spec.epochs or (epochs > spec.epochs and not spec.observe and not spec.checkpoint):
             if best is None or epochs < best[0]:
                 best = (epochs, d)
-    return None if best is None else best[1]
+    # absolute, like a fresh run's: a path that goes into another spec (`from_dir`) must not depend on how
+    # --out was spelled, or that spec's identity would change between a fresh and a cached run
+    return None if best is None else best[1].resolve()
 
 
 def run_spec(spec: Spec, runs: Path) -> RunOutcome:

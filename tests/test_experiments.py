@@ -89,14 +89,17 @@ def test_paper_cost_formulas():
 
 
 @pytest.mark.timeout(60)
-def test_run_cache_reuses_a_longer_run(tmp_path):
+def test_run_cache_reuses_a_longer_run(tmp_path, monkeypatch):
     """The first epochs of a longer run are the shorter run (lockstep, seeded): the cache serves them, but
-    never where checkpoints or a trace are needed."""
+    never where checkpoints or a trace are needed. Paths come back absolute either way, since they go into
+    other specs (`from_dir`) and must not change those specs' identity."""
+    monkeypatch.chdir(tmp_path)
+    runs = Path("runs")  # relative, as `--out runs/...` gives it
     goals = ((4.0, 4.0), (-4.0, 4.0))
-    long = run_spec(Spec("c", epochs=2, steps=40, goals=goals), tmp_path)
-    short = run_spec(Spec("c", epochs=1, steps=40, goals=goals), tmp_path)
-    assert short.out == long.out and short.final_errors == long.final_errors[:1]
-    own = run_spec(Spec("c", epochs=1, steps=40, goals=goals, checkpoint=True), tmp_path)
+    long = run_spec(Spec("c", epochs=2, steps=40, goals=goals), runs)
+    short = run_spec(Spec("c", epochs=1, steps=40, goals=goals), runs)
+    assert short.out == long.out and short.out.is_absolute() and short.final_errors == long.final_errors[:1]
+    own = run_spec(Spec("c", epochs=1, steps=40, goals=goals, checkpoint=True), runs)
     assert own.out != long.out and own.final_errors == short.final_errors  # bit-identical, as promised
     assert json.loads((long.out / "goals.json").read_text()) == [list(g) for g in goals]
     assert long.rows[1]["final_error"] != long.rows[0]["final_error"]  # a different goal per epoch
