@@ -214,18 +214,16 @@ def plt_module() -> Any:
     return plt
 
 
-def band(ax: Any, curves: Sequence[Sequence[float]], label: str, color: str | None = None, log: bool = True) -> None:
-    """Mean over seeds with a ±std band (clipped above 0 on a log axis)."""
+def band(ax: Any, curves: Sequence[Sequence[float]], label: str, color: str | None = None) -> None:
+    """Mean over seeds, with a band from the lowest to the highest seed (a ±std band means little on the log
+    axes these errors need)."""
     import numpy as np
 
     n = min(len(c) for c in curves)
     a = np.array([list(c)[:n] for c in curves], dtype=float)
-    m = a.mean(axis=0)
-    s = a.std(axis=0, ddof=1) if len(a) > 1 else np.zeros(n)
     x = np.arange(n)
-    (line,) = ax.plot(x, m, label=label, color=color, lw=1.4)
-    lo = np.maximum(m - s, 1e-3) if log else m - s
-    ax.fill_between(x, lo, m + s, color=line.get_color(), alpha=0.2, lw=0)
+    (line,) = ax.plot(x, a.mean(axis=0), label=label, color=color, lw=1.4)
+    ax.fill_between(x, a.min(axis=0), a.max(axis=0), color=line.get_color(), alpha=0.15, lw=0)
 
 
 Runner = Callable[[Context], dict[str, Any]]

@@ -337,4 +337,4 @@ def _figures(
     fig.tight_layout()
     fig.savefig(ctx.out / "learning.png", dpi=100)
     plt.close(fig)
-    rep.figure("learning.png", "Final error per training epoch (mean ± std over seeds) for each s")
+    rep.figure("learning.png", "Final error per training epoch for each s (mean over seeds, band: min-max)")
