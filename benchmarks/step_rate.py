@@ -80,10 +80,12 @@ def main() -> None:
     for mode, v in floors.items():
         if v:
             print(f"{'wire floor (' + mode + ')':28}{statistics.median(v):10.0f}{min(v):10.0f}{max(v):10.0f}")
-    if "async" in fmed:
-        print(f"process / wire floor (async): {med['process'] / fmed['async']:.2f}")
-    if "block" in fmed:
-        print(f"process / wire floor (block): {med['process'] / fmed['block']:.2f}")
+    for mode in ("async", "block"):
+        if mode in fmed:
+            print(
+                f"process / wire floor ({mode}): {med['process'] / fmed[mode]:.2f}    "
+                f"single / wire floor ({mode}): {med['single'] / fmed[mode]:.2f}"
+            )
     if a.json:
         a.json.write_text(json.dumps({"rates": rates, "floors": floors, "median": med, "floor_median": fmed}, indent=2))
 
