@@ -37,11 +37,18 @@ def _check_report(out: Path, name: str) -> dict:
     return results
 
 
+@pytest.fixture(scope="module")
+def quick_all(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """`kinswarm experiment all --quick` once; each experiment's report is then checked by its own test."""
+    out = tmp_path_factory.mktemp("experiments")
+    assert kinswarm(["experiment", "all", "--quick", "--seeds", "1", "--out", str(out)]) == 0
+    return out
+
+
 @pytest.mark.parametrize("name", EXPERIMENTS)
-@pytest.mark.timeout(90)
-def test_quick_experiment(tmp_path, name):
-    assert kinswarm(["experiment", name, "--quick", "--seeds", "1", "--out", str(tmp_path)]) == 0
-    results = _check_report(tmp_path, name)
+@pytest.mark.timeout(300)  # the first test pays for the whole `all --quick` (about a minute on 2 idle cores)
+def test_quick_experiment(quick_all, name):
+    results = _check_report(quick_all, name)
     if name == "generalisation":
         level = results["per_level"]["Level-1"]
         for block in ("test_set_0", "test_set_1"):
