@@ -28,7 +28,7 @@ import numpy as np
 from kinswarm.actors.config import RunConfig
 from kinswarm.actors.report import read_metrics, write_summary
 from kinswarm.actors.runtime import open_session
-from kinswarm.actors.supervisor import SinglePlacement, Supervisor
+from kinswarm.actors.supervisor import RunResult, SinglePlacement, Supervisor
 from kinswarm.protocol import codec
 from kinswarm.protocol.keys import Keys
 from kinswarm.protocol.messages import EpochDone, Obs, Task
@@ -137,7 +137,9 @@ class RunOutcome:
             return {k: z[k] for k in z.files}
 
 
-async def _supervise(cfg: RunConfig, topo: Topology, goals: tuple[Goal, ...] | None, observe: bool) -> Any:
+async def _supervise(
+    cfg: RunConfig, topo: Topology, goals: tuple[Goal, ...] | None, observe: bool
+) -> tuple[RunResult, list[tuple[str, bytes]]]:
     session = open_session(listen=[cfg.listen])
     captured: list[tuple[str, bytes]] = []
     subs = []
