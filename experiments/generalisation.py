@@ -76,7 +76,7 @@ def run(ctx: Context) -> dict[str, Any]:
         trainings.append(Training(f"Level-1, {control_epochs} epochs (control)", 1, control_epochs, LEARNER, False))
         trainings.append(Training("Level-3, default learner", 3, REPS * 4**3, DEFAULT_LEARNER, False))
         # more training on the same goals: does Level-3 improve with more epochs?
-        for more in (2, 4):
+        for more in (2, 4, 8):
             trainings.append(Training(f"Level-3, {more * REPS}x per goal", 3, more * REPS * 4**3, LEARNER, False))
     if q:
         trainings = [Training("Level-1", 1, 4, LEARNER)]
