@@ -148,6 +148,15 @@ class Report:
     def figure(self, name: str, caption: str) -> None:
         self.parts.append(f"![{caption}]({name})\n\n*{caption}*")
 
+    def save_figure(self, fig: Any, name: str, caption: str) -> None:
+        """Write a matplotlib figure next to report.md, close it, and show it in the report."""
+        import matplotlib.pyplot as plt
+
+        fig.tight_layout()
+        fig.savefig(self.ctx.out / name, dpi=100)
+        plt.close(fig)
+        self.figure(name, caption)
+
     def write(self, settings_used: dict[str, Any], runs: Sequence[RunOutcome] = ()) -> Path:
         ctx = self.ctx
         wall = time.perf_counter() - ctx.started

@@ -141,7 +141,6 @@ def _figure(ctx: Context, rep: Report, cfgs: list, per: dict[str, Any]) -> None:
             ax.legend(fontsize=7)
         axes[1, col].set_xlabel("epoch")
     fig.suptitle(f"Fig. 5 analogue: mean over {ctx.seeds} seed(s), band from the lowest to the highest", fontsize=10)
-    fig.tight_layout()
-    fig.savefig(ctx.out / "convergence.png", dpi=100)
-    plt.close(fig)
-    rep.figure("convergence.png", "Fig. 5 analogue: mean (top) and final (bottom) error per epoch; bands: min-max")
+    rep.save_figure(
+        fig, "convergence.png", "Fig. 5 analogue: mean (top) and final (bottom) error per epoch; bands: min-max"
+    )

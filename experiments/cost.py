@@ -334,7 +334,4 @@ def _figure(ctx: Context, rep: Report, nested: dict, central: dict) -> None:
     ax.set_ylabel("operations (paper's |S| = 8^6, L = 1500)")
     ax.legend(fontsize=8)
     ax.grid(alpha=0.3)
-    fig.tight_layout()
-    fig.savefig(ctx.out / "cost.png", dpi=100)
-    plt.close(fig)
-    rep.figure("cost.png", "Measured time per step (left) and the paper's operation counts (right)")
+    rep.save_figure(fig, "cost.png", "Measured time per step (left) and the paper's operation counts (right)")

@@ -296,10 +296,7 @@ def _figures(
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8)
     ax.set_title("Fig. 12 analogue: error on unseen goals per training level (± std over seeds)", fontsize=9)
-    fig.tight_layout()
-    fig.savefig(ctx.out / "levels.png", dpi=100)
-    plt.close(fig)
-    rep.figure("levels.png", "Fig. 12 analogue: mean and STD of the test error per level")
+    rep.save_figure(fig, "levels.png", "Fig. 12 analogue: mean and STD of the test error per level")
 
     # Fig. 11: error map (seed 0), lowest and highest level.
     show = [main[0], main[-1]] if len(main) > 1 else main
@@ -327,10 +324,9 @@ def _figures(
         ax.set_title(f"{label}: final error per test goal (seed 0)", fontsize=9)
         ax.legend(fontsize=7, loc="lower left")
         fig.colorbar(sc, ax=ax, label="final error")
-    fig.tight_layout()
-    fig.savefig(ctx.out / "error_map.png", dpi=100)
-    plt.close(fig)
-    rep.figure("error_map.png", "Fig. 11 analogue: error over the task space for the lowest and highest level")
+    rep.save_figure(
+        fig, "error_map.png", "Fig. 11 analogue: error over the task space for the lowest and highest level"
+    )
 
     # Error distributions per level.
     fig, ax = plt.subplots(figsize=(7, 3.8))
@@ -343,10 +339,7 @@ def _figures(
     ax.set_ylabel("fraction of test goals (all seeds)")
     ax.legend(fontsize=7)
     ax.grid(alpha=0.3)
-    fig.tight_layout()
-    fig.savefig(ctx.out / "cdf.png", dpi=100)
-    plt.close(fig)
-    rep.figure("cdf.png", "Cumulative distribution of the test errors per training configuration")
+    rep.save_figure(fig, "cdf.png", "Cumulative distribution of the test errors per training configuration")
 
 
 def _lognorm() -> Any:

@@ -261,10 +261,9 @@ def _figures(
     uniq = dict(zip(labels, handles, strict=True))
     axes[0, 0].legend(uniq.values(), uniq.keys(), fontsize=7, loc="lower left")
     fig.suptitle("Fig. 6: learned final configurations (greedy epoch after training) vs LS-optimal", fontsize=10)
-    fig.tight_layout()
-    fig.savefig(ctx.out / "solutions.png", dpi=100)
-    plt.close(fig)
-    rep.figure("solutions.png", "Fig. 6 analogue: final configurations per s and seed; dashed: pseudo-inverse")
+    rep.save_figure(
+        fig, "solutions.png", "Fig. 6 analogue: final configurations per s and seed; dashed: pseudo-inverse"
+    )
 
     # Fig. 7: distance to LS after `early` and after the last epoch, vs s.
     fig, ax = plt.subplots(figsize=(6, 3.8))
@@ -280,10 +279,7 @@ def _figures(
     ax.legend()
     ax.grid(alpha=0.3)
     ax.set_title("Fig. 7: distance to the LS-optimal configuration (mean ± std over seeds)", fontsize=9)
-    fig.tight_layout()
-    fig.savefig(ctx.out / "ls_distance.png", dpi=100)
-    plt.close(fig)
-    rep.figure("ls_distance.png", "Fig. 7 analogue: distance to the LS-optimal configuration vs s")
+    rep.save_figure(fig, "ls_distance.png", "Fig. 7 analogue: distance to the LS-optimal configuration vs s")
 
     # Fig. 8: effort vs s, the pseudo-inverse's as a line.
     fig, ax = plt.subplots(figsize=(6, 3.8))
@@ -300,10 +296,7 @@ def _figures(
     ax.legend(fontsize=8)
     ax.grid(alpha=0.3)
     ax.set_title("Fig. 8: cumulative joint effort", fontsize=9)
-    fig.tight_layout()
-    fig.savefig(ctx.out / "effort.png", dpi=100)
-    plt.close(fig)
-    rep.figure("effort.png", "Fig. 8 analogue: cumulative joint effort (greedy epoch) vs s")
+    rep.save_figure(fig, "effort.png", "Fig. 8 analogue: cumulative joint effort (greedy epoch) vs s")
 
     # Fig. 9: end-effector paths.
     fig, ax = plt.subplots(figsize=(5.5, 5))
@@ -319,10 +312,7 @@ def _figures(
     ax.grid(alpha=0.3)
     ax.legend(fontsize=7)
     ax.set_title("Fig. 9: end-effector paths (greedy epoch after training)", fontsize=9)
-    fig.tight_layout()
-    fig.savefig(ctx.out / "paths.png", dpi=100)
-    plt.close(fig)
-    rep.figure("paths.png", "Fig. 9 analogue: end-effector path of the pseudo-inverse and of learned swarms")
+    rep.save_figure(fig, "paths.png", "Fig. 9 analogue: end-effector path of the pseudo-inverse and of learned swarms")
 
     # Learning curves of the runs, for reference.
     fig, ax = plt.subplots(figsize=(7, 3.8))
@@ -334,7 +324,4 @@ def _figures(
     ax.set_ylabel("final error")
     ax.legend(fontsize=8)
     ax.grid(alpha=0.3)
-    fig.tight_layout()
-    fig.savefig(ctx.out / "learning.png", dpi=100)
-    plt.close(fig)
-    rep.figure("learning.png", "Final error per training epoch for each s (mean over seeds, band: min-max)")
+    rep.save_figure(fig, "learning.png", "Final error per training epoch for each s (mean over seeds, band: min-max)")

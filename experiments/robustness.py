@@ -172,7 +172,4 @@ def _figures(ctx: Context, rep: Report, outs: dict[tuple[str, str, int], RunOutc
         ax.grid(alpha=0.3)
         ax.legend(fontsize=7, loc="lower left")
     axes[-1, 0].set_xlabel("step")
-    fig.tight_layout()
-    fig.savefig(ctx.out / "tracking.png", dpi=100)
-    plt.close(fig)
-    rep.figure("tracking.png", "Figs. 15/17/19/21 analogue: tracking error per step, fault times dotted")
+    rep.save_figure(fig, "tracking.png", "Figs. 15/17/19/21 analogue: tracking error per step, fault times dotted")
