@@ -86,7 +86,10 @@ async def _serve(role: str, ident: str, cfg: RunConfig, connect: str, parent_pid
     def on_supervisor(sample: Any) -> None:  # zenoh thread
         present["supervisor"] = sample.kind == sample.kind.PUT
         if not present["supervisor"]:
-            loop.call_soon_threadsafe(lost.set)
+            try:
+                loop.call_soon_threadsafe(lost.set)
+            except RuntimeError:  # the actor's loop is already closed: it is leaving anyway
+                pass
 
     async def supervisor_gone() -> None:
         while True:

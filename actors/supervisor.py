@@ -267,6 +267,7 @@ class Supervisor:
         self.link_faults: dict[str, list[tuple[str, float | None]]] = {}  # agent -> (description, expiry)
         self.byes: dict[str, Bye] = {}
         self._next_status = 0.0
+        self.host = socket.gethostname()  # every actor of a local run lives here
 
     async def run(self) -> RunResult:
         t0 = time.perf_counter()
@@ -283,7 +284,10 @@ class Supervisor:
             parsed = self.keys.parse_alive(str(sample.key_expr))
             if parsed is not None:
                 up = sample.kind == zenoh.SampleKind.PUT
-                loop.call_soon_threadsafe(self._alive_changed, parsed, up)
+                try:
+                    loop.call_soon_threadsafe(self._alive_changed, parsed, up)
+                except RuntimeError:  # tokens going away while the run's loop closes: nobody to tell
+                    pass
 
         watch = self.session.liveliness().declare_subscriber(self.keys.alive_all, on_alive, history=True)
         node.declare_alive()
@@ -495,7 +499,7 @@ class Supervisor:
             role=roles,
             alive={i: int((roles[i], i) in self.alive) for i in ids},
             pid={i: pids.get(i, 0) for i in ids},
-            host={i: socket.gethostname() for i in ids},
+            host=dict.fromkeys(ids, self.host),
             restarts={i: self.restarts[i].total if i in self.restarts else 0 for i in ids},
             faults=faults,
         )
