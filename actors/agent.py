@@ -32,10 +32,11 @@ from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import numpy as np
 from kinswarm.actors.checkpoint import CheckpointError, digest, load_checkpoint, load_latest, save_checkpoint
 from kinswarm.actors.config import RunConfig
 from kinswarm.actors.learning.learner import Learner
-from kinswarm.actors.learning.reward import reach_reward
+from kinswarm.actors.learning.reward import corridor_reward, reach_reward
 from kinswarm.actors.learning.settings import LearnerSettings
 from kinswarm.actors.learning.state import agent_state, joint_frame, link_end
 from kinswarm.actors.runtime import Node
@@ -51,7 +52,13 @@ def agent_seed(seed: int, agent: str) -> list[int]:
 
 
 def learner_settings(cfg: RunConfig, topo: Topology) -> LearnerSettings:
-    return LearnerSettings.for_reach(topo.reach, **cfg.learner)
+    settings = LearnerSettings.for_reach(topo.reach, **cfg.learner)
+    if (settings.clearance_state or settings.collision_state) and not topo.obstacles:
+        raise ValueError(
+            f"learner settings clearance_state/collision_state need a scene with obstacles; {topo.source} has no "
+            "[[obstacle]]"
+        )
+    return settings
 
 
 @dataclass
@@ -65,6 +72,7 @@ class _Step:
     waiting: frozenset[str]  # the live agents whose `up` this step needs: children, or adopted ones' children
     tips: dict[str, tuple[float, float, float]]  # end effectors of adopted leaves, computed here
     ups: dict[str, Up] = field(default_factory=dict)  # by sender
+    sense: tuple[float | None, int] = (None, 0)  # scenes with obstacles: my link's clearance, my move refused
 
 
 class Agent:
@@ -90,6 +98,7 @@ class Agent:
         self.current: _Step | None = None
         self.q_in: dict[str, dict[Key, float]] = {agent_id: {}}  # encoder readings: mine and adopted ones'
         self.head_in: dict[Key, Down | Task] = {}
+        self.sense_in: dict[Key, tuple[float | None, int]] = {}  # my obs' clearance and collided, by step
         self.ups_early: dict[Key, dict[str, Up]] = {}
         self.D_prev: float | None = None  # root only: D_goal(t-1)
         self.steps_done = 0
@@ -197,6 +206,8 @@ class Agent:
                     agent = kind[len("sim/obs/") :]
                     if agent in self.q_in:
                         self.q_in[agent][(m.epoch, m.step)] = m.q
+                        if agent == self.id and m.clearance is not None:
+                            self.sense_in[(m.epoch, m.step)] = (m.clearance, m.collided)
                         self._try_begin((m.epoch, m.step))
             elif kind.endswith("/down") or kind == "sim/task":
                 m2 = node.decode(key, payload, Task if self.is_root else Down)
@@ -272,6 +283,9 @@ class Agent:
         for a, readings in self.q_in.items():
             self.q_in[a] = {kk: v for kk, v in readings.items() if kk > key}
         self.head_in = {kk: v for kk, v in self.head_in.items() if kk > key}
+        sense = self.sense_in.pop(key, (None, 0))
+        if self.sense_in:
+            self.sense_in = {kk: v for kk, v in self.sense_in.items() if kk > key}
         self.last_begun = key
         if epoch != self.epoch:
             self.epoch = epoch
@@ -286,7 +300,12 @@ class Agent:
             base = self.topo.base
             goal = head.goal
             D = _distance(_centroid([head.tips[leaf] for leaf in self.leaves if leaf in head.tips]), goal)
-            reward = None if self.D_prev is None else reach_reward(D, self.D_prev, self.cfg.reward)
+            if self.D_prev is None:
+                reward = None
+            elif head.clearance is not None:  # a scene with obstacles: the corridor's Eq. 11
+                reward = corridor_reward(D, self.D_prev, head.clearance, head.collisions, self.cfg.reward)
+            else:
+                reward = reach_reward(D, self.D_prev, self.cfg.reward)
             self.D_prev = D
         else:
             base, goal, reward = head.base, head.goal, head.reward
@@ -298,7 +317,16 @@ class Agent:
                 self.keys.down(child), Down(epoch=epoch, step=step, base=child_base, goal=goal, reward=reward)
             )
         self.current = _Step(
-            key, frame, end, q.get(self.id, 0.0), goal, reward, frozenset(waiting), tips, self.ups_early.pop(key, {})
+            key,
+            frame,
+            end,
+            q.get(self.id, 0.0),
+            goal,
+            reward,
+            frozenset(waiting),
+            tips,
+            self.ups_early.pop(key, {}),
+            sense,
         )
         self.ups_early = {kk: v for kk, v in self.ups_early.items() if kk > key}
         self._try_finish()
@@ -380,7 +408,10 @@ class Agent:
             self._observe(cur)
             tip = _centroid([tips[leaf] for leaf in self.leaves])
             s = agent_state(cur.frame, cur.q, tip, cur.goal)
-            action = self.learner.decide(s, cur.reward, learn=self.cfg.learn, explore=self.cfg.explore)
+            reward = cur.reward
+            if cur.sense[0] is not None:
+                s, reward = self._scene_state(s, reward, cur.sense)
+            action = self.learner.decide(s, reward, learn=self.cfg.learn, explore=self.cfg.explore)
             self.decided = (cur.key, action)
             if self.visible:
                 # a lost child's joint holds: to this agent's fictitious play it chose "keep"
@@ -399,6 +430,21 @@ class Agent:
             self.node.send(self.keys.cmd(self.id), Cmd(epoch=epoch, step=step, delta=delta))
         self.last_finished = cur.key
         self.steps_done += 1
+
+    def _scene_state(
+        self, s: np.ndarray, reward: float | None, sense: tuple[float | None, int]
+    ) -> tuple[np.ndarray, float | None]:
+        """A scene with obstacles (§5.4): the optional state variables (my link's clearance, whether my move
+        was refused) and the local collision penalty on the reward for my refused move (LearnerSettings)."""
+        assert self.learner is not None
+        st = self.learner.settings
+        clearance, collided = sense
+        extra = [clearance] * st.clearance_state + [float(collided)] * st.collision_state
+        if extra:
+            s = np.concatenate((s, extra))
+        if reward is not None and collided:
+            reward += st.collision_penalty
+        return s, reward
 
     def _observe(self, cur: _Step) -> None:
         """Hand the learner its visible children's actions of the step before `cur`, which their `up` of

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import json
 import logging
 import secrets
 import signal
@@ -20,7 +21,7 @@ from kinswarm.protocol.messages import EpochDone
 from kinswarm.protocol.topology import Topology, TopologyError, load_topology
 
 log = logging.getLogger("kinswarm")
-EXPERIMENT_NAMES = ("convergence", "optimality", "generalisation", "robustness", "cost", "all")
+EXPERIMENT_NAMES = ("convergence", "optimality", "generalisation", "robustness", "cost", "all", "corridor")
 
 
 def _goal(text: str) -> tuple[float, float]:
@@ -29,6 +30,32 @@ def _goal(text: str) -> tuple[float, float]:
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected X,Y (two numbers), got {text!r}") from None
     return (x, y)
+
+
+def _setting(text: str) -> tuple[str, object]:
+    """--learner NAME=VALUE: a LearnerSettings override; VALUE is JSON (true, 5, -5.0, [0, 1]) or a string."""
+    name, sep, value = text.partition("=")
+    if not sep or not name:
+        raise argparse.ArgumentTypeError(f"expected NAME=VALUE, got {text!r}")
+    try:
+        parsed: object = json.loads(value)
+    except json.JSONDecodeError:
+        parsed = value
+    return name, tuple(parsed) if isinstance(parsed, list) else parsed
+
+
+def _learner(pairs: list[tuple[str, object]], topo: Topology) -> dict[str, object]:
+    """The --learner overrides, checked now (unknown name, bad value) so a bad one fails before anything runs."""
+    from kinswarm.actors.learning.settings import LearnerSettings
+
+    learner = dict(pairs)
+    try:
+        LearnerSettings.for_reach(topo.reach, **learner)
+    except TypeError as e:
+        raise ConfigError(f"--learner: {e} (see LearnerSettings in actors/learning/settings.py)") from None
+    except ValueError as e:
+        raise ConfigError(f"--learner: {e}") from None
+    return {k: list(v) if isinstance(v, tuple) else v for k, v in learner.items()}
 
 
 def _on_off(text: str) -> bool:
@@ -71,6 +98,14 @@ def build_parser() -> argparse.ArgumentParser:
         "--checkpoint-every", type=int, default=1, help="epochs between checkpoints (0: last only; default 1)"
     )
     run.add_argument("--max-restarts", type=int, default=5, help="restarts of one agent within 60 s before giving up")
+    run.add_argument(
+        "--learner",
+        type=_setting,
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        help="a LearnerSettings override, repeatable (e.g. --learner clearance_state=true)",
+    )
     base = sub.add_parser("baseline", help="drive the same simulator with the pseudo-inverse controller")
     _add_common(base)
     rep = sub.add_parser("report", help="rebuild a run's summary plots")
@@ -137,6 +172,7 @@ def _resolve(a: argparse.Namespace, controller: str) -> tuple[RunConfig, Topolog
         controller=controller,
         scenario=str(a.scenario.resolve()) if a.scenario else None,
         max_restarts=getattr(a, "max_restarts", 5),
+        learner=_learner(getattr(a, "learner", []), topo),
     )
     cfg.resolved_goal(topo)
     if a.scenario:  # refuse a bad scenario before anything starts

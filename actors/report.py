@@ -118,6 +118,13 @@ def write_plots(run_dir: Path) -> list[Path]:
         plt.close(fig)
         written.append(run_dir / "arm.png")
 
+    if rows and topo.obstacles:  # the chain in its scene (paper Fig. 23)
+        from kinswarm.actors.scene_plot import write_scene_plot
+
+        title = f"{cfg.run_id}: final configurations, reward={cfg.reward}, seed={cfg.seed}"
+        write_scene_plot(run_dir / "corridor.png", topo, goal, rows, title)
+        written.append(run_dir / "corridor.png")
+
     tracked = [r for r in rows if r.get("errors")]
     with_events = [r for r in tracked if r["epoch"] in by_epoch]
     chosen = with_events[-TRACKED_EPOCHS:] or tracked[-1:]

@@ -610,6 +610,8 @@ class Supervisor:
             "final_angles_deg": {a: round(math.degrees(q), 4) for a, q in d.final_angles.items()},
             "errors": [round(e, 5) for e in d.errors],
         }
+        if d.collisions or d.clearance:  # scenes with obstacles: refused increments, smallest clearance per step
+            row["collisions"], row["clearance"] = d.collisions, d.clearance
         self.metrics_file.write(json.dumps(row) + "\n")
         self.metrics_file.flush()
 

@@ -7,11 +7,12 @@ The codec (`codec.py`) validates every field against these annotations.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import ClassVar
 
-SCHEMA_VERSION = 3  # 2: faults, events, status, bye; payloads carry a MAC (codec.py). 3: Up.action is the
-# sender's action of the step before (sent before it learns), plus a closing Up after an epoch's last step
+SCHEMA_VERSION = 4  # 2: faults, events, status, bye; payloads carry a MAC (codec.py). 3: Up.action is the
+# sender's action of the step before (sent before it learns), plus a closing Up after an epoch's last step.
+# 4: scenes with obstacles (§5.4): Obs.clearance/collided, Task.clearance/collisions, EpochDone.collisions/clearance
 
 Vec2 = tuple[float, float]
 Vec3 = tuple[float, float, float]
@@ -19,12 +20,18 @@ Vec3 = tuple[float, float, float]
 
 @dataclass(frozen=True)
 class Obs:
-    """sim -> agent: its own encoder reading q_i after the joint actions of step-1."""
+    """sim -> agent: its own encoder reading q_i after the joint actions of step-1.
+
+    In a scene with obstacles also what the agent perceives locally (paper §5.4): `clearance`, the signed
+    distance of its own link to the nearest obstacle (None: the scene has none), and `collided` = 1 when
+    its own increment of step-1 was refused because the link would have penetrated a wall (else 0)."""
 
     KIND: ClassVar[str] = "obs"
     epoch: int
     step: int
     q: float
+    clearance: float | None = None
+    collided: int = 0
 
 
 @dataclass(frozen=True)
@@ -36,6 +43,10 @@ class Task:
     step: int
     goal: Vec2
     tips: dict[str, Vec3]
+    # scenes with obstacles: the smallest link clearance (None: no obstacles), and how many joints' increments
+    # of step-1 were refused as penetrating (the collisions of Eq. 11)
+    clearance: float | None = None
+    collisions: int = 0
 
 
 @dataclass(frozen=True)
@@ -100,6 +111,10 @@ class EpochDone:
     missed_cmds: int
     seconds: float
     max_step_seconds: float  # the longest step: a missing cmd makes it as long as the deadline, never longer
+    # scenes with obstacles (else empty): per step, the joints whose increment was refused, and the smallest
+    # link clearance after the step's joint actions
+    collisions: list[int] = field(default_factory=list)
+    clearance: list[float] = field(default_factory=list)
 
 
 @dataclass(frozen=True)

@@ -20,6 +20,10 @@ compound = false                # true: no DOF, only encapsulates children (the 
 
 [task]
 goal = [4.16, 6.18]             # default goal (x, y) for reaching
+
+[[obstacle]]                    # optional static boxes (walls of a corridor): see obstacles.py
+center = [4.5, 4.4]
+half_extents = [1.5, 2.0]
 ```
 
 Trees, not only chains: an agent may have several children, and every leaf is an end effector.
@@ -34,6 +38,8 @@ import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
+
+from .obstacles import ObstacleSpec, parse_obstacles
 
 ID_RE = re.compile(r"^[A-Za-z0-9_-]{1,64}$")
 
@@ -75,6 +81,7 @@ class Topology:
     base: tuple[float, float, float]  # x, y, heading (radians)
     goal: tuple[float, float] | None
     source: str = field(default="<memory>")
+    obstacles: tuple[ObstacleSpec, ...] = ()  # static boxes of the scene ([[obstacle]], protocol/obstacles.py)
 
     @property
     def dof_agents(self) -> tuple[str, ...]:
@@ -129,9 +136,9 @@ _AGENT_KEYS = {"id", "parent", "link_length", "limits_deg", "initial_deg", "offs
 def parse_topology(data: dict[str, Any], source: str = "<memory>") -> Topology:
     """Validate a parsed TOML document and build the Topology; errors name source and field."""
     src = source
-    unknown = set(data) - {"robot", "defaults", "agent", "task"}
+    unknown = set(data) - {"robot", "defaults", "agent", "task", "obstacle"}
     if unknown:
-        raise TopologyError(src, sorted(unknown)[0], "unknown table (expected robot, defaults, agent, task)")
+        raise TopologyError(src, sorted(unknown)[0], "unknown table (expected robot, defaults, agent, task, obstacle)")
     robot = data.get("robot", {})
     if not isinstance(robot, dict):
         raise TopologyError(src, "robot", "must be a table")
@@ -235,6 +242,7 @@ def parse_topology(data: dict[str, Any], source: str = "<memory>") -> Topology:
         base=(bx, by, math.radians(bh)),
         goal=goal,  # type: ignore[arg-type]
         source=src,
+        obstacles=parse_obstacles(data.get("obstacle"), src),
     )
 
 

@@ -27,6 +27,7 @@ from kinswarm.actors.scenario import ScenarioEntry, load_scenario
 from kinswarm.protocol.faults import DISTURB_AMPLITUDE_DEG, JOINT_FAULTS, check_fault, describe, expand_targets
 from kinswarm.protocol.messages import Bye, Cmd, EpochDone, EpochStart, Event, Fault, JointStatus, Obs, Stop, Task
 from kinswarm.protocol.topology import Topology
+from kinswarm.sim.obstacles import Scene
 from kinswarm.sim.world import World
 
 # Timers and liveliness changes go through the mailbox under keys no Zenoh key can equal (those start
@@ -48,6 +49,19 @@ class SimActor:
         # Read before the world exists: a bad file fails the actor without leaking a PyBullet client.
         self.scenario = load_scenario(cfg.scenario, topo) if cfg.scenario else None
         self.world = World(topo)
+        # Obstacles (paper §5.4): solid walls, per-link clearance in each agent's obs, collisions to the root
+        self.scene: Scene | None = None
+        self.clearance: dict[str, float] = {}  # per link, after the last step's joint actions
+        self.refused: tuple[str, ...] = ()  # joints whose increment of the last step was refused
+        self.collisions: list[int] = []  # per step of the epoch: how many increments were refused
+        self.min_clearance: list[float] = []  # per step of the epoch: the smallest link clearance
+        if topo.obstacles:
+            try:
+                self.scene = Scene(self.world)
+                self.scene.check_start(topo.source)
+            except BaseException:
+                self.world.close()
+                raise
         self.dof = topo.dof_agents
         self.dof_set = frozenset(self.dof)
         self._obs_first = [a for a in self.dof if a == topo.root]  # the root's reading goes out with the task
@@ -159,6 +173,9 @@ class SimActor:
         self.last_epoch = e.epoch
         self.world.reset()  # faults persist, angles do not: a locked joint is locked at its initial angle
         self.tips = self.world.tip_poses()
+        if self.scene is not None:
+            self.clearance, self.refused = self.scene.clearances(), ()
+            self.collisions, self.min_clearance = [], []
         self.t = 0
         self.errors = []
         self.missed = 0
@@ -300,11 +317,14 @@ class SimActor:
         q = self.world.joint_positions()
         # The root begins once it holds both the task and its own reading: put them back to back, so they
         # reach it in one burst (one wake-up); the others' readings are needed only a hop later.
-        for a in self._obs_first:
-            send(k.obs(a), Obs(epoch=e.epoch, step=self.t, q=q[a]))
-        send(k.task, Task(epoch=e.epoch, step=self.t, goal=e.goal, tips=self.tips))
-        for a in self._obs_after:
-            send(k.obs(a), Obs(epoch=e.epoch, step=self.t, q=q[a]))
+        if self.scene is not None:
+            self._publish_scene_step(e, q)
+        else:
+            for a in self._obs_first:
+                send(k.obs(a), Obs(epoch=e.epoch, step=self.t, q=q[a]))
+            send(k.task, Task(epoch=e.epoch, step=self.t, goal=e.goal, tips=self.tips))
+            for a in self._obs_after:
+                send(k.obs(a), Obs(epoch=e.epoch, step=self.t, q=q[a]))
         self.cmds = {}
         self.step_started = time.perf_counter()
         # Nobody expected (every agent down): the deadline runs the step rather than the joints racing.
@@ -313,6 +333,32 @@ class SimActor:
         loop = asyncio.get_running_loop()
         self._deadline = loop.call_later(self.cfg.deadline_ms / 1000, self.node.mailbox.push, DEADLINE, token)
 
+    def _publish_scene_step(self, e: EpochStart, q: dict[str, float]) -> None:
+        """_publish_step's messages in a scene with obstacles: each agent's own link clearance and whether its
+        increment of the step before was refused; the smallest clearance and the refusals for the root."""
+        k, send, c, refused = self.keys, self.node.send, self.clearance, self.refused
+
+        def obs(a: str) -> Obs:
+            return Obs(epoch=e.epoch, step=self.t, q=q[a], clearance=c.get(a), collided=int(a in refused))
+
+        for a in self._obs_first:
+            send(k.obs(a), obs(a))
+        clear = min(c.values()) if c else None
+        task = Task(epoch=e.epoch, step=self.t, goal=e.goal, tips=self.tips, clearance=clear, collisions=len(refused))
+        send(k.task, task)
+        for a in self._obs_after:
+            send(k.obs(a), obs(a))
+
+    def _move(self, deltas: dict[str, float]) -> dict[str, float]:
+        """The step's increments into the world; through the solid walls' check when there are obstacles."""
+        if self.scene is None:
+            return self.world.apply_increments(deltas)
+        moved = self.scene.move(deltas)
+        self.clearance, self.refused = moved.clearance, moved.refused
+        self.collisions.append(len(moved.refused))
+        self.min_clearance.append(min(moved.clearance.values()) if moved.clearance else 0.0)
+        return moved.applied
+
     def _advance(self) -> None:
         e = self.epoch
         assert e is not None
@@ -320,7 +366,7 @@ class SimActor:
             self._deadline.cancel()
             self._deadline = None
         faulted = bool(self.locked or self.disturbed)
-        self.applied = self.world.apply_increments(self._increments() if faulted else self.cmds)
+        self.applied = self._move(self._increments() if faulted else self.cmds)
         self.tips = self.world.tip_poses()
         self.errors.append(self.error())
         self.longest_step = max(self.longest_step, time.perf_counter() - self.step_started)
@@ -343,6 +389,8 @@ class SimActor:
                 missed_cmds=self.missed,
                 seconds=time.perf_counter() - self.started,
                 max_step_seconds=self.longest_step,
+                collisions=list(self.collisions),
+                clearance=[round(v, 5) for v in self.min_clearance],
             ),
         )
         self.epoch = None

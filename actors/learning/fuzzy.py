@@ -44,17 +44,18 @@ class FuzzyPartition:
     """Vectorised membership evaluation (Eq. 3) and sparse rule activation (Eq. 4) for one agent."""
 
     def __init__(self, settings: LearnerSettings) -> None:
-        self.n_sets = np.asarray(settings.n_sets, dtype=np.int64)
+        n_sets, ranges = settings.state_sets, settings.state_ranges  # the six of §3.3, plus scene variables
+        self.n_sets = np.asarray(n_sets, dtype=np.int64)
         self.top_k = settings.top_k
-        n_vars = len(settings.n_sets)
+        n_vars = len(n_sets)
         width = int(self.n_sets.max())
-        lo = np.array([r[0] for r in settings.ranges])
-        hi = np.array([r[1] for r in settings.ranges])
+        lo = np.array([r[0] for r in ranges])
+        hi = np.array([r[1] for r in ranges])
         self._lo, self._hi = lo, hi
         # Boundaries padded to a rectangle: +inf boundaries give L = 0 so padded sets have membership 0.
         bounds = np.full((n_vars, max(width - 1, 1)), np.inf)
         sigma = np.ones(n_vars)
-        for v, m in enumerate(settings.n_sets):
+        for v, m in enumerate(n_sets):
             if m > 1:
                 c = centres(m, lo[v], hi[v])
                 bounds[v, : m - 1] = (c[:-1] + c[1:]) / 2.0
@@ -83,7 +84,7 @@ class FuzzyPartition:
         self._real = np.arange(bounds.shape[1])[None, :] < (self.n_sets - 1)[:, None]
         self._L = np.zeros((n_vars, width + 1))
         self._L[:, 0] = 1.0  # L_{b_{-1}} = 1
-        for v, m in enumerate(settings.n_sets):
+        for v, m in enumerate(n_sets):
             self._L[v, m + 1 :] = np.arange(1, width + 1 - m)  # L at b_m, b_{m+1}, ... = 1, 2, ...
         self._L_real = self._L[:, 1:-1]  # view: L at b_0 .. b_{width-2}
         self._L_lo, self._L_hi = self._L[:, :-1], self._L[:, 1:]  # views: mu_j = L_lo[j] - L_hi[j]

@@ -33,3 +33,62 @@ def reach_reward(
     if dD <= 0.0:
         return math.exp(-c * D)
     return -1.0
+
+
+#: Eq. 11's constants for the corridor (paper §5.4: c1, c2 in (0, 1)); D_MIN as Eq. 10's default.
+CORRIDOR_C1 = 0.5
+CORRIDOR_C2 = 0.5
+#: C_ai = 1, "agent a_i is close to collide", when its link's clearance is below this (the capsule radius)
+CORRIDOR_D_SAFE = 0.1
+#: strict and shaped on a corridor: a collision costs -CORRIDOR_WEIGHT e^(-c2 D_corridor), below any other case
+CORRIDOR_WEIGHT = 5.0
+
+
+def corridor_reward(
+    D: float,
+    D_prev: float,
+    clearance: float,
+    collisions: int,
+    mode: str,
+    D_min: float = 3.0,
+    c1: float = CORRIDOR_C1,
+    c2: float = CORRIDOR_C2,
+    d_safe: float = CORRIDOR_D_SAFE,
+    weight: float = CORRIDOR_WEIGHT,
+    k: float = 20.0,
+) -> float:
+    """R(t) of the corridor task (paper §5.4, Eq. 11) from D = D_goal(t), D_prev = D_goal(t-1), the smallest
+    link clearance min_i D_corridor^{a_i}(t) and the number of joint increments the walls refused at t-1.
+
+    Some agent is close to collide (exists a_i with C_ai = 1) when a move was refused or clearance < d_safe;
+    the clearance of the closest agent is then min_i D_corridor (Eq. 11 takes the min over the agents that
+    perceive a collision, which is the min over all of them).
+
+    paper (Eq. 11 as printed, in its case order):
+        D >  D_min                                   ->  -2
+        D <= D_min and Delta D > 0                   ->  -1
+        D <= D_min and Delta D <= 0 and no C_ai = 1  ->  e^(-c1 D)
+        otherwise (D <= D_min, Delta D <= 0, a C_ai = 1)  ->  -e^(-c2 min_i D_corridor)
+      A collision is punished only while approaching inside D_min, and never by more than 1: less than the
+      -2 paid anywhere outside D_min, so touching a wall is cheap.
+    strict: the collision case first, whatever D: -weight e^(-c2 min_i D_corridor), at most -weight * e^(-c2 d_safe),
+      below every other case; else Eq. 10 "strict" (0 inside D_min when the tip did not move).
+    shaped: Eq. 10 "shaped" (outside D_min -2 + k (D_prev - D), a gradient towards the goal; inside as strict)
+      plus, when close to collide, the same -weight e^(-c2 min_i D_corridor): added, not replacing, so a move
+      that touches is always worse than the same move clear of the walls and the gradient is kept.
+    """
+    if mode not in REWARD_MODES:
+        raise ValueError(f"unknown reward mode {mode!r}; allowed modes: {', '.join(REWARD_MODES)}")
+    close = collisions > 0 or clearance < d_safe  # exists a_i with C_ai = 1
+    penalty = math.exp(-c2 * max(clearance, 0.0))  # e^(-c2 min_i D_corridor)
+    if mode == "paper":
+        if D > D_min:
+            return -2.0
+        if D - D_prev > 0.0:
+            return -1.0
+        if not close:
+            return math.exp(-c1 * D)
+        return -penalty
+    if mode == "strict":
+        return -weight * penalty if close else reach_reward(D, D_prev, mode, D_min=D_min, c=c1, k=k)
+    return reach_reward(D, D_prev, mode, D_min=D_min, c=c1, k=k) - (weight * penalty if close else 0.0)

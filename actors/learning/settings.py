@@ -45,6 +45,16 @@ class LearnerSettings:
         count_prior: initial fictitious-play count of every action, so Eq. 7 is defined at the start.
         n_actions: own actions (0 decrease, 1 keep, 2 increase).
 
+    Scenes with obstacles (paper §5.4; the corridor): the agent's obs carries its own link's signed clearance
+    and whether its own increment was refused by a wall. Both are off by default (the paper's six variables):
+        clearance_state: append the own link's clearance ("the distance from the corridor that is locally
+            perceived by agent a_i") as a 7th state variable, clearance_sets sets over clearance_range (clipped).
+        collision_state: append a 0/1 flag "my increment of the previous step was refused" (2 sets over [0, 1]).
+            It breaks the greedy deadlock against a wall: a refused move leaves q and the tips unchanged, so
+            without it the state, and hence the greedy choice, would repeat forever.
+        collision_penalty: added (it is <= 0) to the reward of an agent whose own increment was refused, on
+            top of the root's global reward: a local signal for the agent that pushed into the wall.
+
     Tuning (planar 4R chain, links 3, goal (4.16, 6.18), 60 epochs x 500 steps, 3 seeds): with the shaped
     reward every variant tried met the target (>= 80% of the last 20 epochs within 0.5, median <= 0.15)
     except bootstrap="joint_max" (one seed median 0.43). s = 0.05 gave the lowest medians (~0.04) and also
@@ -65,6 +75,25 @@ class LearnerSettings:
     bootstrap: str = "expected"
     count_prior: float = 1.0
     n_actions: int = 3
+    clearance_state: bool = False
+    clearance_sets: int = 5
+    clearance_range: tuple[float, float] = (0.0, 1.0)
+    collision_state: bool = False
+    collision_penalty: float = 0.0
+
+    @property
+    def state_names(self) -> tuple[str, ...]:
+        """Names of the state variables: STATE_NAMES, then "clearance" and "collided" when enabled."""
+        return STATE_NAMES + ("clearance",) * self.clearance_state + ("collided",) * self.collision_state
+
+    @property
+    def state_sets(self) -> tuple[int, ...]:
+        """Membership sets per state variable (n_sets, then those of the optional scene variables)."""
+        return self.n_sets + (self.clearance_sets,) * self.clearance_state + (2,) * self.collision_state
+
+    @property
+    def state_ranges(self) -> tuple[tuple[float, float], ...]:
+        return self.ranges + (self.clearance_range,) * self.clearance_state + ((0.0, 1.0),) * self.collision_state
 
     @classmethod
     def for_reach(cls, reach: float, **overrides: object) -> LearnerSettings:
@@ -113,3 +142,16 @@ class LearnerSettings:
             raise ValueError(f"count_prior must be > 0 so Eq. 7 is defined, got {self.count_prior}")
         if not (isinstance(self.n_actions, int) and self.n_actions >= 1):
             raise ValueError(f"n_actions must be an int >= 1, got {self.n_actions}")
+        object.__setattr__(self, "clearance_range", tuple(float(v) for v in self.clearance_range))
+        for name in ("clearance_state", "collision_state"):
+            if not isinstance(getattr(self, name), bool):
+                raise ValueError(f"{name} must be true or false, got {getattr(self, name)!r}")
+        if not (isinstance(self.clearance_sets, int) and self.clearance_sets >= 1):
+            raise ValueError(f"clearance_sets must be an int >= 1, got {self.clearance_sets!r}")
+        lo, hi = self.clearance_range
+        if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
+            raise ValueError(f"clearance_range must be finite with lo < hi, got ({lo}, {hi})")
+        if not (math.isfinite(self.collision_penalty) and self.collision_penalty <= 0.0):
+            raise ValueError(f"collision_penalty must be <= 0, got {self.collision_penalty}")
+        if self.top_k > min(self.state_sets):
+            raise ValueError(f"top_k must be <= the fewest sets of any state variable ({min(self.state_sets)})")

@@ -1,0 +1,123 @@
+"""Static obstacles in the PyBullet world (paper §5.4): solid box walls, per-link signed clearance.
+
+Each `ObstacleSpec` of the topology becomes a fixed box body (mass 0) in the World's PyBullet client, as tall
+in z as it needs to be to meet the planar links. A link's clearance is the signed distance between its
+capsule and the nearest box from `getClosestPoints` (exact for capsules against boxes: positive apart,
+negative in penetration). Walls are solid: `Scene.move` applies the agents' increments, and when the new
+configuration would make a link penetrate a wall it takes back, joint by joint (root first), the increments
+that cause the penetration; those joints hold and are reported as collisions.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+from kinswarm.protocol.obstacles import ObstacleSpec
+from kinswarm.sim.world import World, pb
+
+#: Links further than this from every obstacle report this clearance (the query's search radius).
+MAX_CLEARANCE = 10.0
+#: Penetration tolerance: a link is "in" a wall when its signed clearance is below -PENETRATION_TOL. Touching
+#: (clearance 0) is allowed; the tolerance absorbs float32 noise of PyBullet's distance queries.
+PENETRATION_TOL = 1e-6
+_HALF_HEIGHT = 1.0  # z half-extent of the wall boxes: the links lie in z = 0
+
+
+@dataclass(frozen=True)
+class Moved:
+    """What `Scene.move` did: the increment applied per DOF joint, the joints refused, the clearances after."""
+
+    applied: dict[str, float]
+    refused: tuple[str, ...]
+    clearance: dict[str, float]
+
+
+class SceneError(ValueError):
+    """The scene cannot be used as given (e.g. the start configuration penetrates a wall)."""
+
+
+class Scene:
+    """The obstacles of `world.topo` in `world`'s PyBullet client."""
+
+    def __init__(self, world: World, obstacles: tuple[ObstacleSpec, ...] | None = None) -> None:
+        self.world = world
+        self.specs = world.topo.obstacles if obstacles is None else obstacles
+        cid = world.client
+        self.bodies: list[int] = []
+        for spec in self.specs:
+            shape = pb.createCollisionShape(
+                pb.GEOM_BOX, halfExtents=[*spec.half_extents, _HALF_HEIGHT], physicsClientId=cid
+            )
+            body = pb.createMultiBody(
+                baseMass=0.0,
+                baseCollisionShapeIndex=shape,
+                basePosition=[*spec.center, 0.0],
+                baseOrientation=pb.getQuaternionFromEuler((0.0, 0.0, spec.angle)),
+                physicsClientId=cid,
+            )
+            self.bodies.append(body)
+        topo = world.topo
+        # links with a body: every agent with a link length > 0 (compound agents may have none)
+        self.links = {a: world.joint_index[a] for a in topo.order if topo.agents[a].link_length > 0}
+
+    def clearances(self) -> dict[str, float]:
+        """Signed clearance of every agent's link to the nearest obstacle (MAX_CLEARANCE if none is near)."""
+        cid, robot = self.world.client, self.world.body
+        out: dict[str, float] = {}
+        for agent, link in self.links.items():
+            best = MAX_CLEARANCE
+            for body in self.bodies:
+                pts = pb.getClosestPoints(
+                    bodyA=robot, bodyB=body, distance=MAX_CLEARANCE, linkIndexA=link, physicsClientId=cid
+                )
+                for p in pts:
+                    best = min(best, float(p[8]))  # contactDistance: negative in penetration
+            out[agent] = best
+        return out
+
+    def penetrating(self, clearance: Mapping[str, float]) -> list[str]:
+        return [a for a, c in clearance.items() if c < -PENETRATION_TOL]
+
+    def check_start(self, source: str) -> None:
+        """Raise SceneError if the current (start) configuration already penetrates an obstacle."""
+        bad = self.penetrating(self.clearances())
+        if bad:
+            raise SceneError(
+                f"{source}: initial_deg: the start configuration puts link(s) {bad} inside an obstacle "
+                "(walls are solid; move the obstacles or the start angles)"
+            )
+
+    def move(self, deltas: Mapping[str, float]) -> Moved:
+        """Apply `deltas` like World.apply_increments, refusing the increments that would penetrate a wall.
+
+        All at once when the result is free; otherwise from the configuration before, the joints' increments
+        one at a time in the topology's order (root first), each kept only if no link then penetrates."""
+        world = self.world
+        before = world.joint_positions()
+        applied = world.apply_increments(deltas)
+        clearance = self.clearances()
+        if not self.penetrating(clearance):
+            return Moved(applied, (), clearance)
+        world.reset(before)
+        applied = dict.fromkeys(applied, 0.0)
+        refused: list[str] = []
+        clearance_now: dict[str, float] | None = None
+        for a in world.topo.dof_agents:
+            d = deltas.get(a, 0.0)
+            if d == 0.0:
+                continue
+            keep = world.joint_positions()
+            step = world.apply_increments({a: d})[a]
+            if step == 0.0:  # at a joint limit: nothing to test
+                continue
+            c = self.clearances()
+            if self.penetrating(c):
+                world.reset(keep)
+                refused.append(a)
+            else:
+                applied[a] = step
+                clearance_now = c
+        if clearance_now is None:
+            clearance_now = self.clearances()
+        return Moved(applied, tuple(refused), clearance_now)

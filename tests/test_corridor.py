@@ -1,0 +1,288 @@
+"""The corridor (paper §5.4): obstacle parsing, PyBullet clearance against geometry, solid walls, the wire
+fields, Eq. 11 and its variants, the scene settings of the learner, and a swarm run through the corridor."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+from conftest import EXAMPLES
+from kinswarm.actors.agent import learner_settings
+from kinswarm.actors.cli import main as cli_main
+from kinswarm.actors.config import RunConfig
+from kinswarm.actors.learning.fuzzy import FuzzyPartition
+from kinswarm.actors.learning.reward import corridor_reward
+from kinswarm.actors.learning.settings import LearnerSettings
+from kinswarm.protocol import codec
+from kinswarm.protocol.messages import EpochDone, Obs, Task
+from kinswarm.protocol.topology import TopologyError, load_topology, parse_topology
+from kinswarm.sim.kinematics import frames
+from kinswarm.sim.obstacles import Scene, SceneError
+from kinswarm.sim.world import World
+
+CORRIDOR = EXAMPLES / "corridor7.toml"
+RADIUS = 0.1  # the capsule radius of sim/urdf.py
+
+
+def _doc(obstacles: list[dict], n: int = 2, initial: float = 0.0) -> dict:
+    agents = [{"id": "a1", "initial_deg": initial}]
+    agents += [{"id": f"a{i}", "parent": f"a{i - 1}", "initial_deg": 0.0} for i in range(2, n + 1)]
+    return {"robot": {"name": "t"}, "defaults": {"link_length": 1.0}, "agent": agents, "obstacle": obstacles}
+
+
+# -- parsing ---------------------------------------------------------------------------------------
+def test_examples_parse():
+    topo = load_topology(CORRIDOR)
+    assert [o.id for o in topo.obstacles] == ["upper", "lower"]
+    upper, lower = topo.obstacles
+    assert upper.center == (4.5, 4.4) and upper.half_extents == (1.5, 2.0) and upper.angle == 0.0
+    gap = (upper.center[1] - upper.half_extents[1]) - (lower.center[1] + lower.half_extents[1])
+    assert gap == pytest.approx(0.8)
+    assert topo.goal == (5.5, 2.0) and len(topo.dof_agents) == 7 and topo.reach == pytest.approx(7.0)
+    relaxed = load_topology(EXAMPLES / "corridor7-relaxed.toml").obstacles
+    assert (relaxed[0].center[1] - relaxed[0].half_extents[1]) - (
+        relaxed[1].center[1] + relaxed[1].half_extents[1]
+    ) == pytest.approx(1.2)
+    assert load_topology(EXAMPLES / "chain4.toml").obstacles == ()
+
+
+@pytest.mark.parametrize(
+    ("obstacle", "field", "what"),
+    [
+        ({"half_extents": [1, 1]}, "obstacle[0].center", "missing"),
+        ({"center": [1, 1]}, "obstacle[0].half_extents", "missing"),
+        ({"center": [1, 1], "half_extents": [1, 0]}, "obstacle[0].half_extents", "> 0"),
+        ({"center": [1, "x"], "half_extents": [1, 1]}, "obstacle[0].center[1]", "finite number"),
+        ({"center": [1], "half_extents": [1, 1]}, "obstacle[0].center", "list of 2"),
+        ({"center": [1, 1], "half_extents": [1, 1], "size": 3}, "obstacle[0].size", "unknown field"),
+        ({"center": [1, 1], "half_extents": [1, 1], "angle_deg": True}, "obstacle[0].angle_deg", "finite"),
+        ({"center": [1, 1], "half_extents": [1, 1], "id": "a b"}, "obstacle[0].id", "letters"),
+    ],
+)
+def test_obstacle_errors_name_file_and_field(obstacle, field, what):
+    with pytest.raises(TopologyError) as e:
+        parse_topology(_doc([obstacle]), source="scene.toml")
+    assert e.value.source == "scene.toml" and e.value.where == field and what in e.value.what
+    assert str(e.value).startswith(f"scene.toml: {field}: ")
+
+
+def test_obstacle_table_errors():
+    box = {"center": [1, 1], "half_extents": [1, 1], "id": "w"}
+    with pytest.raises(TopologyError, match="duplicate obstacle id 'w'"):
+        parse_topology(_doc([box, box]), source="s.toml")
+    doc = _doc([])
+    doc["obstacle"] = {"center": [1, 1]}  # [obstacle] instead of [[obstacle]]
+    with pytest.raises(TopologyError, match=r"s.toml: obstacle: expected \[\[obstacle\]\]"):
+        parse_topology(doc, source="s.toml")
+
+
+def test_bad_file_names_the_file(tmp_path):
+    p = tmp_path / "bad.toml"
+    p.write_text(CORRIDOR.read_text().replace("half_extents = [1.5, 2.0]", "half_extents = [1.5, -2.0]", 1))
+    with pytest.raises(TopologyError, match=rf"{p}: obstacle\[0\].half_extents: both must be > 0"):
+        load_topology(p)
+
+
+# -- geometry ----------------------------------------------------------------------------------------
+def _exact_clearance(topo, angles: dict[str, float]) -> dict[str, float]:
+    """Closed form: min over the link's axis (sampled finely, then refined) of the box's signed distance,
+    minus the capsule radius; exact where the capsule is outside every box."""
+    f = frames(topo, angles)
+    out = {}
+    for a in topo.dof_agents:
+        x, y, h = f[a]
+        length = topo.agents[a].link_length
+        ts = np.linspace(0.0, length, 4001)
+        best = min(o.signed_distance(x + t * math.cos(h), y + t * math.sin(h)) for o in topo.obstacles for t in ts)
+        out[a] = best - RADIUS
+    return out
+
+
+def test_clearance_matches_geometry():
+    topo = load_topology(CORRIDOR)
+    rng = np.random.default_rng(0)
+    with World(topo) as world:
+        scene = Scene(world)
+        checked = 0
+        configs = [topo.initial_angles()]
+        offset = np.array([0.7, 0, 0, 0, 0, 0, 0])  # a1 towards the walls, the others curling at random
+        configs += [
+            dict(zip(topo.dof_agents, (rng.uniform(-0.5, 0.5, 7) + offset).tolist(), strict=True)) for _ in range(12)
+        ]
+        for angles in configs:
+            world.reset(angles)
+            got = scene.clearances()
+            want = _exact_clearance(topo, angles)
+            for a in topo.dof_agents:
+                if want[a] > 0.01:  # apart: PyBullet's distance is the exact capsule-box distance
+                    assert got[a] == pytest.approx(want[a], abs=2e-3), (angles, a)
+                    checked += 1
+                elif want[a] < -0.01:
+                    assert got[a] < 0.0, (angles, a)  # in penetration: negative
+        assert checked > 40
+
+
+def test_clearance_values_by_hand():
+    """Links along known lines: the numbers can be read off the drawing."""
+    topo = load_topology(CORRIDOR)
+    with World(topo) as world:
+        scene = Scene(world)
+        c = scene.clearances()  # start: a1 straight up from (0, 0): 3 from the walls' left faces, minus 0.1
+        assert c["a1"] == pytest.approx(2.9, abs=1e-4)
+        # all along y = 2 (a1 at 90 deg to (0, 1), a2 at 0 deg ... no: a1 0 deg, the chain along y = 0)
+        world.reset(dict.fromkeys(topo.dof_agents, 0.0))
+        c = scene.clearances()
+        assert c["a1"] == pytest.approx(1.9, abs=1e-4)  # x in [0, 1]: 2 from the face x = 3
+        assert c["a2"] == pytest.approx(0.9, abs=1e-4)
+        assert c["a3"] == pytest.approx(-0.1, abs=1e-4)  # its tip's cap is 0.1 into the lower wall
+        assert c["a5"] < -1.0  # deep inside the lower wall
+
+
+def _one_wall_topology(tmp_path: Path, gap: float = 0.05) -> Path:
+    """Two links along +x from the origin; a wall whose bottom face lies `gap` above the capsules' surface."""
+    bottom = RADIUS + gap
+    p = tmp_path / "wall.toml"
+    p.write_text(
+        '[robot]\nname = "wall"\n[defaults]\nlink_length = 1.0\n'
+        '[[agent]]\nid = "a1"\n[[agent]]\nid = "a2"\nparent = "a1"\n[task]\ngoal = [1.5, -0.5]\n'
+        f"[[obstacle]]\ncenter = [1.0, {bottom + 1.0}]\nhalf_extents = [3.0, 1.0]\n"
+    )
+    return p
+
+
+def test_penetrating_move_is_refused_and_reported(tmp_path):
+    topo = load_topology(_one_wall_topology(tmp_path))
+    up, down = math.radians(5.0), -math.radians(5.0)
+    with World(topo) as world:
+        scene = Scene(world)
+        assert scene.clearances()["a2"] == pytest.approx(0.05, abs=1e-4)
+        # a1 up would lift the tip 2 sin(5 deg) = 0.17 > 0.05 into the wall: refused; a2 down is free
+        m = scene.move({"a1": up, "a2": down})
+        assert m.refused == ("a1",)
+        assert m.applied["a1"] == 0.0 and m.applied["a2"] == pytest.approx(down)
+        q = world.joint_positions()
+        assert q["a1"] == 0.0 and q["a2"] == pytest.approx(down)
+        assert min(m.clearance.values()) >= -1e-6 and m.clearance == pytest.approx(scene.clearances())
+        # both free: applied together, nothing refused
+        m = scene.move({"a1": down, "a2": up})
+        assert m.refused == () and m.applied == pytest.approx({"a1": down, "a2": up})
+        # every joint into the wall: all refused, nothing moves
+        world.reset({"a1": 0.0, "a2": 0.0})
+        m = scene.move({"a1": up, "a2": up})
+        assert set(m.refused) == {"a1", "a2"} and world.joint_positions() == {"a1": 0.0, "a2": 0.0}
+
+
+def test_start_inside_a_wall_is_an_error(tmp_path):
+    p = tmp_path / "in.toml"
+    p.write_text(
+        '[robot]\nname = "in"\n[[agent]]\nid = "a1"\nlink_length = 1.0\n'
+        "[[obstacle]]\ncenter = [0.5, 0.0]\nhalf_extents = [0.2, 0.2]\n"
+    )
+    topo = load_topology(p)
+    with World(topo) as world:
+        with pytest.raises(SceneError, match=rf"{p}: initial_deg: .*\['a1'\] inside an obstacle"):
+            Scene(world).check_start(topo.source)
+
+
+# -- wire ------------------------------------------------------------------------------------------
+def test_scene_fields_round_trip():
+    key, run = b"k" * 16, "r1"
+    for m in (
+        Obs(epoch=1, step=2, q=0.5, clearance=0.25, collided=1),
+        Obs(epoch=1, step=2, q=0.5),
+        Task(epoch=0, step=3, goal=(5.5, 2.0), tips={"a7": (1.0, 2.0, 0.0)}, clearance=-0.0, collisions=2),
+        EpochDone(
+            epoch=0,
+            steps=2,
+            final_error=1.0,
+            mean_error=1.0,
+            errors=[1.0, 1.0],
+            final_angles={"a1": 0.1},
+            missed_cmds=0,
+            seconds=0.1,
+            max_step_seconds=0.01,
+            collisions=[0, 3],
+            clearance=[0.2, 0.0],
+        ),
+    ):
+        assert codec.decode(codec.encode(m, run, "sim", key), type(m), run, key) == m
+
+
+# -- rewards ---------------------------------------------------------------------------------------
+def test_eq11_as_printed():
+    r = corridor_reward
+    assert r(4.0, 4.5, 1.0, 0, "paper") == -2.0  # outside D_min
+    assert r(4.0, 4.5, 0.0, 3, "paper") == -2.0  # outside D_min a collision costs nothing extra
+    assert r(2.0, 1.9, 1.0, 0, "paper") == -1.0  # inside, moving away
+    assert r(2.0, 1.9, 0.0, 1, "paper") == -1.0  # ... with a collision: still -1 (the case order)
+    assert r(2.0, 2.1, 1.0, 0, "paper") == pytest.approx(math.exp(-0.5 * 2.0))  # inside, approaching, clear
+    assert r(2.0, 2.1, 0.05, 0, "paper") == pytest.approx(-math.exp(-0.5 * 0.05))  # close to collide
+    assert r(2.0, 2.1, 0.3, 1, "paper") == pytest.approx(-math.exp(-0.5 * 0.3))  # a refused move
+    assert r(2.0, 2.0, 1.0, 0, "paper") == pytest.approx(math.exp(-1.0))  # Delta D = 0 counts as approaching
+    assert -1.0 <= r(2.0, 2.1, 0.0, 5, "paper") < 0  # the issue's point: never below -1
+
+
+def test_corridor_variants():
+    r = corridor_reward
+    # strict: the collision case first, replacing the rest, at most -5 e^(-c2 d_safe): below every other case
+    assert r(4.0, 4.5, 0.0, 1, "strict") == pytest.approx(-5.0)
+    assert r(1.0, 1.2, 0.05, 0, "strict") == pytest.approx(-5.0 * math.exp(-0.025))
+    assert r(4.0, 4.5, 0.5, 0, "strict") == -2.0
+    for mode in ("strict", "shaped"):
+        assert r(2.0, 2.1, 0.5, 0, mode) == pytest.approx(math.exp(-1.0))  # clear: Eq. 10 inside
+        assert r(2.0, 2.0, 0.5, 0, mode) == 0.0  # still: 0
+    # shaped: Eq. 10 shaped, the collision term added
+    assert r(4.0, 4.1, 0.5, 0, "shaped") == pytest.approx(-2.0 + 20 * 0.1)
+    assert r(4.0, 4.1, 0.0, 1, "shaped") == pytest.approx(-2.0 + 20 * 0.1 - 5.0)
+    assert r(1.0, 1.2, 0.05, 0, "shaped") == pytest.approx(math.exp(-0.5) - 5.0 * math.exp(-0.025))
+    with pytest.raises(ValueError, match="unknown reward mode"):
+        r(1.0, 1.0, 1.0, 0, "geodesic?")
+
+
+# -- learner settings ---------------------------------------------------------------------------------
+def test_scene_state_settings():
+    st = LearnerSettings(clearance_state=True, collision_state=True, clearance_sets=4)
+    assert st.state_names[-2:] == ("clearance", "collided") and st.state_sets[-2:] == (4, 2)
+    assert st.state_ranges[-2:] == ((0.0, 1.0), (0.0, 1.0))
+    fp = FuzzyPartition(st)
+    state = np.array([0.1, 0.2, 3.0, 1.0, -1.0, 0.3, 0.4, 1.0])
+    rules, O = fp.activate(state)  # noqa: E741 -- Eq. 4
+    ref_rules, ref_O = fp.activate_reference(state)
+    assert len(rules) == 2**8 and (O > 0).all() and fp.n_rules == 1_783_600 * 4 * 2
+    order, ref_order = np.argsort(rules), np.argsort(ref_rules)
+    assert (rules[order] == ref_rules[ref_order]).all()
+    np.testing.assert_allclose(O[order], ref_O[ref_order], rtol=1e-12)
+    # the flag is felt: refused (1.0) and not (0.0) fire the same rules with different weights
+    r0, o0 = fp.activate(np.concatenate((state[:-1], [0.0])))
+    w1, w0 = dict(zip(rules.tolist(), O.tolist(), strict=True)), dict(zip(r0.tolist(), o0.tolist(), strict=True))
+    assert w1.keys() == w0.keys() and max(abs(w1[k] - w0[k]) for k in w1) > 0.01
+    assert len(LearnerSettings().state_sets) == 6
+    with pytest.raises(ValueError, match="collision_penalty must be <= 0"):
+        LearnerSettings(collision_penalty=1.0)
+    with pytest.raises(ValueError, match="clearance_state must be true or false"):
+        LearnerSettings(clearance_state=1)  # type: ignore[arg-type]
+    cfg = RunConfig(run_id="r", topology=str(EXAMPLES / "chain4.toml"), out="/tmp/x", learner={"clearance_state": True})
+    with pytest.raises(ValueError, match="need a scene with obstacles.*chain4.toml"):
+        learner_settings(cfg, cfg.topo())
+
+
+# -- a run through the corridor ---------------------------------------------------------------------
+@pytest.mark.timeout(120)
+def test_corridor_run_walls_are_solid(tmp_path, endpoint):
+    out = tmp_path / "run"
+    args = ["run", str(CORRIDOR), "--placement", "single", "--epochs", "2", "--steps", "250", "--seed", "1"]
+    args += ["--listen", endpoint, "--out", str(out), "--no-progress", "--reward", "shaped"]
+    args += ["--learner", "clearance_state=true", "--learner", "collision_state=true"]
+    args += ["--learner", "collision_penalty=-5"]
+    assert cli_main(args) == 0
+    rows = [json.loads(line) for line in (out / "metrics.jsonl").read_text().splitlines()]
+    assert len(rows) == 2
+    for r in rows:
+        assert len(r["collisions"]) == len(r["clearance"]) == 250
+        assert min(r["clearance"]) >= -1e-5  # never inside a wall
+    assert sum(sum(r["collisions"]) for r in rows) > 0  # exploring from scratch, it bumps into the walls
+    for f in ("corridor.png", "learning_curve.png", "arm.png", "summary.json"):
+        assert (out / f).is_file(), f
