@@ -35,6 +35,7 @@ from pathlib import Path
 import numpy as np
 from kinswarm.actors.checkpoint import CheckpointError, digest, load_checkpoint, load_latest, save_checkpoint
 from kinswarm.actors.config import RunConfig
+from kinswarm.actors.learning.grasp import GraspReward, grasp_learner_settings
 from kinswarm.actors.learning.learner import Learner
 from kinswarm.actors.learning.reward import corridor_reward, reach_reward
 from kinswarm.actors.learning.settings import LearnerSettings
@@ -51,7 +52,12 @@ def agent_seed(seed: int, agent: str) -> list[int]:
     return [seed, zlib.crc32(agent.encode())]
 
 
-def learner_settings(cfg: RunConfig, topo: Topology) -> LearnerSettings:
+def learner_settings(cfg: RunConfig, topo: Topology, agent_id: str | None = None) -> LearnerSettings:
+    if topo.object is not None and agent_id is not None:  # a grasp scene: the finger agents' kinds
+        obj = topo.object
+        finger = max(sum(topo.agents[a].link_length for a in _path(topo, leaf)) for leaf in topo.end_effectors)
+        fn_max = (obj.kn + obj.cn) * obj.max_depth
+        return grasp_learner_settings(finger, topo.agents[agent_id].is_leaf, fn_max, cfg.learner)
     settings = LearnerSettings.for_reach(topo.reach, **cfg.learner)
     if (settings.clearance_state or settings.collision_state) and not topo.obstacles:
         raise ValueError(
@@ -89,9 +95,20 @@ class Agent:
         # exactly the tips reported (computed once per x, not per message)
         self.child_by_tips: dict[str, dict[frozenset[str], str]] = {}
         self.learner: Learner | None = None
+        self.extra_state: tuple[str, ...] = ()
+        self.sense_now: dict[str, float] = {}
         self.epochs_before = 0  # epochs trained before this run (from --from), for the lr schedule
         if self.spec.has_dof:
-            self.learner = Learner(learner_settings(cfg, topo), len(self.visible), agent_seed(cfg.seed, agent_id))
+            settings = learner_settings(cfg, topo, agent_id)
+            self.learner = Learner(settings, len(self.visible), agent_seed(cfg.seed, agent_id))
+            self.extra_state = settings.extra_state
+        # a grasp scene's root is the grasp agent: per-finger rewards and force errors (learning/grasp.py)
+        self.grasp: GraspReward | None = None
+        obj = topo.object
+        if self.is_root and obj is not None:
+            self.grasp = GraspReward(cfg.reward, obj.grasp, obj.center, obj.half_extents)
+            self.finger_of = {c: topo.subtree_leaves(c)[0] for c in self.spec.children}
+        self.grasp_in: dict[Key, dict[str, float]] = {}  # my own Obs.sense by step (a fingertip's contact)
         self.epoch = -1
         self.last_begun: Key = (-1, -1)
         self.last_finished: Key = (-1, -1)
@@ -208,6 +225,8 @@ class Agent:
                         self.q_in[agent][(m.epoch, m.step)] = m.q
                         if agent == self.id and m.clearance is not None:
                             self.sense_in[(m.epoch, m.step)] = (m.clearance, m.collided)
+                        if m.sense and agent == self.id:
+                            self.grasp_in[(m.epoch, m.step)] = m.sense
                         self._try_begin((m.epoch, m.step))
             elif kind.endswith("/down") or kind == "sim/task":
                 m2 = node.decode(key, payload, Task if self.is_root else Down)
@@ -296,7 +315,12 @@ class Agent:
             self.learner.resync(step)  # a missed step: no TD update across the gap
         self._announce(adopted)
 
-        if isinstance(head, Task):  # the root: the world's base, the reward from the task observation
+        per_child: dict[str, tuple[tuple[float, float], float | None, dict[str, float]]] = {}
+        ctx: dict[str, float] = {}  # Down.sense: context from above (a finger's force error)
+        if isinstance(head, Task) and self.grasp is not None:  # the grasp agent (paper §5.5)
+            base, goal, reward = self.topo.base, head.goal, None
+            per_child = self._grasp_down(head, step)
+        elif isinstance(head, Task):  # the root: the world's base, the reward from the task observation
             base = self.topo.base
             goal = head.goal
             D = _distance(_centroid([head.tips[leaf] for leaf in self.leaves if leaf in head.tips]), goal)
@@ -308,13 +332,18 @@ class Agent:
                 reward = reach_reward(D, self.D_prev, self.cfg.reward)
             self.D_prev = D
         else:
-            base, goal, reward = head.base, head.goal, head.reward
+            base, goal, reward, ctx = head.base, head.goal, head.reward, head.sense
+        self.sense_now = {**ctx, **self.grasp_in.pop(key, {})}
+        if self.grasp_in:
+            self.grasp_in = {kk: v for kk, v in self.grasp_in.items() if kk > key}
         frame = joint_frame(base, self.spec.offset, q.get(self.id, 0.0))
         end = link_end(frame, self.spec.link_length)
         tips: dict[str, tuple[float, float, float]] = {}
         for child, child_base in self._frames_below(self.id, end, q, tips):
+            c_goal, c_reward, c_sense = per_child.get(child, (goal, reward, ctx))
             self.node.send(
-                self.keys.down(child), Down(epoch=epoch, step=step, base=child_base, goal=goal, reward=reward)
+                self.keys.down(child),
+                Down(epoch=epoch, step=step, base=child_base, goal=c_goal, reward=c_reward, sense=c_sense),
             )
         self.current = _Step(
             key,
@@ -411,6 +440,8 @@ class Agent:
             reward = cur.reward
             if cur.sense[0] is not None:
                 s, reward = self._scene_state(s, reward, cur.sense)
+            if self.extra_state:  # named extra variables (a grasp finger's force error, contact force)
+                s = np.concatenate([s, [self.sense_now.get(n, 0.0) for n in self.extra_state]])
             action = self.learner.decide(s, reward, learn=self.cfg.learn, explore=self.cfg.explore)
             self.decided = (cur.key, action)
             if self.visible:
@@ -445,6 +476,21 @@ class Agent:
         if reward is not None and collided:
             reward += st.collision_penalty
         return s, reward
+
+    def _grasp_down(
+        self, task: Task, step: int
+    ) -> dict[str, tuple[tuple[float, float], float | None, dict[str, float]]]:
+        """Per finger: its goal (its grasp point), its reward r(t-1) and its force error, from the task
+        observation (the sim's contact readings)."""
+        assert self.grasp is not None and self.topo.object is not None
+        if step == 0:
+            self.grasp.reset()
+        rewards, context = self.grasp.step(task.tips, task.sense)
+        out = {}
+        for child, leaf in self.finger_of.items():
+            r = None if rewards is None else rewards[leaf]
+            out[child] = (self.topo.object.grasp[leaf], r, {"force_error": context[leaf]})
+        return out
 
     def _observe(self, cur: _Step) -> None:
         """Hand the learner its visible children's actions of the step before `cur`, which their `up` of
@@ -500,6 +546,15 @@ class Agent:
                 error = f"cannot write {path}: {e}"
                 self.node.log.error(error)
         self.node.send(self.keys.rep("agent", self.id), Saved(epoch=m.epoch, path=str(path), error=error))
+
+
+def _path(topo: Topology, leaf: str) -> list[str]:
+    """The agents from the root down to `leaf`."""
+    out, a = [], leaf
+    while a is not None:
+        out.append(a)
+        a = topo.agents[a].parent
+    return out[::-1]
 
 
 def _below(topo: Topology, agent: str) -> Iterator[str]:

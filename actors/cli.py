@@ -15,6 +15,7 @@ from pathlib import Path
 
 from kinswarm.actors.checkpoint import CheckpointError, load_checkpoint
 from kinswarm.actors.config import PLACEMENTS, REWARDS, ConfigError, RunConfig
+from kinswarm.actors.learning.grasp import scene_reward_problem
 from kinswarm.actors.runtime import DEFAULT_LISTEN, open_session, setup_logging
 from kinswarm.protocol.faults import FAULTS
 from kinswarm.protocol.messages import EpochDone
@@ -175,6 +176,8 @@ def _resolve(a: argparse.Namespace, controller: str) -> tuple[RunConfig, Topolog
         learner=_learner(getattr(a, "learner", []), topo),
     )
     cfg.resolved_goal(topo)
+    if (problem := scene_reward_problem(topo.object is not None, cfg.reward)) is not None:
+        raise ConfigError(f"--reward {cfg.reward}: {problem} ({topo.source})")
     if a.scenario:  # refuse a bad scenario before anything starts
         from kinswarm.actors.scenario import load_scenario
 

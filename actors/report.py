@@ -138,6 +138,10 @@ def write_plots(run_dir: Path) -> list[Path]:
         fig.savefig(run_dir / "tracking.png", dpi=110)
         plt.close(fig)
         written.append(run_dir / "tracking.png")
+    if topo.object is not None:  # a grasp scene (paper §5.5): the fingers, forces, friction cones
+        from kinswarm.actors.grasp_report import write_grasp_plots
+
+        written += write_grasp_plots(run_dir, topo, rows, plt)
     return written
 
 
@@ -193,5 +197,10 @@ def write_summary(run_dir: Path, extra: dict[str, Any]) -> dict[str, Any]:
         "steps_per_second": steps / sim_seconds if sim_seconds > 0 else 0.0,
         **extra,
     }
+    topo = cfg.topo()
+    if topo.object is not None:  # a grasp scene: the grasp's quality per epoch
+        from kinswarm.actors.grasp_report import grasp_summary
+
+        summary["grasp"] = grasp_summary(rows, topo)
     (run_dir / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
     return summary

@@ -612,6 +612,8 @@ class Supervisor:
         }
         if d.collisions or d.clearance:  # scenes with obstacles: refused increments, smallest clearance per step
             row["collisions"], row["clearance"] = d.collisions, d.clearance
+        if d.traces:  # a scene's per-step series (grasp forces)
+            row["traces"] = d.traces
         self.metrics_file.write(json.dumps(row) + "\n")
         self.metrics_file.flush()
 

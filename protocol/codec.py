@@ -185,6 +185,10 @@ def _fast_field(name: str, tp: Any, lines: list[str]) -> bool:
     elif (n := vec_len(tp)) is not None:
         lines += vec(name, n)
         lines.append(f"{name} = tuple({name})")
+    elif origin is dict and get_args(tp) == (str, float):
+        lines.append(f"if type({name}) is not dict: return None")
+        lines.append(f"for k, v in {name}.items():")
+        lines.append(f"    if type(k) is not str or not ({finite.format(x='v')}): return None")
     elif origin is dict and get_args(tp)[0] is str and (n := vec_len(get_args(tp)[1])) is not None:
         lines.append(f"if type({name}) is not dict: return None")
         lines.append(f"for k, v in {name}.items():")

@@ -12,7 +12,8 @@ from typing import ClassVar
 
 SCHEMA_VERSION = 4  # 2: faults, events, status, bye; payloads carry a MAC (codec.py). 3: Up.action is the
 # sender's action of the step before (sent before it learns), plus a closing Up after an epoch's last step.
-# 4: scenes with obstacles (§5.4): Obs.clearance/collided, Task.clearance/collisions, EpochDone.collisions/clearance
+# 4: scenes with obstacles (§5.4): Obs.clearance/collided, Task.clearance/collisions, EpochDone.collisions/clearance;
+# the grasp scene (§5.5): `sense` maps on Obs, Task and Down (contacts, force errors), `traces` on EpochDone
 
 Vec2 = tuple[float, float]
 Vec3 = tuple[float, float, float]
@@ -32,6 +33,9 @@ class Obs:
     q: float
     clearance: float | None = None
     collided: int = 0
+    # the agent's own named local readings beyond q_i, e.g. a fingertip's contact ("fn", "ft", "margin",
+    # "contact"); empty when the scene gives it none
+    sense: dict[str, float] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -47,6 +51,9 @@ class Task:
     # of step-1 were refused as penetrating (the collisions of Eq. 11)
     clearance: float | None = None
     collisions: int = 0
+    # named task observations of the scene, e.g. a grasp's "net_fx", "net_fy", "net_torque" and per
+    # fingertip "fn/<leaf>", "ft/<leaf>", "margin/<leaf>", "contact/<leaf>"; empty for reaching
+    sense: dict[str, float] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -59,6 +66,8 @@ class Down:
     base: Vec3
     goal: Vec2
     reward: float | None
+    # named context from above for the child's state, e.g. a grasp agent's "force_error" for one finger
+    sense: dict[str, float] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -115,6 +124,7 @@ class EpochDone:
     # link clearance after the step's joint actions
     collisions: list[int] = field(default_factory=list)
     clearance: list[float] = field(default_factory=list)
+    traces: dict[str, list[float]] = field(default_factory=dict)  # per-step series of a scene (grasp forces)
 
 
 @dataclass(frozen=True)

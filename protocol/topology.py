@@ -24,6 +24,18 @@ goal = [4.16, 6.18]             # default goal (x, y) for reaching
 [[obstacle]]                    # optional static boxes (walls of a corridor): see obstacles.py
 center = [4.5, 4.4]
 half_extents = [1.5, 2.0]
+
+[object]                        # optional: a fixed rectangular object to grasp (paper §5.5, "infinite mass")
+center = [0.0, 0.0]             # x, y of its centre
+half_extents = [1.0, 0.6]       # half width (x) and half height (y), axis-aligned
+mu = 0.5                        # Coulomb friction coefficient (Fig. 24a)
+kn = 20.0                       # normal spring (force / length), Fig. 25
+kt = 20.0                       # tangential spring (force / length)
+cn = 2.0                        # normal damper (force / (length / time unit))
+ct = 2.0                        # tangential damper
+max_depth = 0.3                 # the object is solid: no link may sink deeper than this
+[object.grasp]                  # the grasp point (goal) of every end effector, on the object's boundary
+f1_4 = [-1.0, 0.0]
 ```
 
 Trees, not only chains: an agent may have several children, and every leaf is an end effector.
@@ -73,6 +85,26 @@ class AgentSpec:
 
 
 @dataclass(frozen=True)
+class ObjectSpec:
+    """A fixed rectangular object (paper §5.5) and the contact model's constants (Fig. 25)."""
+
+    center: tuple[float, float]
+    half_extents: tuple[float, float]
+    mu: float
+    kn: float
+    kt: float
+    cn: float
+    ct: float
+    max_depth: float
+    grasp: dict[str, tuple[float, float]]  # end effector -> grasp point (its goal)
+
+    @property
+    def char_length(self) -> float:
+        """The object's characteristic length (its larger half-extent): torque / char_length is a force."""
+        return max(self.half_extents)
+
+
+@dataclass(frozen=True)
 class Topology:
     name: str
     agents: dict[str, AgentSpec]
@@ -82,6 +114,7 @@ class Topology:
     goal: tuple[float, float] | None
     source: str = field(default="<memory>")
     obstacles: tuple[ObstacleSpec, ...] = ()  # static boxes of the scene ([[obstacle]], protocol/obstacles.py)
+    object: ObjectSpec | None = None  # a grasp scene's object ([object] table)
 
     @property
     def dof_agents(self) -> tuple[str, ...]:
@@ -136,9 +169,11 @@ _AGENT_KEYS = {"id", "parent", "link_length", "limits_deg", "initial_deg", "offs
 def parse_topology(data: dict[str, Any], source: str = "<memory>") -> Topology:
     """Validate a parsed TOML document and build the Topology; errors name source and field."""
     src = source
-    unknown = set(data) - {"robot", "defaults", "agent", "task", "obstacle"}
+    unknown = set(data) - {"robot", "defaults", "agent", "task", "obstacle", "object"}
     if unknown:
-        raise TopologyError(src, sorted(unknown)[0], "unknown table (expected robot, defaults, agent, task, obstacle)")
+        raise TopologyError(
+            src, sorted(unknown)[0], "unknown table (expected robot, defaults, agent, task, obstacle, object)"
+        )
     robot = data.get("robot", {})
     if not isinstance(robot, dict):
         raise TopologyError(src, "robot", "must be a table")
@@ -234,6 +269,9 @@ def parse_topology(data: dict[str, Any], source: str = "<memory>") -> Topology:
         raise TopologyError(src, f"task.{sorted(bad)[0]}", "unknown field")
     goal = _vec(src, "task.goal", task["goal"], 2) if "goal" in task else None
 
+    leaves = [a for a in order if not agents[a].children]
+    obj = _parse_object(src, data["object"], leaves) if "object" in data else None
+
     return Topology(
         name=name,
         agents=agents,
@@ -243,6 +281,7 @@ def parse_topology(data: dict[str, Any], source: str = "<memory>") -> Topology:
         goal=goal,  # type: ignore[arg-type]
         source=src,
         obstacles=parse_obstacles(data.get("obstacle"), src),
+        object=obj,
     )
 
 
@@ -257,3 +296,49 @@ def load_topology(path: str | Path) -> Topology:
     except tomllib.TOMLDecodeError as e:
         raise TopologyError(str(path), "toml", str(e)) from None
     return parse_topology(data, source=str(path))
+
+
+_OBJECT_KEYS = ("center", "half_extents", "mu", "kn", "kt", "cn", "ct", "max_depth", "grasp")
+
+
+def _parse_object(src: str, table: Any, leaves: list[str]) -> ObjectSpec:
+    """The `[object]` table of a grasp scene: every number checked, every end effector given a grasp point
+    on the object's boundary."""
+    if not isinstance(table, dict):
+        raise TopologyError(src, "object", "must be a table")
+    bad = set(table) - set(_OBJECT_KEYS)
+    if bad:
+        raise TopologyError(src, f"object.{sorted(bad)[0]}", f"unknown field (expected {', '.join(_OBJECT_KEYS)})")
+    missing = [k for k in _OBJECT_KEYS if k not in table]
+    if missing:
+        raise TopologyError(src, f"object.{missing[0]}", "missing")
+    cx, cy = _vec(src, "object.center", table["center"], 2)
+    hx, hy = _vec(src, "object.half_extents", table["half_extents"], 2)
+    if hx <= 0 or hy <= 0:
+        raise TopologyError(src, "object.half_extents", f"both must be > 0, got [{hx}, {hy}]")
+    consts: dict[str, float] = {}
+    for k in ("mu", "kn", "kt", "cn", "ct", "max_depth"):
+        v = _num(src, f"object.{k}", table[k])
+        positive = k in ("kn", "kt", "max_depth")
+        if v < 0 or (positive and v == 0):
+            raise TopologyError(src, f"object.{k}", f"must be {'> 0' if positive else '>= 0'}, got {v}")
+        consts[k] = v
+    grasp_t = table["grasp"]
+    if not isinstance(grasp_t, dict):
+        raise TopologyError(src, "object.grasp", "must be a table of end effector = [x, y]")
+    grasp: dict[str, tuple[float, float]] = {}
+    for leaf, point in grasp_t.items():
+        where = f"object.grasp.{leaf}"
+        if leaf not in leaves:
+            raise TopologyError(src, where, f"{leaf!r} is not an end effector (leaves: {', '.join(leaves)})")
+        gx, gy = _vec(src, where, point, 2)
+        dx, dy = abs(gx - cx), abs(gy - cy)
+        tol = 1e-6 * max(1.0, hx, hy)
+        on_edge = (abs(dx - hx) <= tol and dy <= hy + tol) or (abs(dy - hy) <= tol and dx <= hx + tol)
+        if not on_edge:
+            raise TopologyError(src, where, f"[{gx}, {gy}] is not on the object's boundary")
+        grasp[leaf] = (gx, gy)
+    lacking = [leaf for leaf in leaves if leaf not in grasp]
+    if lacking:
+        raise TopologyError(src, "object.grasp", f"no grasp point for end effector(s) {', '.join(lacking)}")
+    return ObjectSpec(center=(cx, cy), half_extents=(hx, hy), grasp=grasp, **consts)

@@ -27,6 +27,7 @@ from kinswarm.actors.scenario import ScenarioEntry, load_scenario
 from kinswarm.protocol.faults import DISTURB_AMPLITUDE_DEG, JOINT_FAULTS, check_fault, describe, expand_targets
 from kinswarm.protocol.messages import Bye, Cmd, EpochDone, EpochStart, Event, Fault, JointStatus, Obs, Stop, Task
 from kinswarm.protocol.topology import Topology
+from kinswarm.sim.contact import GraspScene
 from kinswarm.sim.obstacles import Scene
 from kinswarm.sim.world import World
 
@@ -62,6 +63,9 @@ class SimActor:
             except BaseException:
                 self.world.close()
                 raise
+        # a grasp scene (paper §5.5): the object, the fingertips' contacts, the net wrench (sim/contact.py)
+        self.grasp = GraspScene(self.world, topo.object) if topo.object is not None else None
+        self.traces: dict[str, list[float]] = {}
         self.dof = topo.dof_agents
         self.dof_set = frozenset(self.dof)
         self._obs_first = [a for a in self.dof if a == topo.root]  # the root's reading goes out with the task
@@ -176,6 +180,9 @@ class SimActor:
         if self.scene is not None:
             self.clearance, self.refused = self.scene.clearances(), ()
             self.collisions, self.min_clearance = [], []
+        if self.grasp is not None:
+            self.grasp.reset()
+            self.traces = {}
         self.t = 0
         self.errors = []
         self.missed = 0
@@ -319,6 +326,8 @@ class SimActor:
         # reach it in one burst (one wake-up); the others' readings are needed only a hop later.
         if self.scene is not None:
             self._publish_scene_step(e, q)
+        elif self.grasp is not None:
+            self._publish_grasp_step(e, q)
         else:
             for a in self._obs_first:
                 send(k.obs(a), Obs(epoch=e.epoch, step=self.t, q=q[a]))
@@ -366,7 +375,10 @@ class SimActor:
             self._deadline.cancel()
             self._deadline = None
         faulted = bool(self.locked or self.disturbed)
+        q_before = self.world.joint_positions() if self.grasp is not None else None
         self.applied = self._move(self._increments() if faulted else self.cmds)
+        if q_before is not None:
+            self._grasp_after_move(q_before)
         self.tips = self.world.tip_poses()
         self.errors.append(self.error())
         self.longest_step = max(self.longest_step, time.perf_counter() - self.step_started)
@@ -391,14 +403,56 @@ class SimActor:
                 max_step_seconds=self.longest_step,
                 collisions=list(self.collisions),
                 clearance=[round(v, 5) for v in self.min_clearance],
+                traces=self.traces,
             ),
         )
         self.epoch = None
 
     def error(self) -> float:
-        """End-effector distance to the goal (the centroid of the end effectors for a tree)."""
+        """End-effector distance to the goal (the centroid of the end effectors for a tree); in a grasp
+        scene, the fingertips' mean distance to their grasp points."""
         assert self.epoch is not None
+        if self.grasp is not None:
+            return self.grasp.goal_error(self.tips)
         tips = list(self.tips.values())
         x = sum(p[0] for p in tips) / len(tips)
         y = sum(p[1] for p in tips) / len(tips)
         return math.hypot(x - self.epoch.goal[0], y - self.epoch.goal[1])
+
+    # -- the grasp scene (paper §5.5) ----------------------------------------------------------------
+    def _publish_grasp_step(self, e: EpochStart, q: dict[str, float]) -> None:
+        """The step's messages with the contact readings: the task observation carries the net wrench and
+        every contact (Task.sense), each fingertip agent its own contact (Obs.sense)."""
+        assert self.grasp is not None
+        k, send, g = self.keys, self.node.send, self.grasp
+        for a in self._obs_first:
+            send(k.obs(a), Obs(epoch=e.epoch, step=self.t, q=q[a]))
+        send(k.task, Task(epoch=e.epoch, step=self.t, goal=e.goal, tips=self.tips, sense=g.task_sense()))
+        for a in self._obs_after:
+            sense = g.tip_sense(a) if a in g.readings else {}
+            send(k.obs(a), Obs(epoch=e.epoch, step=self.t, q=q[a], sense=sense))
+
+    def _grasp_after_move(self, q_before: dict[str, float]) -> None:
+        """The object is solid: a finger whose move sank a link deeper than max_depth goes back (its joints
+        hold this step, counted as blocked); then the contact model advances one time unit."""
+        g = self.grasp
+        assert g is not None
+        deep = g.too_deep()
+        if deep:
+            q = self.world.joint_positions()
+            for leaf in deep:
+                for a in g.fingers[leaf]:
+                    q[a] = q_before[a]
+                    self.applied[a] = 0.0
+            self.world.reset(q)
+            g.blocked += len(deep)
+        g.sense_contacts()
+        fx, fy, tau = g.wrench
+        row = {"net_fx": fx, "net_fy": fy, "net_torque": tau}
+        for leaf, r in g.readings.items():
+            row[f"fn/{leaf}"] = r.fn
+            row[f"ft/{leaf}"] = r.ft
+            row[f"margin/{leaf}"] = r.margin
+            row[f"contact/{leaf}"] = 1.0 if r.contact else 0.0
+        for name, v in row.items():
+            self.traces.setdefault(name, []).append(round(v, 5))

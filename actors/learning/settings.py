@@ -8,6 +8,8 @@ from dataclasses import dataclass, replace
 #: Names of the six state variables S_i = <q_i, theta_i, d_i, g1, g2, g3> (paper §3.3).
 STATE_NAMES: tuple[str, ...] = ("q", "theta", "d", "g1", "g2", "g3")
 BOOTSTRAPS: tuple[str, ...] = ("joint_max", "expected")
+#: State of a grasp scene's finger agents (paper §5.5), see `grasp_state` below.
+GRASP_STATES: tuple[str, ...] = ("reach", "force", "contact")
 
 #: Reach of the paper's planar 4R chain (4 links of length 3); default ranges scale with it.
 DEFAULT_REACH = 12.0
@@ -44,6 +46,15 @@ class LearnerSettings:
             "expected" = max over own actions of E(s', .) (Eq. 9), i.e. what the agent can choose.
         count_prior: initial fictitious-play count of every action, so Eq. 7 is defined at the start.
         n_actions: own actions (0 decrease, 1 keep, 2 increase).
+        extra_state, extra_sets, extra_ranges: named state variables appended to S_i (after the scene
+            variables below), read from the agent's `sense` (its own Obs.sense and the Down.sense from its
+            parent), with their membership sets and ranges. Empty for reaching; set per agent from
+            `grasp_state` in a grasp scene (actors/learning/grasp.py, grasp_learner_settings).
+        grasp_state: the finger agents' state in a grasp scene (paper §5.5): "reach" = the paper's S_i
+            (6 variables, goal = the finger's grasp point); "force" (default) = S_i + force_error, the
+            grasp agent's (fn_i - fn_i*) / f_grip for the finger, sent down the finger; "contact" = "force"
+            plus, for fingertip agents only, their own normal force fn from the contact reading.
+            Every agent's action is the same: -1, 0, +1 times the run's action size (`action_deg`).
 
     Scenes with obstacles (paper §5.4; the corridor): the agent's obs carries its own link's signed clearance
     and whether its own increment was refused by a wall. Both are off by default (the paper's six variables):
@@ -80,20 +91,28 @@ class LearnerSettings:
     clearance_range: tuple[float, float] = (0.0, 1.0)
     collision_state: bool = False
     collision_penalty: float = 0.0
+    extra_state: tuple[str, ...] = ()
+    extra_sets: tuple[int, ...] = ()
+    extra_ranges: tuple[tuple[float, float], ...] = ()
+    grasp_state: str = "force"
 
     @property
     def state_names(self) -> tuple[str, ...]:
         """Names of the state variables: STATE_NAMES, then "clearance" and "collided" when enabled."""
-        return STATE_NAMES + ("clearance",) * self.clearance_state + ("collided",) * self.collision_state
+        base = STATE_NAMES + ("clearance",) * self.clearance_state + ("collided",) * self.collision_state
+        return base + self.extra_state
 
     @property
     def state_sets(self) -> tuple[int, ...]:
         """Membership sets per state variable (n_sets, then those of the optional scene variables)."""
-        return self.n_sets + (self.clearance_sets,) * self.clearance_state + (2,) * self.collision_state
+        return (
+            self.n_sets + (self.clearance_sets,) * self.clearance_state + (2,) * self.collision_state + self.extra_sets
+        )
 
     @property
     def state_ranges(self) -> tuple[tuple[float, float], ...]:
-        return self.ranges + (self.clearance_range,) * self.clearance_state + ((0.0, 1.0),) * self.collision_state
+        base = self.ranges + (self.clearance_range,) * self.clearance_state + ((0.0, 1.0),) * self.collision_state
+        return base + self.extra_ranges
 
     @classmethod
     def for_reach(cls, reach: float, **overrides: object) -> LearnerSettings:
@@ -153,5 +172,17 @@ class LearnerSettings:
             raise ValueError(f"clearance_range must be finite with lo < hi, got ({lo}, {hi})")
         if not (math.isfinite(self.collision_penalty) and self.collision_penalty <= 0.0):
             raise ValueError(f"collision_penalty must be <= 0, got {self.collision_penalty}")
+        object.__setattr__(self, "extra_state", tuple(str(n) for n in self.extra_state))
+        object.__setattr__(self, "extra_sets", tuple(int(m) for m in self.extra_sets))
+        object.__setattr__(self, "extra_ranges", tuple((float(lo), float(hi)) for lo, hi in self.extra_ranges))
+        if not len(self.extra_state) == len(self.extra_sets) == len(self.extra_ranges):
+            raise ValueError("extra_state, extra_sets and extra_ranges need one entry per extra variable")
+        for name, m, (lo, hi) in zip(self.extra_state, self.extra_sets, self.extra_ranges, strict=True):
+            if m < 1 or not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
+                raise ValueError(
+                    f"extra variable {name!r}: needs >= 1 sets and a finite lo < hi, got {m}, ({lo}, {hi})"
+                )
+        if self.grasp_state not in GRASP_STATES:
+            raise ValueError(f"grasp_state must be one of {GRASP_STATES}, got {self.grasp_state!r}")
         if self.top_k > min(self.state_sets):
             raise ValueError(f"top_k must be <= the fewest sets of any state variable ({min(self.state_sets)})")

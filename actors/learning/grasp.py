@@ -1,0 +1,248 @@
+"""The grasp task's rewards (paper §5.5, Eq. 12) and the grasp agent's per-finger credit.
+
+The grasp agent (the compound root, no DOF) reads the task observation (the sim's contact readings: the
+net force and torque on the object and every fingertip's contact) and sends each finger its reward with
+the down pass. Reward modes (`--reward` in a grasp scene; docs/science.md "Grasp (§5.5)"):
+
+paper    Eq. 12 as printed, one global reward for all fingers: the reaching cases of Eq. 10 on
+         D_goal (the fingertips' mean distance to their grasp points) plus R_f + R_tau + R_s, with
+         R_f = e^(-c |F|), R_tau = e^(-c |tau|), R_s = e^(-c FC), FC = the summed friction-cone
+         violation (sum of max(0, -margin)). With no contact every R_i is at its maximum.
+contact  as paper, but R_f, R_tau, R_s are paid only while all fingertips touch (0 otherwise).
+global   the shaped potential below, summed over the fingers: one global reward (no per-finger credit).
+shaped   (default) per finger i, from the grasp agent: out of contact, the reaching reward that works
+         for the chain (-2 + k (D_i(t-1) - D_i(t)), D_i = distance to its grasp point); in contact,
+         -|e_i|/f_grip (capped at 1) + k_f (|e_i(t-1)| - |e_i(t)|)/f_grip - 1 if it slips, where
+         e_i = fn_i - fn_i* and fn* are the normal forces nearest to the present ones that balance the
+         object (zero net force and torque with the present tangential forces) with at least f_grip
+         each; e_i(t) is taken against the target of t-1, so other fingers' moves do not count as
+         finger i's (a difference reward). The same e_i / f_grip goes down the finger as the state
+         variable "force_error".
+
+Numpy only, like the rest of actors/learning.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from .settings import LearnerSettings
+
+GRASP_REWARDS: tuple[str, ...] = ("paper", "contact", "global", "shaped")
+REACH_REWARDS: tuple[str, ...] = ("paper", "strict", "shaped")  # reward.py's modes
+
+
+def scene_reward_problem(grasp_scene: bool, reward: str) -> str | None:
+    """Why `reward` does not fit the scene, or None: grasp rewards need an [object], reach ones a chain."""
+    allowed = GRASP_REWARDS if grasp_scene else REACH_REWARDS
+    if reward in allowed:
+        return None
+    return f"a {'grasp' if grasp_scene else 'reaching'} scene takes {', '.join(allowed)}"
+
+
+Vec = tuple[float, float]
+
+
+@dataclass(frozen=True)
+class GraspParams:
+    """Constants of the grasp rewards. D_min: Eq. 12's reach threshold, scaled to the fingers (the chain's
+    3.0 would cover the whole hand); c: Eq. 12's c and c*; f_grip: the least normal force per finger."""
+
+    D_min: float = 0.5
+    c: float = 1.0
+    k: float = 20.0
+    k_f: float = 2.0
+    f_grip: float = 1.0
+    err_cap: float = 3.0  # force_error is sent clipped to [-err_cap, err_cap]
+
+
+@dataclass(frozen=True)
+class Contacts:
+    """What the task observation tells the grasp agent about one step (Task.sense, parsed)."""
+
+    contact: dict[str, bool]
+    fn: dict[str, float]
+    ft: dict[str, float]
+    margin: dict[str, float]
+    point: dict[str, Vec]  # contact points (only for fingertips in contact)
+    normal: dict[str, Vec]
+    net: tuple[float, float, float]  # F_x, F_y, tau
+
+    @classmethod
+    def from_sense(cls, sense: Mapping[str, float], tips: Sequence[str]) -> Contacts:
+        c = {t: sense.get(f"contact/{t}", 0.0) > 0.5 for t in tips}
+        return cls(
+            contact=c,
+            fn={t: sense.get(f"fn/{t}", 0.0) for t in tips},
+            ft={t: sense.get(f"ft/{t}", 0.0) for t in tips},
+            margin={t: sense.get(f"margin/{t}", 0.0) for t in tips},
+            point={t: (sense[f"px/{t}"], sense[f"py/{t}"]) for t in tips if c[t] and f"px/{t}" in sense},
+            normal={t: (sense[f"nx/{t}"], sense[f"ny/{t}"]) for t in tips if c[t] and f"nx/{t}" in sense},
+            net=(sense.get("net_fx", 0.0), sense.get("net_fy", 0.0), sense.get("net_torque", 0.0)),
+        )
+
+    @property
+    def all_touch(self) -> bool:
+        return all(self.contact.values())
+
+    def cone_violation(self) -> float:
+        """FC(t): the summed amount by which contacts leave their friction cones (0 inside)."""
+        return sum(max(0.0, -self.margin[t]) for t in self.contact if self.contact[t])
+
+
+def reach_cases(D: float, D_prev: float, D_min: float, c: float) -> float:
+    """The reaching part of Eq. 12 (Eq. 10's three cases) on D_goal."""
+    dD = D - D_prev
+    if D > D_min:
+        return -2.0
+    if dD <= 0.0:
+        return math.exp(-c * D)
+    return -1.0
+
+
+def eq12(D: float, D_prev: float, obs: Contacts, p: GraspParams, only_with_contact: bool = False) -> float:
+    """Eq. 12 as printed: the reach cases plus R_f + R_tau + R_s (only while all touch, if asked)."""
+    base = reach_cases(D, D_prev, p.D_min, p.c)
+    if only_with_contact and not obs.all_touch:
+        return base
+    fx, fy, tau = obs.net
+    R_f = math.exp(-p.c * math.hypot(fx, fy))
+    R_tau = math.exp(-p.c * abs(tau))
+    R_s = math.exp(-p.c * obs.cone_violation())
+    return base + R_f + R_tau + R_s
+
+
+def balance_targets(
+    obs: Contacts, grasp: Mapping[str, Vec], normals: Mapping[str, Vec], center: Vec, f_grip: float
+) -> dict[str, float]:
+    """fn*: the normal forces nearest (least squares) to the present ones that cancel the net wrench,
+    with at least f_grip each. A fingertip out of contact is placed at its grasp point with that face's
+    outward normal and no force. Internal forces (the null space of the grasp matrix) raise the smallest
+    to f_grip when they can; otherwise the result is clipped at f_grip."""
+    tips = list(obs.contact)
+    G = np.zeros((3, len(tips)))  # wrench of a unit normal force at each contact: [-n; (p - c) x (-n)]
+    w_t = np.zeros(3)  # wrench of the tangential forces
+    fn = np.zeros(len(tips))
+    for j, t in enumerate(tips):
+        if obs.contact[t] and t in obs.point:
+            (px, py), (nx, ny) = obs.point[t], obs.normal[t]
+            fn[j] = obs.fn[t]
+        else:
+            (px, py), (nx, ny) = grasp[t], normals[t]
+        rx, ry = px - center[0], py - center[1]
+        G[:, j] = (-nx, -ny, -(rx * ny - ry * nx))
+        if obs.contact[t]:
+            tx, ty = -ny, nx
+            ft = obs.ft[t]
+            w_t += (ft * tx, ft * ty, ft * (rx * ty - ry * tx))
+    x = fn - np.linalg.pinv(G) @ (G @ fn + w_t)
+    if x.min() < f_grip:
+        _, sv, vt = np.linalg.svd(G)
+        rank = int((sv > 1e-9 * max(1.0, sv.max())).sum())
+        null = vt[rank:]
+        v = next((v * np.sign(v.sum()) for v in null if np.all(v * np.sign(v.sum()) > 1e-9)), None)
+        if v is not None:
+            alpha = max((f_grip - xi) / vi for xi, vi in zip(x, v, strict=True))
+            x = x + max(alpha, 0.0) * v
+        x = np.maximum(x, f_grip)
+    return {t: float(x[j]) for j, t in enumerate(tips)}
+
+
+def face_normal(point: Vec, center: Vec, half_extents: Vec) -> Vec:
+    """Outward normal of the rectangle's face that `point` (on its boundary) lies on."""
+    dx, dy = point[0] - center[0], point[1] - center[1]
+    if abs(abs(dx) - half_extents[0]) <= abs(abs(dy) - half_extents[1]):
+        return (math.copysign(1.0, dx), 0.0)
+    return (0.0, math.copysign(1.0, dy))
+
+
+class GraspReward:
+    """The grasp agent's reward and per-finger context, one call per step (it keeps t-1)."""
+
+    def __init__(
+        self,
+        mode: str,
+        grasp: Mapping[str, Vec],
+        center: Vec,
+        half_extents: Vec,
+        params: GraspParams | None = None,
+    ) -> None:
+        if mode not in GRASP_REWARDS:
+            raise ValueError(f"unknown grasp reward {mode!r}; allowed: {', '.join(GRASP_REWARDS)}")
+        self.mode, self.grasp, self.center = mode, dict(grasp), center
+        self.tips = tuple(grasp)
+        self.normals = {t: face_normal(g, center, half_extents) for t, g in grasp.items()}
+        self.p = params or GraspParams()
+        self.reset()
+
+    def reset(self) -> None:
+        self._D: dict[str, float] | None = None
+        self._err: dict[str, float] | None = None
+        self._target: dict[str, float] | None = None
+
+    def step(
+        self, tips: Mapping[str, Sequence[float]], sense: Mapping[str, float]
+    ) -> tuple[dict[str, float] | None, dict[str, float]]:
+        """(reward per fingertip for the transition into this step, or None at an epoch's first step;
+        force_error per fingertip for the fingers' state)."""
+        p = self.p
+        obs = Contacts.from_sense(sense, self.tips)
+        D = {t: math.hypot(tips[t][0] - g[0], tips[t][1] - g[1]) for t, g in self.grasp.items()}
+        target = balance_targets(obs, self.grasp, self.normals, self.center, p.f_grip)
+        err = {t: obs.fn[t] - target[t] for t in self.tips}
+        # against the previous step's target: only finger i's own move counts for it (difference reward)
+        err_own = err if self._target is None else {t: obs.fn[t] - self._target[t] for t in self.tips}
+        rewards: dict[str, float] | None = None
+        if self._D is not None and self._err is not None:
+            D_goal, D_prev = sum(D.values()) / len(D), sum(self._D.values()) / len(self._D)
+            if self.mode in ("paper", "contact"):
+                r = eq12(D_goal, D_prev, obs, p, only_with_contact=self.mode == "contact")
+                rewards = dict.fromkeys(self.tips, r)
+            else:
+                per = {t: self._finger(t, obs, D[t], self._D[t], err_own[t], self._err[t]) for t in self.tips}
+                if self.mode == "global":
+                    r = sum(per.values()) / len(per)
+                    rewards = dict.fromkeys(self.tips, r)
+                else:
+                    rewards = per
+        self._D, self._err, self._target = D, err, target
+        cap = p.err_cap
+        context = {t: max(-cap, min(cap, err[t] / p.f_grip)) for t in self.tips}
+        return rewards, context
+
+    def _finger(self, t: str, obs: Contacts, D: float, D_prev: float, err: float, err_prev: float) -> float:
+        p = self.p
+        if not obs.contact[t]:
+            return -2.0 + p.k * (D_prev - D)  # the chain's shaped reaching reward, towards the grasp point
+        r = -min(1.0, abs(err) / p.f_grip) + p.k_f * (abs(err_prev) - abs(err)) / p.f_grip
+        if obs.margin[t] < 0.0:
+            r -= 1.0  # it slips
+        return r
+
+
+def grasp_learner_settings(
+    finger_length: float, is_tip: bool, fn_max: float, overrides: Mapping[str, object]
+) -> LearnerSettings:
+    """A finger agent's settings in a grasp scene: the reach ranges of one finger (d in [0, L], g in
+    [-2L, 2L]) and the extra state variables of `grasp_state` for its kind (fingertip or not):
+    force_error in [-err_cap, err_cap] and fn in [0, fn_max], 7 sets each (extra_state/sets/ranges)."""
+    ov = dict(overrides)
+    gs = str(ov.get("grasp_state", LearnerSettings.grasp_state))
+    extra: list[tuple[str, int, tuple[float, float]]] = []
+    if gs in ("force", "contact"):
+        cap = GraspParams.err_cap
+        extra.append(("force_error", 7, (-cap, cap)))
+    if gs == "contact" and is_tip:
+        extra.append(("fn", 7, (0.0, fn_max)))
+    ov.pop("extra_state", None)
+    return LearnerSettings.for_reach(
+        finger_length,
+        extra_state=tuple(n for n, _, _ in extra),
+        extra_sets=tuple(m for _, m, _ in extra),
+        extra_ranges=tuple(r for _, _, r in extra),
+        **ov,
+    )

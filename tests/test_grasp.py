@@ -1,0 +1,282 @@
+"""The grasp scene (paper §5.5): object validation, the contact model against hand-computed values,
+the net wrench's signs, the reward variants (actors/learning/grasp.py)."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import pytest
+from kinswarm.actors.learning.grasp import (
+    Contacts,
+    GraspParams,
+    GraspReward,
+    balance_targets,
+    eq12,
+    grasp_learner_settings,
+    scene_reward_problem,
+)
+from kinswarm.protocol.topology import ObjectSpec, TopologyError, load_topology, parse_topology
+from kinswarm.sim.contact import ContactModel, ContactReading, net_wrench
+
+ROOT = Path(__file__).resolve().parent.parent
+GRASP3 = ROOT / "examples" / "grasp3.toml"
+
+SCENE = """
+[[agent]]
+id = "hand"
+compound = true
+[[agent]]
+id = "f1"
+parent = "hand"
+link_length = 1.0
+[[agent]]
+id = "f2"
+parent = "hand"
+link_length = 1.0
+[object]
+center = [0.0, 0.0]
+half_extents = [1.0, 0.5]
+mu = 0.5
+kn = 10.0
+kt = 4.0
+cn = 2.0
+ct = 1.0
+max_depth = 0.2
+[object.grasp]
+f1 = [-1.0, 0.0]
+f2 = [0.3, 0.5]
+"""
+
+
+def _parse(text: str):
+    import tomllib
+
+    return parse_topology(tomllib.loads(text), source="scene.toml")
+
+
+def test_grasp3_is_13_agents_around_a_compound_hand():
+    t = load_topology(GRASP3)
+    assert len(t.agents) == 13 and len(t.dof_agents) == 12
+    assert t.root == "hand" and t.agents["hand"].compound and not t.agents["hand"].has_dof
+    assert t.end_effectors == ("f1_4", "f2_4", "f3_4")
+    assert set(t.agents["hand"].children) == {"f1_1", "f2_1", "f3_1"}
+    assert t.object is not None and t.object.mu == 0.5 and set(t.object.grasp) == set(t.end_effectors)
+
+
+def test_scene_parses():
+    t = _parse(SCENE)
+    assert t.object == ObjectSpec(
+        center=(0.0, 0.0),
+        half_extents=(1.0, 0.5),
+        mu=0.5,
+        kn=10.0,
+        kt=4.0,
+        cn=2.0,
+        ct=1.0,
+        max_depth=0.2,
+        grasp={"f1": (-1.0, 0.0), "f2": (0.3, 0.5)},
+    )
+
+
+@pytest.mark.parametrize(
+    ("change", "where", "what"),
+    [
+        (("[object]\n", "[object]\ncolour = 1\n"), "object.colour", "unknown field"),
+        (("mu = 0.5\n", ""), "object.mu", "missing"),
+        (("mu = 0.5\n", "mu = -0.1\n"), "object.mu", ">= 0"),
+        (("kn = 10.0\n", "kn = 0.0\n"), "object.kn", "> 0"),
+        (("max_depth = 0.2\n", "max_depth = 'deep'\n"), "object.max_depth", "finite number"),
+        (("half_extents = [1.0, 0.5]\n", "half_extents = [1.0, -0.5]\n"), "object.half_extents", "> 0"),
+        (("center = [0.0, 0.0]\n", "center = [0.0]\n"), "object.center", "list of 2"),
+        (("f2 = [0.3, 0.5]\n", "f2 = [0.3, 0.2]\n"), "object.grasp.f2", "not on the object's boundary"),
+        (("f2 = [0.3, 0.5]\n", "hand = [0.3, 0.5]\n"), "object.grasp.hand", "not an end effector"),
+        (("f2 = [0.3, 0.5]\n", ""), "object.grasp", "no grasp point for end effector(s) f2"),
+        (("[object.grasp]\nf1 = [-1.0, 0.0]\nf2 = [0.3, 0.5]\n", "grasp = 3\n"), "object.grasp", "must be a table"),
+    ],
+)
+def test_bad_object_names_file_field_and_fault(change, where, what):
+    old, new = change
+    assert old in SCENE
+    with pytest.raises(TopologyError) as e:
+        _parse(SCENE.replace(old, new, 1))
+    assert e.value.source == "scene.toml" and e.value.where == where and what in e.value.what, str(e.value)
+
+
+def test_bad_object_file_error_names_the_file(tmp_path):
+    p = tmp_path / "bad.toml"
+    p.write_text(GRASP3.read_text().replace("mu = 0.5", "mu = true"))
+    with pytest.raises(TopologyError, match=r"bad\.toml: object\.mu: expected a finite number"):
+        load_topology(p)
+
+
+SPEC = _parse(SCENE).object
+
+
+def test_normal_spring_damper_and_tangential_spring_from_the_anchor():
+    m = ContactModel(SPEC)
+    # first contact on the right face (outward normal +x, tangent t = (0, 1)): d(depth)/dt from zero
+    r = m.update("f", 0.1, (1.0, 0.0), (1.0, 0.0))
+    assert r.contact and r.fn == pytest.approx(10 * 0.1 + 2 * 0.1) and r.ft == 0.0
+    assert r.margin == pytest.approx(0.5 * 1.2) and r.force == pytest.approx((-1.2, 0.0))
+    assert m.anchor("f") == (1.0, 0.0)
+    # slides 0.05 along t at the same depth: ft = kt u + ct du/dt = 4 * 0.05 + 1 * 0.05
+    r = m.update("f", 0.1, (1.0, 0.05), (1.0, 0.0))
+    assert r.fn == pytest.approx(1.0) and r.ft == pytest.approx(0.25) and not r.slip
+    assert r.margin == pytest.approx(0.5 - 0.25) and r.force == pytest.approx((-1.0, 0.25))
+
+
+def test_coulomb_cap_slip_and_anchor_follows():
+    m = ContactModel(SPEC)
+    m.update("f", 0.1, (1.0, 0.0), (1.0, 0.0))
+    m.update("f", 0.1, (1.0, 0.05), (1.0, 0.0))
+    r = m.update("f", 0.1, (1.0, 0.3), (1.0, 0.0))  # u = 0.3, du = 0.25: trial 1.45 > mu fn = 0.5
+    assert r.ft_trial == pytest.approx(4 * 0.3 + 0.25) and r.ft == pytest.approx(0.5)
+    assert r.margin == pytest.approx(0.5 - 1.45) and r.slip
+    assert m.anchor("f") == pytest.approx((1.0, 0.3 - 0.5 / 4))  # the spring now holds exactly the cap
+    r = m.update("f", 0.1, (1.0, 0.3), (1.0, 0.0))  # standing still: at the cone's edge, no more slip
+    assert r.ft == pytest.approx(0.5) and r.margin == pytest.approx(0.0, abs=1e-12) and not r.slip
+    r = m.update("f", 0.0, None, None)  # contact lost: anchor dropped
+    assert not r.contact and r.fn == 0.0 and m.anchor("f") is None
+    r = m.update("f", 0.05, (1.0, 0.8), (1.0, 0.0))  # a new contact anchors where it begins
+    assert m.anchor("f") == (1.0, 0.8) and r.ft == 0.0
+
+
+def test_no_adhesion_when_retracting_fast():
+    m = ContactModel(SPEC)
+    m.update("f", 0.2, (1.0, 0.0), (1.0, 0.0))
+    r = m.update("f", 0.01, (1.0, 0.0), (1.0, 0.0))  # kn 0.01 + cn (-0.19) < 0: clipped to 0
+    assert r.contact and r.fn == 0.0
+
+
+def _reading(point, normal, fn, ft=0.0):
+    nx, ny = normal
+    return ContactReading(
+        True, 0.1, fn, ft, ft, 0.5 * fn - abs(ft), point, normal, (-fn * nx - ft * ny, -fn * ny + ft * nx)
+    )
+
+
+def test_net_wrench_signs():
+    # pushing left (-x) at the top right corner turns the object counter-clockwise: tau > 0
+    fx, fy, tau = net_wrench({"a": _reading((1.0, 0.5), (1.0, 0.0), 2.0)}, (0.0, 0.0))
+    assert (fx, fy) == pytest.approx((-2.0, 0.0)) and tau == pytest.approx(+1.0)
+    # pushing up (+y) on the bottom face right of centre: counter-clockwise too; about a shifted centre
+    fx, fy, tau = net_wrench({"b": _reading((0.5, -0.5), (0.0, -1.0), 1.0)}, (0.0, 0.0))
+    assert (fx, fy) == pytest.approx((0.0, 1.0)) and tau == pytest.approx(0.5)
+    fx, fy, tau = net_wrench({"b": _reading((0.5, -0.5), (0.0, -1.0), 1.0)}, (1.0, 0.0))
+    assert tau == pytest.approx(-0.5)
+    # the tangential force: on the right face t = (0, 1); ft > 0 drags the object up
+    _, fy, tau = net_wrench({"c": _reading((1.0, 0.0), (1.0, 0.0), 1.0, ft=0.25)}, (0.0, 0.0))
+    assert fy == pytest.approx(0.25) and tau == pytest.approx(0.25)
+    # the grasp3 balance: fn 2 on the left, 1 and 1 at y = +-0.35 on the right: zero net wrench
+    r = {
+        "a": _reading((-1.0, 0.0), (-1.0, 0.0), 2.0),
+        "b": _reading((1.0, 0.35), (1.0, 0.0), 1.0),
+        "c": _reading((1.0, -0.35), (1.0, 0.0), 1.0),
+    }
+    assert net_wrench(r, (0.0, 0.0)) == pytest.approx((0.0, 0.0, 0.0))
+
+
+TIPS = ("a", "b", "c")
+GRASP = {"a": (-1.0, 0.0), "b": (1.0, 0.35), "c": (1.0, -0.35)}
+
+
+def _sense(fn: dict, ft: dict | None = None, net=(0.0, 0.0, 0.0), margin: dict | None = None) -> dict:
+    s = {"net_fx": net[0], "net_fy": net[1], "net_torque": net[2]}
+    for t in TIPS:
+        touch = fn.get(t) is not None
+        s[f"contact/{t}"] = 1.0 if touch else 0.0
+        s[f"fn/{t}"] = fn.get(t) or 0.0
+        s[f"ft/{t}"] = (ft or {}).get(t, 0.0)
+        s[f"margin/{t}"] = (margin or {}).get(t, 0.0)
+        if touch:
+            s[f"px/{t}"], s[f"py/{t}"] = GRASP[t]
+            s[f"nx/{t}"], s[f"ny/{t}"] = (-1.0, 0.0) if t == "a" else (1.0, 0.0)
+    return s
+
+
+def test_eq12_as_printed_pays_most_for_not_touching():
+    p = GraspParams()
+    none = Contacts.from_sense(_sense({}), TIPS)
+    # inside D_min, approaching, no contact: e^(-c D) + R_f + R_tau + R_s = e^-0.2 + 3
+    assert eq12(0.2, 0.3, none, p) == pytest.approx(math.exp(-0.2) + 3.0)
+    # an unbalanced grasp with all three touching scores less
+    touching = Contacts.from_sense(_sense({"a": 1.0, "b": 1.0, "c": 1.0}, net=(-1.0, 0.0, 0.0)), TIPS)
+    assert eq12(0.2, 0.3, touching, p) == pytest.approx(math.exp(-0.2) + math.exp(-1.0) + 2.0)
+    # outside D_min: -2 + the R_i; moving away inside it: -1 + the R_i
+    assert eq12(0.8, 0.7, none, p) == pytest.approx(-2.0 + 3.0)
+    assert eq12(0.2, 0.1, none, p) == pytest.approx(-1.0 + 3.0)
+    # slip: R_s = e^(-c FC), FC = the summed cone violation
+    slip = Contacts.from_sense(_sense({"a": 1.0, "b": 1.0, "c": 1.0}, margin={"a": -0.3, "b": 0.2}), TIPS)
+    assert eq12(0.2, 0.3, slip, p) == pytest.approx(math.exp(-0.2) + 2.0 + math.exp(-0.3))
+    # the contact variant pays the R_i only while all three touch
+    assert eq12(0.2, 0.3, none, p, only_with_contact=True) == pytest.approx(math.exp(-0.2))
+    assert eq12(0.2, 0.3, touching, p, only_with_contact=True) == pytest.approx(eq12(0.2, 0.3, touching, p))
+
+
+def test_balance_targets():
+    normals = {"a": (-1.0, 0.0), "b": (1.0, 0.0), "c": (1.0, 0.0)}
+    balanced = Contacts.from_sense(_sense({"a": 2.0, "b": 1.0, "c": 1.0}), TIPS)
+    assert balance_targets(balanced, GRASP, normals, (0.0, 0.0), 1.0) == pytest.approx({"a": 2, "b": 1, "c": 1})
+    # equal forces are not balanced: the nearest balanced ones, with the least at f_grip, are 2 : 1 : 1
+    equal = Contacts.from_sense(_sense({"a": 1.0, "b": 1.0, "c": 1.0}), TIPS)
+    x = balance_targets(equal, GRASP, normals, (0.0, 0.0), 1.0)
+    assert x["a"] == pytest.approx(2 * x["b"]) and x["b"] == pytest.approx(x["c"]) and min(x.values()) >= 1.0 - 1e-9
+    # nobody touches: the grip, 2 : 1 : 1 at the least force f_grip
+    none = Contacts.from_sense(_sense({}), TIPS)
+    assert balance_targets(none, GRASP, normals, (0.0, 0.0), 1.5) == pytest.approx({"a": 3.0, "b": 1.5, "c": 1.5})
+
+
+def test_reward_modes():
+    tips0 = {"a": (-1.5, 0.0, 0.0), "b": (1.5, 0.35, 0.0), "c": (1.5, -0.35, 0.0)}
+    tips1 = {"a": (-1.4, 0.0, 0.0), "b": (1.5, 0.35, 0.0), "c": (1.5, -0.35, 0.0)}
+    out: dict = {}
+    for mode in ("paper", "contact", "global", "shaped"):
+        g = GraspReward(mode, GRASP, (0.0, 0.0), (1.0, 0.5))
+        first, ctx = g.step(tips0, _sense({}))
+        assert first is None and ctx == pytest.approx({"a": -2.0, "b": -1.0, "c": -1.0})  # e / f_grip
+        out[mode], _ = g.step(tips1, _sense({}))
+    D0, D1 = 0.5, (0.4 + 0.5 + 0.5) / 3
+    assert out["paper"] == pytest.approx(dict.fromkeys(TIPS, math.exp(-D1) + 3.0))  # D <= D_min, approaching
+    assert D1 < D0 and out["contact"] == pytest.approx(dict.fromkeys(TIPS, math.exp(-D1)))
+    # shaped: per finger, out of contact the chain's -2 + k (D_i(t-1) - D_i(t)); a moved closer by 0.1
+    assert out["shaped"] == pytest.approx({"a": -2.0 + 20 * 0.1, "b": -2.0, "c": -2.0})
+    assert out["global"] == pytest.approx(dict.fromkeys(TIPS, (0.0 - 2.0 - 2.0) / 3))
+
+
+def test_shaped_reward_in_contact_credits_a_fingers_own_move():
+    g = GraspReward("shaped", GRASP, (0.0, 0.0), (1.0, 0.5))
+    tips = {t: (*GRASP[t], 0.0) for t in TIPS}
+    g.step(tips, _sense({"a": 1.0, "b": 1.0, "c": 1.0}, net=(-1.0, 0.0, 0.0)))
+    target = g._target
+    assert target is not None
+    # a pushes harder, towards its target: rewarded; b, c did not move: their error is unchanged
+    r, ctx = g.step(tips, _sense({"a": 1.5, "b": 1.0, "c": 1.0}, net=(-0.5, 0.0, 0.0)))
+    assert r is not None
+    e_a0, e_a1 = 1.0 - target["a"], 1.5 - target["a"]
+    assert r["a"] == pytest.approx(-min(1.0, abs(e_a1)) + 2.0 * (abs(e_a0) - abs(e_a1)))
+    assert r["a"] > r["b"]
+    # a finger that slips pays 1 more
+    r2, _ = g.step(tips, _sense({"a": 1.5, "b": 1.0, "c": 1.0}, margin={"b": -0.1}, net=(-0.5, 0.0, 0.0)))
+    r3, _ = GraspReward("shaped", GRASP, (0.0, 0.0), (1.0, 0.5)).step(tips, _sense({"a": 1.5, "b": 1.0, "c": 1.0}))
+    assert r2 is not None and r3 is None and r2["b"] < r2["c"] - 0.99
+
+
+def test_reward_names_fit_the_scene():
+    assert scene_reward_problem(True, "shaped") is None and scene_reward_problem(False, "strict") is None
+    assert "grasp scene takes" in (scene_reward_problem(True, "strict") or "")
+    assert "reaching scene takes" in (scene_reward_problem(False, "contact") or "")
+    with pytest.raises(ValueError, match="unknown grasp reward"):
+        GraspReward("strict", GRASP, (0.0, 0.0), (1.0, 0.5))
+
+
+def test_state_of_each_kind_of_agent():
+    tip = grasp_learner_settings(3.2, True, 6.6, {"grasp_state": "contact"})
+    inner = grasp_learner_settings(3.2, False, 6.6, {"grasp_state": "contact"})
+    assert tip.state_names == ("q", "theta", "d", "g1", "g2", "g3", "force_error", "fn")
+    assert inner.state_names == ("q", "theta", "d", "g1", "g2", "g3", "force_error")
+    assert tip.state_ranges[-1] == (0.0, 6.6) and tip.state_ranges[2] == (0.0, 3.2) and len(tip.state_sets) == 8
+    assert grasp_learner_settings(3.2, True, 6.6, {"grasp_state": "reach"}).state_names[-1] == "g3"
+    assert grasp_learner_settings(3.2, True, 6.6, {}).extra_state == ("force_error",)  # the default: force
+    with pytest.raises(ValueError, match="grasp_state"):
+        grasp_learner_settings(3.2, True, 6.6, {"grasp_state": "telepathy"})
