@@ -17,7 +17,7 @@ from .common import Context
 # epochs) and robustness (the trained swarm).
 EXPERIMENTS = ("cost", "optimality", "convergence", "robustness", "generalisation")
 # Issue 6's tasks (§5.4, §5.5): run by name only, not by `all` (their own reports, their own cost)
-TASKS: tuple[str, ...] = ("corridor",)
+TASKS: tuple[str, ...] = ("corridor", "grasp")
 
 
 def run_experiment(

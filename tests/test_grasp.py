@@ -251,14 +251,14 @@ def test_shaped_reward_in_contact_credits_a_fingers_own_move():
     target = g._target
     assert target is not None
     # a pushes harder, towards its target: rewarded; b, c did not move: their error is unchanged
-    r, ctx = g.step(tips, _sense({"a": 1.5, "b": 1.0, "c": 1.0}, net=(-0.5, 0.0, 0.0)))
+    r, ctx = g.step(tips, _sense({"a": 2.0, "b": 1.0, "c": 1.0}, net=(-0.5, 0.0, 0.0)))
     assert r is not None
-    e_a0, e_a1 = 1.0 - target["a"], 1.5 - target["a"]
-    assert r["a"] == pytest.approx(-min(1.0, abs(e_a1)) + 2.0 * (abs(e_a0) - abs(e_a1)))
+    e_a0, e_a1, f = 1.0 - target["a"], 2.0 - target["a"], g.p.f_grip
+    assert r["a"] == pytest.approx(-min(1.0, abs(e_a1) / f) + g.p.k_f * (abs(e_a0) - abs(e_a1)) / f)
     assert r["a"] > r["b"]
     # a finger that slips pays 1 more
-    r2, _ = g.step(tips, _sense({"a": 1.5, "b": 1.0, "c": 1.0}, margin={"b": -0.1}, net=(-0.5, 0.0, 0.0)))
-    r3, _ = GraspReward("shaped", GRASP, (0.0, 0.0), (1.0, 0.5)).step(tips, _sense({"a": 1.5, "b": 1.0, "c": 1.0}))
+    r2, _ = g.step(tips, _sense({"a": 2.0, "b": 1.0, "c": 1.0}, margin={"b": -0.1}, net=(-0.5, 0.0, 0.0)))
+    r3, _ = GraspReward("shaped", GRASP, (0.0, 0.0), (1.0, 0.5)).step(tips, _sense({"a": 2.0, "b": 1.0, "c": 1.0}))
     assert r2 is not None and r3 is None and r2["b"] < r2["c"] - 0.99
 
 

@@ -44,3 +44,19 @@ def test_grasp_rejects_a_reaching_reward(tmp_path, capsys):
 def test_reach_rejects_a_grasp_reward(tmp_path, chain4, capsys):
     assert cli_main(["run", str(chain4), "--reward", "contact", "--out", str(tmp_path / "x"), "--no-progress"]) == 2
     assert "reaching scene takes" in capsys.readouterr().err
+
+
+def test_quick_grasp_experiment(tmp_path):
+    from kinswarm.experiments import run_experiment
+
+    res = run_experiment("grasp", seeds=1, quick=True, out=tmp_path)["grasp"]
+    out = tmp_path / "grasp"
+    for f in ("report.md", "results.json", "grasp.png", "grasp_forces.png", "grasp_cone.png", "grasp_balance.png"):
+        assert (out / f).is_file(), f
+    scores = res["scores"]
+    assert [s["reward"] for s in scores] == ["shaped", "paper", "contact", "global"]
+    for s in scores:
+        assert s["epochs"] == 3 and 0.0 <= s["good_share_last"] <= 1.0
+        assert s["meets_bar"] == (s["good_share_last"] >= 0.8)
+    results = json.loads((out / "results.json").read_text())
+    assert results["quick"] and results["bar"] == {"share": 0.8, "last": 20, "balance": 0.1}

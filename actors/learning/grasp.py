@@ -56,7 +56,7 @@ class GraspParams:
     c: float = 1.0
     k: float = 20.0
     k_f: float = 2.0
-    f_grip: float = 1.0
+    f_grip: float = 2.0
     err_cap: float = 3.0  # force_error is sent clipped to [-err_cap, err_cap]
 
 

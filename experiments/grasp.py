@@ -1,0 +1,141 @@
+"""§5.5, Figs. 24-29: the three-finger quasi-static grasp by 13 nested agents (examples/grasp3.toml).
+
+Trains the swarm with the default reward (`shaped`: the grasp agent's per-finger credit) on every seed,
+and Eq. 12 as printed (`paper`), its contact-gated variant (`contact`) and the shaped potential paid
+globally (`global`) on the first seed, then scores each epoch's last step: all three fingertips in
+contact (fn > 0) inside their friction cones, |net force| < 10 % of the mean normal force and |net torque|
+< 10 % of the mean normal force x L (L = the object's larger half-extent, 1.0 length unit): the issue's
+bar is >= 80 % of the last 20 epochs, over 5 seeds.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+from kinswarm.actors.grasp_report import BALANCE, epoch_quality, write_grasp_plots
+from kinswarm.protocol.topology import load_topology
+
+from .common import Context, Report, plt_module, run_specs
+from .swarm import ROOT, RunOutcome, Spec
+
+GRASP3 = ROOT / "examples" / "grasp3.toml"
+BAR = 0.8  # share of the last 20 epochs
+LAST = 20
+
+
+def _score(o: RunOutcome, topo: Any) -> dict[str, Any]:
+    q = [epoch_quality(r, topo) for r in o.rows]
+    tail = q[-LAST:]
+    share = lambda key: sum(x[key] for x in tail) / len(tail)  # noqa: E731
+    return {
+        "reward": o.spec.reward,
+        "seed": o.spec.seed,
+        "epochs": len(q),
+        "good_share_last": share("good"),
+        "touch_share_last": share("touch"),
+        "cone_share_last": share("cone"),
+        "force_ok_share_last": share("force_ok"),
+        "torque_ok_share_last": share("torque_ok"),
+        "good_tail_steps_last": sum(x["good_tail_share"] for x in tail) / len(tail),
+        "median_net_force_last": _median([x["net_force"] for x in tail]),
+        "median_net_torque_last": _median([x["net_torque"] for x in tail]),
+        "median_mean_fn_last": _median([x["mean_fn"] for x in tail]),
+        "meets_bar": share("good") >= BAR,
+    }
+
+
+def _median(v: list[float]) -> float:
+    s = sorted(v)
+    n = len(s)
+    return s[n // 2] if n % 2 else 0.5 * (s[n // 2 - 1] + s[n // 2])
+
+
+def run(ctx: Context) -> dict[str, Any]:
+    topo = load_topology(GRASP3)
+    epochs, steps = (3, 60) if ctx.quick else (30, 400)
+    base = {"topology": str(GRASP3), "epochs": epochs, "steps": steps}
+    specs = [Spec(name=f"grasp-shaped-s{s}", seed=s, reward="shaped", **base) for s in ctx.seed_list]  # type: ignore[arg-type]
+    variants = ("paper", "contact", "global")
+    specs += [Spec(name=f"grasp-{v}-s0", seed=0, reward=v, **base) for v in variants]  # type: ignore[arg-type]
+    outcomes = run_specs(ctx, specs, desc="grasp")
+    scores = [_score(o, topo) for o in outcomes]
+    rep = Report(ctx, "Three-finger grasp by 13 nested agents", "5.5 (Figs. 24-29)")
+    rep.text(
+        "A compound grasp agent (no DOF) over three 4-joint fingers around a fixed rectangle (examples/grasp3.toml:"
+        " finger 1 opposes fingers 2 and 3; balanced with pure normal forces at fn1 = fn2 + fn3, fn2 = fn3). "
+        "Contacts: Fig. 25's spring-dampers (kn = kt = 20, cn = ct = 2, mu = 0.5, sim/contact.py). "
+        f"Training: {epochs} epochs x {steps} steps (paper: 200 x 500), 1 degree per action.",
+        "",
+        f"**Good grasp** at an epoch's last step: all fingertips touch (fn > 0) inside their friction cones, |F| < "
+        f"{BALANCE} x mean fn (force units) and |tau| < {BALANCE} x mean fn x L, L = "
+        f"{topo.object.char_length if topo.object else 0} (force x length units). The issue's bar: good in >= "
+        f"{BAR:.0%} of the last {LAST} epochs, in every one of 5 seeds.",
+    )
+    rows = []
+    for s in scores:
+        rows.append(
+            [
+                s["reward"],
+                s["seed"],
+                f"{s['good_share_last']:.0%}",
+                f"{s['touch_share_last']:.0%}",
+                f"{s['cone_share_last']:.0%}",
+                f"{s['force_ok_share_last']:.0%}",
+                f"{s['torque_ok_share_last']:.0%}",
+                f"{s['median_net_force_last']:.2f}",
+                f"{s['median_net_torque_last']:.2f}",
+                f"{s['median_mean_fn_last']:.2f}",
+                "yes" if s["meets_bar"] else "**no**",
+            ]
+        )
+    rep.table(
+        [
+            "reward",
+            "seed",
+            "good (last 20)",
+            "all touch",
+            "touch + in cones",
+            "|F| ok",
+            "|tau| ok",
+            "median |F|",
+            "median |tau|",
+            "median mean fn",
+            "bar met",
+        ],
+        rows,
+    )
+    shaped = [s for s in scores if s["reward"] == "shaped"]
+    met = sum(s["meets_bar"] for s in shaped)
+    rep.text(
+        f"paper | kinswarm: the paper shows the net force falling towards zero over 200 epochs (Figs. 26-27) and "
+        f"the contact forces moving into the friction cones (Fig. 28); kinswarm (`shaped`, {len(shaped)} seeds): "
+        f"the bar is met in {met} of {len(shaped)} seeds; mean share of good last epochs "
+        f"{sum(s['good_share_last'] for s in shaped) / max(1, len(shaped)):.0%}, all three touching in "
+        f"{sum(s['touch_share_last'] for s in shaped) / max(1, len(shaped)):.0%}."
+    )
+    plt = plt_module()
+    first = next(o for o in outcomes if o.spec.reward == "shaped")
+    for path in write_grasp_plots(ctx.out, topo, first.rows, plt):
+        caption = {
+            "grasp.png": "Figs. 24a/29: the fingers at the end of four epochs (shaped, seed 0)",
+            "grasp_forces.png": "Figs. 26-27: |net force| and |net torque| over the steps of four epochs, with the "
+            "bounds (shaped, seed 0)",
+            "grasp_cone.png": "Fig. 28: each fingertip's |ft| against fn, and the cone |ft| = mu fn (shaped, seed 0)",
+            "grasp_epochs.png": "the last step's |F|, |tau| and mean fn over the epochs (shaped, seed 0)",
+        }[path.name]
+        rep.figure(path.name, caption)
+    fig, ax = plt.subplots(figsize=(7, 3.6))
+    for o in outcomes:
+        q = [epoch_quality(r, topo) for r in o.rows]
+        rel = [x["net_force"] / x["mean_fn"] if x["mean_fn"] > 0 else math.nan for x in q]
+        ax.plot(rel, label=f"{o.spec.reward} s{o.spec.seed}", lw=1)
+    ax.axhline(BALANCE, color="k", ls="--", lw=0.8)
+    ax.set_yscale("log")
+    ax.set_xlabel("epoch")
+    ax.set_ylabel("|F| / mean fn at the last step")
+    ax.legend(fontsize=6, ncol=2)
+    rep.save_figure(fig, "grasp_balance.png", "|net force| / mean normal force at each epoch's last step")
+    rep.results = {"scores": scores, "bar": {"share": BAR, "last": LAST, "balance": BALANCE}, "seeds_meeting_bar": met}
+    rep.write({"epochs": epochs, "steps": steps, "topology": "examples/grasp3.toml", "variants": variants}, outcomes)
+    return rep.results
