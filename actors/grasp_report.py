@@ -98,8 +98,8 @@ def write_grasp_plots(run_dir: Path, topo: Topology, rows: list[dict[str, Any]],
         ax.add_patch(plt.Rectangle((cx - hx, cy - hy), 2 * hx, 2 * hy, color="0.8"))
         final = {a: math.radians(v) for a, v in r["final_angles_deg"].items()}
         for i, pts in enumerate(arm_points(topo, final)):
-            xs, ys = zip(*pts, strict=True)
-            ax.plot(xs[1:], ys[1:], "-o", ms=3, color=f"C{i}")
+            xs, ys = zip(*pts[3:], strict=True)  # from the finger's base: not the hand's frame (world base, hand)
+            ax.plot(xs, ys, "-o", ms=3, color=f"C{i}")
         for i, (_, g) in enumerate(obj.grasp.items()):
             ax.plot(*g, "*", color=f"C{i}", ms=10, mec="k")
         q = epoch_quality(r, topo)
