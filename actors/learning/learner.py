@@ -39,6 +39,7 @@ class Learner:
         self._no_visible = np.zeros((0, self.n_actions))  # P (Eq. 7) when no agent is visible
         self.epoch = 0
         self.lr = settings.lr
+        self.epsilon = settings.epsilon  # epsilon(epoch) = epsilon (1 - epsilon_decay)^epoch
         self.t = 0
         # (rules, their phi rows or -1, w = O / sum O, joint action or -1 until observed) of s(t-1), a(t-1);
         # rules and rows as lists
@@ -53,6 +54,7 @@ class Learner:
             raise ValueError(f"epoch and t must be >= 0, got {epoch}, {t}")
         self.epoch = int(epoch)
         self.lr = self.settings.lr * (1.0 - self.settings.lr_decay) ** self.epoch
+        self.epsilon = self.settings.epsilon * (1.0 - self.settings.epsilon_decay) ** self.epoch
         self.t = int(t)
         self._pending = None
 
@@ -123,7 +125,7 @@ class Learner:
         E = jasm.expected_values(q_now, P, self.n_actions)
         T = jasm.temperature(self.t, st.T_max, st.s)
         pi = jasm.boltzmann(E, T)
-        a = jasm.select_action(pi, jasm.explore_probability(T, st.T_max, st.epsilon), self.rng, explore)
+        a = jasm.select_action(pi, jasm.explore_probability(T, st.T_max, self.epsilon), self.rng, explore)
 
         # (d) remember s(t) for the next update; observe() adds the joint action.
         self._pending = (rules_list, rows, w, -1)

@@ -63,6 +63,9 @@ class LearnerSettings:
         collision_state: append a 0/1 flag "my increment of the previous step was refused" (2 sets over [0, 1]).
             It breaks the greedy deadlock against a wall: a refused move leaves q and the tips unchanged, so
             without it the state, and hence the greedy choice, would repeat forever.
+        epsilon_decay: per-epoch decay of epsilon, epsilon(epoch) = epsilon * (1 - epsilon_decay) ** epoch (default 0:
+            the same exploration every epoch). With a slow T(t) decay (small s) exploration then lasts through
+            the epoch early in training and fades over the epochs.
         collision_penalty: added (it is <= 0) to the reward of an agent whose own increment was refused, on
             top of the root's global reward: a local signal for the agent that pushed into the wall.
 
@@ -95,6 +98,7 @@ class LearnerSettings:
     extra_sets: tuple[int, ...] = ()
     extra_ranges: tuple[tuple[float, float], ...] = ()
     grasp_state: str = "force"
+    epsilon_decay: float = 0.0
 
     @property
     def state_names(self) -> tuple[str, ...]:
@@ -170,6 +174,8 @@ class LearnerSettings:
         lo, hi = self.clearance_range
         if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
             raise ValueError(f"clearance_range must be finite with lo < hi, got ({lo}, {hi})")
+        if not 0.0 <= self.epsilon_decay < 1.0:
+            raise ValueError(f"epsilon_decay must be in [0, 1), got {self.epsilon_decay}")
         if not (math.isfinite(self.collision_penalty) and self.collision_penalty <= 0.0):
             raise ValueError(f"collision_penalty must be <= 0, got {self.collision_penalty}")
         object.__setattr__(self, "extra_state", tuple(str(n) for n in self.extra_state))
