@@ -286,3 +286,26 @@ def test_corridor_run_walls_are_solid(tmp_path, endpoint):
     assert sum(sum(r["collisions"]) for r in rows) > 0  # exploring from scratch, it bumps into the walls
     for f in ("corridor.png", "learning_curve.png", "arm.png", "summary.json"):
         assert (out / f).is_file(), f
+
+
+# -- the experiment ----------------------------------------------------------------------------------
+@pytest.mark.timeout(180)
+def test_quick_corridor_experiment(tmp_path):
+    out = tmp_path / "x"
+    assert cli_main(["experiment", "corridor", "--quick", "--seeds", "1", "--out", str(out)]) == 0
+    d = out / "corridor"
+    report = (d / "report.md").read_text()
+    assert "kinswarm experiment corridor" in report and "seeds:" in report and "single" in report
+    assert "| " in report and "paper" in report.lower() and "quick" in report
+    for fig in ("corridor.png", "frozen.png", "learning.png"):
+        assert (d / fig).stat().st_size > 1000, fig
+        assert f"]({fig})" in report
+    res = json.loads((d / "results.json").read_text())
+    assert res["experiment"] == "corridor" and res["quick"] is True and res["steps"] == 100
+    for label in ("paper", "kinswarm"):
+        per = res["configs"][label]
+        seed = per["seeds"]["0"]
+        assert 0.0 <= seed["success_last"] <= 1.0 and seed["frozen_collisions"] >= 0
+        assert seed["frozen_min_clearance"] >= -1e-5  # solid walls in the frozen run too
+        assert isinstance(seed["frozen_success"], bool)
+        assert per["bar_training_met"] is False and per["bar_frozen_met"] is False  # one seed never meets a bar

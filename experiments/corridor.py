@@ -1,0 +1,288 @@
+"""§5.4, Fig. 23: a 7-DOF planar chain reaching a target 2.5 deep inside a narrow corridor (examples/corridor7.toml,
+issue 6's hard set-up: links of length 1 and radius 0.1, walls 0.8 apart spanning x in [3, 6] around y = 2).
+
+Each configuration trains from scratch on every seed; then the trained swarm runs one frozen epoch
+(`--from T --learn off --explore off`). Issue 6's bars, per seed:
+
+  training  the share of the last TAIL training epochs that end within TOL of the target with no collision
+            (refused penetrating increment) in the epoch's last 100 steps; bar: >= 80 % over the seeds
+  frozen    the frozen epoch ends within TOL of the target with zero collisions in the whole epoch; bar: >= 4 of
+            5 seeds
+
+Configurations (reasoning and measurements: docs/science.md, "Corridor (§5.4)"):
+  paper     Eq. 11 as printed (`--reward paper`), the paper's six state variables, the default learner
+  kinswarm  what made the task learnable here (CONFIGS below)
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from kinswarm.actors.learning.settings import LearnerSettings
+from kinswarm.actors.scene_plot import draw_chain, draw_scene, plot_scene_epochs
+from kinswarm.protocol.topology import load_topology
+
+from .common import Context, Report, band, mean_std, plt_module, pm, run_specs, settings
+from .swarm import ROOT, RunOutcome, Spec
+
+TOPOLOGY = ROOT / "examples" / "corridor7.toml"
+TOL = 0.3  # issue 6: "within 0.3 of the target"
+TAIL = 50  # the last 50 training epochs
+LAST_STEPS = 100  # no collision in the epoch's last 100 steps
+EPOCHS, STEPS = 150, 500
+QUICK_EPOCHS, QUICK_STEPS = 3, 100
+PAPER_SEEDS = 2  # the paper configuration is a reference: fewer seeds in the full version
+
+_PI = math.pi
+_REACH = 7.0
+# g1, g2 over [-reach, reach] rather than the default [-2 reach, 2 reach]: finer sets where the goal is
+_RANGES = ((-_PI, _PI), (-_PI, _PI), (0.0, _REACH), (-_REACH, _REACH), (-_REACH, _REACH), (-_PI, _PI))
+
+#: label -> (reward, LearnerSettings overrides)
+CONFIGS: dict[str, tuple[str, dict[str, Any]]] = {
+    "paper": ("paper", {}),
+    "kinswarm": (
+        "shaped",
+        {
+            "clearance_state": True,
+            "collision_state": True,
+            "collision_penalty": -5.0,
+            "s": 0.01,
+            "epsilon_decay": 0.03,
+            "ranges": _RANGES,
+        },
+    ),
+}
+
+
+def seed_metrics(train: RunOutcome, frozen: RunOutcome) -> dict[str, Any]:
+    rows = train.rows
+    tail = rows[-TAIL:]
+    ok = [r["final_error"] <= TOL and sum(r["collisions"][-LAST_STEPS:]) == 0 for r in tail]
+    within = [r["final_error"] <= TOL for r in tail]
+    f = frozen.rows[0]
+    return {
+        "success_last": sum(ok) / len(ok),  # within TOL and no collision in the last 100 steps
+        "within_last": sum(within) / len(within),
+        "median_final_last": float(np.median([r["final_error"] for r in tail])),
+        "collisions_per_epoch_last": float(np.mean([sum(r["collisions"]) for r in tail])),
+        "collisions_per_epoch_first10": float(np.mean([sum(r["collisions"]) for r in rows[:10]])),
+        "first_success_epoch": next(
+            (r["epoch"] for r in rows if r["final_error"] <= TOL and sum(r["collisions"][-LAST_STEPS:]) == 0),
+            None,
+        ),
+        "frozen_final_error": f["final_error"],
+        "frozen_collisions": sum(f["collisions"]),
+        "frozen_collisions_last100": sum(f["collisions"][-LAST_STEPS:]),
+        "frozen_min_clearance": min(f["clearance"]),
+        "frozen_success": bool(f["final_error"] <= TOL and sum(f["collisions"]) == 0),
+        "train_run": train.out.name,
+        "frozen_run": frozen.out.name,
+    }
+
+
+def run(ctx: Context) -> dict[str, Any]:
+    epochs, steps = (QUICK_EPOCHS, QUICK_STEPS) if ctx.quick else (EPOCHS, STEPS)
+    topo_path = str(TOPOLOGY)
+    seeds_of = {
+        label: ctx.seed_list if label != "paper" or ctx.quick else ctx.seed_list[: max(1, min(PAPER_SEEDS, ctx.seeds))]
+        for label in CONFIGS
+    }
+    train_specs: dict[tuple[str, int], Spec] = {}
+    for label, (reward, over) in CONFIGS.items():
+        for seed in seeds_of[label]:
+            train_specs[(label, seed)] = Spec(
+                f"corr-{label}",
+                seed=seed,
+                epochs=epochs,
+                steps=steps,
+                reward=reward,
+                learner=settings(**over),
+                topology=topo_path,
+                checkpoint=True,
+            )
+    trained = dict(zip(train_specs, run_specs(ctx, list(train_specs.values()), "train"), strict=True))
+    frozen_specs = {
+        key: Spec(
+            f"corr-{key[0]}-frozen",
+            seed=key[1],
+            epochs=1,
+            steps=steps,
+            reward=spec.reward,
+            learner=spec.learner,
+            topology=topo_path,
+            from_dir=str(trained[key].out),
+            learn=False,
+            explore=False,
+            observe=True,
+        )
+        for key, spec in train_specs.items()
+    }
+    frozen = dict(zip(frozen_specs, run_specs(ctx, list(frozen_specs.values()), "frozen"), strict=True))
+
+    per: dict[str, dict[str, Any]] = {}
+    for label in CONFIGS:
+        seeds = {s: seed_metrics(trained[(label, s)], frozen[(label, s)]) for s in seeds_of[label]}
+        shares = [m["success_last"] for m in seeds.values()]
+        n_frozen = sum(m["frozen_success"] for m in seeds.values())
+        per[label] = {
+            "reward": CONFIGS[label][0],
+            "learner": CONFIGS[label][1],
+            "seeds": seeds,
+            "success_last_mean": mean_std(shares)[0],
+            "frozen_successes": n_frozen,
+            "bar_training_met": bool(len(shares) >= 5 and mean_std(shares)[0] >= 0.8),
+            "bar_frozen_met": bool(len(seeds) >= 5 and n_frozen >= 4),
+        }
+
+    rep = Report(ctx, "Corridor: a 7-DOF chain into a narrow corridor", "5.4, Fig. 23")
+    rep.results.update({"epochs": epochs, "steps": steps, "tol": TOL, "tail": TAIL, "configs": per})
+    rep.text(
+        "## Set-up",
+        "",
+        f"`{Path(topo_path).relative_to(ROOT)}`: 7 links of length 1 (capsules of radius 0.1), walls spanning "
+        "x in [3, 6] with a gap of 0.8 around y = 2, target (5.5, 2.0) 2.5 deep, start angles (90, -5, ..., -5) deg. "
+        "Walls are solid: an increment that would make a link penetrate a wall is refused (the joint holds) and "
+        f"counted as a collision. {epochs} training epochs of {steps} steps per seed, then one frozen epoch "
+        "(`--learn off --explore off`) from the trained swarm.",
+    )
+    rows = []
+    for label, p in per.items():
+        for seed, m in p["seeds"].items():
+            rows.append(
+                [
+                    label,
+                    seed,
+                    f"{100 * m['success_last']:.0f} %",
+                    f"{100 * m['within_last']:.0f} %",
+                    f"{m['median_final_last']:.3f}",
+                    f"{m['collisions_per_epoch_first10']:.0f} → {m['collisions_per_epoch_last']:.1f}",
+                    "—" if m["first_success_epoch"] is None else m["first_success_epoch"],
+                    f"{m['frozen_final_error']:.3f}",
+                    m["frozen_collisions"],
+                    "yes" if m["frozen_success"] else "no",
+                ]
+            )
+    rep.text("## Per seed", "")
+    rep.table(
+        [
+            "config",
+            "seed",
+            f"last {TAIL}: within {TOL}, no collision in last {LAST_STEPS} steps",
+            f"last {TAIL}: within {TOL}",
+            f"median final error, last {TAIL}",
+            "collisions / epoch (first 10 → last 50)",
+            "first such epoch",
+            "frozen: final error",
+            "frozen: collisions",
+            "frozen: success",
+        ],
+        rows,
+    )
+    summary = []
+    for label, p in per.items():
+        n = len(p["seeds"])
+        shares = [m["success_last"] for m in p["seeds"].values()]
+        summary.append(
+            [
+                label,
+                n,
+                pm([100 * s for s in shares], 0) + " %",
+                f"{p['frozen_successes']} of {n}",
+                "met" if p["bar_training_met"] else "not met",
+                "met" if p["bar_frozen_met"] else "not met",
+            ]
+        )
+    rep.text(
+        "## Paper | kinswarm",
+        "",
+        "The paper (Fig. 23) shows the chain entering the corridor and reaching the target on a collision-free "
+        "path, with no numbers. Issue 6's bars: over 5 seeds, ≥ 80 % of the last 50 training epochs within 0.3 "
+        "with no collision in the last 100 steps, and the frozen swarm reaching the target with zero collisions "
+        "in ≥ 4 of 5 seeds. A bar counts as met only with ≥ 5 seeds.",
+    )
+    rep.table(
+        ["config", "seeds", f"last {TAIL}: success (mean ± std)", "frozen successes", "training bar", "frozen bar"],
+        summary,
+    )
+    _figures(ctx, rep, per, trained, frozen, seeds_of)
+    rep.write(
+        {
+            "topology": str(Path(topo_path).relative_to(ROOT)),
+            "epochs": epochs,
+            "steps_per_epoch": steps,
+            "configs": {label: {"reward": r, "learner": o} for label, (r, o) in CONFIGS.items()},
+            "learner_defaults": LearnerSettings().__dict__,
+        },
+        [*trained.values(), *frozen.values()],
+    )
+    return rep.results
+
+
+def _figures(
+    ctx: Context,
+    rep: Report,
+    per: dict[str, Any],
+    trained: dict[tuple[str, int], RunOutcome],
+    frozen: dict[tuple[str, int], RunOutcome],
+    seeds_of: dict[str, list[int]],
+) -> None:
+    plt = plt_module()
+    topo = load_topology(TOPOLOGY)
+    goal = topo.goal
+    labels = list(CONFIGS)
+
+    # Fig. 23: the final configuration over training epochs (first seed), per configuration
+    fig, axes = plt.subplots(1, len(labels), figsize=(6.2 * len(labels), 6.0), squeeze=False)
+    for ax, label in zip(axes[0], labels, strict=True):
+        seed = seeds_of[label][0]
+        plot_scene_epochs(ax, topo, goal, trained[(label, seed)].rows, f"{label}, seed {seed}: final configurations")
+    rep.save_figure(fig, "corridor.png", "Fig. 23 analogue: the chain's final configuration across training epochs")
+
+    # the frozen swarm's path: the chain every 50 steps and the tip's path, per seed
+    seeds = max(len(s) for s in seeds_of.values())
+    fig, axes = plt.subplots(len(labels), seeds, figsize=(4.2 * seeds, 4.2 * len(labels)), squeeze=False)
+    for row, label in enumerate(labels):
+        for col in range(seeds):
+            ax = axes[row, col]
+            if col >= len(seeds_of[label]):
+                ax.axis("off")
+                continue
+            seed = seeds_of[label][col]
+            out = frozen[(label, seed)]
+            tr = out.trace()
+            draw_scene(ax, topo, goal)
+            q, agents = tr["q"], [str(a) for a in tr["agents"]]
+            picks = list(range(0, len(q), 50)) + [len(q) - 1]
+            cmap = plt.get_cmap("viridis")
+            for i, n in enumerate(picks):
+                angles = dict(zip(agents, q[n].tolist(), strict=True))
+                draw_chain(ax, topo, angles, color=cmap(i / max(len(picks) - 1, 1)), lw=1.0, ms=2)
+            ax.plot(tr["tip"][:, 0], tr["tip"][:, 1], color="C3", lw=0.8)
+            m = per[label]["seeds"][seed]
+            ax.set_title(
+                f"{label}, seed {seed}: frozen, error {m['frozen_final_error']:.2f}, {m['frozen_collisions']} coll.",
+                fontsize=8,
+            )
+    caption = "The frozen swarm (no learning, no exploration): the chain every 50 steps, tip path red"
+    rep.save_figure(fig, "frozen.png", caption)
+
+    # learning: final error and collisions per epoch, mean over seeds with a min-max band
+    fig, axes = plt.subplots(1, 2, figsize=(12, 4))
+    for i, label in enumerate(labels):
+        runs = [trained[(label, s)] for s in seeds_of[label]]
+        band(axes[0], [r.final_errors for r in runs], label, color=f"C{i}")
+        band(axes[1], [[sum(row["collisions"]) for row in r.rows] for r in runs], label, color=f"C{i}")
+    axes[0].axhline(TOL, color="grey", ls="--", lw=0.8)
+    axes[0].set_yscale("log")
+    axes[0].set_ylabel("final error")
+    axes[1].set_ylabel("collisions (refused increments) per epoch")
+    for ax in axes:
+        ax.set_xlabel("epoch")
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=8)
+    caption = "Final error and collisions per training epoch (mean over seeds, band min-max)"
+    rep.save_figure(fig, "learning.png", caption)
