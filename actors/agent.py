@@ -37,7 +37,7 @@ from kinswarm.actors.checkpoint import CheckpointError, digest, load_checkpoint,
 from kinswarm.actors.config import RunConfig
 from kinswarm.actors.learning.grasp import GraspReward, grasp_learner_settings
 from kinswarm.actors.learning.learner import Learner
-from kinswarm.actors.learning.reward import corridor_reward, reach_reward
+from kinswarm.actors.learning.reward import corridor_reward, path_distance, reach_reward
 from kinswarm.actors.learning.settings import LearnerSettings
 from kinswarm.actors.learning.state import agent_state, joint_frame, link_end
 from kinswarm.actors.runtime import Node
@@ -323,7 +323,9 @@ class Agent:
         elif isinstance(head, Task):  # the root: the world's base, the reward from the task observation
             base = self.topo.base
             goal = head.goal
-            D = _distance(_centroid([head.tips[leaf] for leaf in self.leaves if leaf in head.tips]), goal)
+            tip = _centroid([head.tips[leaf] for leaf in self.leaves if leaf in head.tips])
+            via = self.topo.via  # a scene's approach path ([task] via): D_goal along it
+            D = _distance(tip, goal) if via is None else path_distance(tip, goal, via, self.topo.via_width)
             if self.D_prev is None:
                 reward = None
             elif head.clearance is not None:  # a scene with obstacles: the corridor's Eq. 11

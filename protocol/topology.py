@@ -115,6 +115,10 @@ class Topology:
     source: str = field(default="<memory>")
     obstacles: tuple[ObstacleSpec, ...] = ()  # static boxes of the scene ([[obstacle]], protocol/obstacles.py)
     object: ObjectSpec | None = None  # a grasp scene's object ([object] table)
+    # [task] via, via_width: the goal distance is measured along an approach path through `via` (see
+    # actors/learning/reward.py path_distance); None: straight to the goal
+    via: tuple[float, float] | None = None
+    via_width: float = 0.0
 
     @property
     def dof_agents(self) -> tuple[str, ...]:
@@ -264,10 +268,16 @@ def parse_topology(data: dict[str, Any], source: str = "<memory>") -> Topology:
     task = data.get("task", {})
     if not isinstance(task, dict):
         raise TopologyError(src, "task", "must be a table")
-    bad = set(task) - {"goal"}
+    bad = set(task) - {"goal", "via", "via_width"}
     if bad:
         raise TopologyError(src, f"task.{sorted(bad)[0]}", "unknown field")
     goal = _vec(src, "task.goal", task["goal"], 2) if "goal" in task else None
+    via = _vec(src, "task.via", task["via"], 2) if "via" in task else None
+    via_width = _num(src, "task.via_width", task.get("via_width", 0.0))
+    if via is not None and via_width <= 0:
+        raise TopologyError(src, "task.via_width", f"must be > 0 with task.via, got {via_width}")
+    if via is None and "via_width" in task:
+        raise TopologyError(src, "task.via_width", "only with task.via")
 
     leaves = [a for a in order if not agents[a].children]
     obj = _parse_object(src, data["object"], leaves) if "object" in data else None
@@ -282,6 +292,8 @@ def parse_topology(data: dict[str, Any], source: str = "<memory>") -> Topology:
         source=src,
         obstacles=parse_obstacles(data.get("obstacle"), src),
         object=obj,
+        via=via,  # type: ignore[arg-type]
+        via_width=via_width,
     )
 
 

@@ -14,7 +14,7 @@ from kinswarm.actors.agent import learner_settings
 from kinswarm.actors.cli import main as cli_main
 from kinswarm.actors.config import RunConfig
 from kinswarm.actors.learning.fuzzy import FuzzyPartition
-from kinswarm.actors.learning.reward import corridor_reward
+from kinswarm.actors.learning.reward import corridor_reward, path_distance
 from kinswarm.actors.learning.settings import LearnerSettings
 from kinswarm.protocol import codec
 from kinswarm.protocol.messages import EpochDone, Obs, Task
@@ -240,6 +240,30 @@ def test_corridor_variants():
     assert r(1.0, 1.2, 0.05, 0, "shaped") == pytest.approx(math.exp(-0.5) - 5.0 * math.exp(-0.025))
     with pytest.raises(ValueError, match="unknown reward mode"):
         r(1.0, 1.0, 1.0, 0, "geodesic?")
+
+
+def test_path_distance_through_via():
+    goal, via = (5.5, 2.0), (2.0, 2.0)
+    assert path_distance((4.0, 2.1), goal, via, 0.3) == pytest.approx(math.hypot(1.5, 0.1))  # past via: straight
+    assert path_distance((2.0, 2.3), goal, via, 0.3) == pytest.approx(math.hypot(3.5, 0.3))  # on the edge: past
+    assert path_distance((2.0, 2.31), goal, via, 0.3) == pytest.approx(0.31 + 3.5)  # just outside the band
+    assert path_distance((1.0, 2.0), goal, via, 0.3) == pytest.approx(1.0 + 3.5)  # before via, on the axis
+    # on top of the upper wall, 0.8 from the goal in a straight line, but far along the path
+    assert path_distance((5.5, 2.8), goal, via, 0.3) == pytest.approx(math.hypot(3.5, 0.8) + 3.5)
+
+
+def test_via_parsing(tmp_path):
+    doc = _doc([])
+    doc["task"] = {"goal": [5.5, 2.0], "via": [2.0, 2.0], "via_width": 0.3}
+    topo = parse_topology(doc, source="v.toml")
+    assert topo.via == (2.0, 2.0) and topo.via_width == 0.3
+    doc["task"] = {"goal": [5.5, 2.0], "via": [2.0, 2.0]}
+    with pytest.raises(TopologyError, match=r"v.toml: task.via_width: must be > 0 with task.via"):
+        parse_topology(doc, source="v.toml")
+    doc["task"] = {"goal": [5.5, 2.0], "via_width": 0.3}
+    with pytest.raises(TopologyError, match=r"v.toml: task.via_width: only with task.via"):
+        parse_topology(doc, source="v.toml")
+    assert load_topology(CORRIDOR).via is None or load_topology(CORRIDOR).via_width > 0
 
 
 # -- learner settings ---------------------------------------------------------------------------------

@@ -92,3 +92,22 @@ def corridor_reward(
     if mode == "strict":
         return -weight * penalty if close else reach_reward(D, D_prev, mode, D_min=D_min, c=c1, k=k)
     return reach_reward(D, D_prev, mode, D_min=D_min, c=c1, k=k) - (weight * penalty if close else 0.0)
+
+
+def path_distance(
+    tip: tuple[float, float], goal: tuple[float, float], via: tuple[float, float], width: float
+) -> float:
+    """D_goal measured along an approach path through `via` (a corridor's axis, declared in the scene's
+    [task] table): straight to the goal once the tip is "past" via -- ahead of it towards the goal and within
+    `width` of the line via -> goal -- else |tip - via| + |via - goal|. This is the task designer's knowledge
+    of the scene in the reward (the agents still sense only their own clearance): it turns the corridor's
+    mouth from a dead end of the Euclidean distance into a way point on a path along the corridor's axis."""
+    ux, uy = goal[0] - via[0], goal[1] - via[1]
+    length = math.hypot(ux, uy)
+    dx, dy = tip[0] - via[0], tip[1] - via[1]
+    if length > 0.0:
+        along = (dx * ux + dy * uy) / length
+        across = abs(dx * uy - dy * ux) / length
+        if along >= 0.0 and across <= width:
+            return math.hypot(tip[0] - goal[0], tip[1] - goal[1])
+    return math.hypot(dx, dy) + length
