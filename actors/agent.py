@@ -528,7 +528,9 @@ class Agent:
         self._observed([1 if c in obs[1] else acts[c] for c in self.visible], obs[0][1] + 1)
 
     def _save(self, m: Checkpoint) -> None:
-        path = Path(m.directory) / f"{self.id}.npz"
+        # Into this agent's own run directory, where a restart restores from: on another host than the
+        # leader's, `m.directory` (the leader's) need not exist.
+        path = Path(self.cfg.out) / "agents" / f"{self.id}.npz"
         error = ""
         if self.learner is not None:
             try:

@@ -7,6 +7,7 @@ import argparse
 import asyncio
 import json
 import logging
+import os
 import secrets
 import signal
 import sys
@@ -16,7 +17,8 @@ from pathlib import Path
 from kinswarm.actors.checkpoint import CheckpointError, load_checkpoint
 from kinswarm.actors.config import PLACEMENTS, REWARDS, ConfigError, RunConfig
 from kinswarm.actors.learning.grasp import scene_reward_problem
-from kinswarm.actors.runtime import DEFAULT_LISTEN, open_session, setup_logging
+from kinswarm.actors.plan import Plan, PlanError, load_plan, local_plan
+from kinswarm.actors.runtime import DEFAULT_LISTEN, NetSpec, open_session, setup_logging
 from kinswarm.protocol.faults import FAULTS
 from kinswarm.protocol.messages import EpochDone
 from kinswarm.protocol.topology import Topology, TopologyError, load_topology
@@ -146,7 +148,101 @@ def build_parser() -> argparse.ArgumentParser:
         q.add_argument("--run-dir", type=Path, default=None, help="the run's directory (default runs/RUN-ID)")
         q.add_argument("--connect", default=None, help="the run's endpoint (default: the one it listens on)")
         q.add_argument("--log-level", default="ERROR")
+    up = sub.add_parser(
+        "up",
+        help="start this host's share of a deploy plan (the leading host trains)",
+        description="Run the same command with the same plan on every host, each with its own --host. The leader "
+        "resolves the run from the plan's [run] table and these flags; the other hosts fetch it from the leader.",
+    )
+    up.add_argument("plan", type=Path, help="a deploy plan (e.g. deploy/two-hosts.toml)")
+    up.add_argument("--host", required=True, help="which of the plan's hosts this is")
+    up.add_argument("--topology", type=Path, default=None, help="leader: overrides the plan's [run] topology")
+    for flag, tp in (("--epochs", int), ("--steps", int), ("--seed", int), ("--deadline-ms", int)):
+        up.add_argument(flag, type=tp, default=None, help="leader: overrides the plan's [run] value")
+    up.add_argument("--reward", choices=REWARDS, default=None)
+    up.add_argument("--scenario", type=Path, default=None)
+    up.add_argument("--run-id", default=None, help="leader: the run id (default <plan>-<time>-<hex>)")
+    up.add_argument("--out", type=Path, default=None, help="this host's run directory (default runs/<run-id>)")
+    up.add_argument("--wait", type=float, default=600.0, help="seconds to wait for the leader / the other hosts")
+    up.add_argument("--no-progress", action="store_true")
+    up.add_argument("--log-level", default="WARNING")
+    down = sub.add_parser("down", help="stop the running swarm of a deploy plan, on every host")
+    down.add_argument("plan", type=Path)
+    down.add_argument("--host", required=True, help="which of the plan's hosts this command runs on")
+    down.add_argument("--log-level", default="ERROR")
+    router = sub.add_parser("router", help="run a Zenoh router (for plans with mode = 'client')")
+    router.add_argument("--listen", action="append", required=True, help="endpoint, e.g. tcp/0.0.0.0:7447")
+    router.add_argument("--plan", type=Path, default=None, help="take TLS, credentials and ACL from this plan")
+    router.add_argument("--log-level", default="WARNING")
+    certs = sub.add_parser("certs", help="write a throwaway CA, certificates and passwords for a plan (trials, tests)")
+    certs.add_argument("plan", type=Path)
+    certs.add_argument("--out", type=Path, required=True, help="directory (the plan's security.certs)")
+    certs.add_argument("--topology", type=Path, default=None, help="default: the plan's [run] topology")
+    certs.add_argument("--log-level", default="WARNING")
     return p
+
+
+def _plan_topology(plan: Plan, given: Path | None) -> Path:
+    if given is not None:
+        return given
+    if "topology" not in plan.run:
+        raise PlanError(plan.source, "run.topology", "no topology: give one in [run] or pass --topology")
+    return Path(plan.run["topology"])
+
+
+def _up(a: argparse.Namespace) -> tuple[dict, RunConfig]:
+    from kinswarm.actors.deploy import fetch_setup, follower_config
+
+    plan = load_plan(a.plan)
+    if a.host not in plan.hosts:
+        raise PlanError(plan.source, "host", f"--host {a.host!r} is not one of {', '.join(plan.hosts)}")
+    progress = not a.no_progress and sys.stderr.isatty()
+    if a.host != plan.leader:
+        run, setup = fetch_setup(plan, a.host, a.wait)
+        cfg, topo = follower_config(setup, a.host, plan, a.out)
+        print(f"kinswarm: host {a.host} joins run {run} of {plan.leader} -> {cfg.out}", flush=True)
+        return run_swarm(cfg, topo, progress=False, plan=plan, host=a.host), cfg
+    r = plan.run
+    ns = argparse.Namespace(
+        topology=_plan_topology(plan, a.topology),
+        epochs=a.epochs if a.epochs is not None else r.get("epochs", 60),
+        steps=a.steps if a.steps is not None else r.get("steps", 500),
+        seed=a.seed if a.seed is not None else r.get("seed", 0),
+        goal=tuple(r["goal"]) if "goal" in r else None,
+        reward=a.reward or r.get("reward", "shaped"),
+        placement="process",
+        run_id=a.run_id or f"{plan.name}-{time.strftime('%Y%m%d-%H%M%S')}-{secrets.token_hex(2)}",
+        listen=plan.hosts[a.host].listen,
+        out=a.out,
+        deadline_ms=a.deadline_ms if a.deadline_ms is not None else r.get("deadline_ms", 500),
+        scenario=a.scenario or (Path(r["scenario"]) if "scenario" in r else None),
+        learn=True,
+        explore=True,
+        checkpoint_every=1,
+    )
+    cfg, topo = _resolve(ns, "agents")
+    print(f"kinswarm: host {a.host} leads run {cfg.run_id} of plan {plan.name} -> {cfg.out}", flush=True)
+    return run_swarm(cfg, topo, progress=progress, plan=plan, host=a.host), cfg
+
+
+def _deploy_tool(a: argparse.Namespace) -> int:
+    from kinswarm.actors.deploy import down, run_router, write_certs
+
+    if a.command == "down":
+        plan = load_plan(a.plan)
+        if a.host not in plan.hosts:
+            raise PlanError(plan.source, "host", f"--host {a.host!r} is not one of {', '.join(plan.hosts)}")
+        print(f"kinswarm: asked run {asyncio.run(down(plan, a.host))} to stop")
+        return 0
+    if a.command == "router":
+        plan = load_plan(a.plan) if a.plan else None
+        topo = load_topology(_plan_topology(plan, None)) if plan and plan.security.acl else None
+        run_router(a.listen, plan, topo)
+        return 0
+    plan = load_plan(a.plan)
+    for path in write_certs(plan, load_topology(_plan_topology(plan, a.topology)), a.out):
+        print(path)
+    return 0
 
 
 def _resolve(a: argparse.Namespace, controller: str) -> tuple[RunConfig, Topology]:
@@ -188,22 +284,44 @@ def _resolve(a: argparse.Namespace, controller: str) -> tuple[RunConfig, Topolog
     return cfg, topo
 
 
-async def _supervise(cfg: RunConfig, topo: Topology, progress: bool) -> dict:
+def _write_net(path: Path, spec: NetSpec) -> Path:
+    """Owner-only: a NetSpec may carry a password."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
+    with os.fdopen(fd, "w") as f:
+        f.write(spec.to_json() + "\n")
+    return path
+
+
+async def _supervise(cfg: RunConfig, topo: Topology, progress: bool, plan: Plan, host: str) -> dict:
+    from kinswarm.actors.deploy import control_net
     from kinswarm.actors.report import write_plots, write_summary
     from kinswarm.actors.supervisor import ProcessPlacement, SinglePlacement, Supervisor
 
     out = Path(cfg.out)
+    lead = host == plan.leader
+    sup_id = "main" if lead else host
+    spec = plan.net(host, plan.identity("supervisor", "", host), supervisor=True, topo=topo)
     try:
-        session = open_session(listen=[cfg.listen])
+        session = open_session(spec)
     except Exception as e:
+        where = ", ".join(spec.listen) or ", ".join(spec.connect)
+        hint = "pass --listen tcp/127.0.0.1:PORT" if plan.name == "local" else "check the plan's endpoints"
         raise ConfigError(
-            f"cannot listen on {cfg.listen} ({e}); is another run using it? pass --listen tcp/127.0.0.1:PORT"
+            f"cannot open the supervisor's session on {where} ({e}); is another run using it? {hint}"
         ) from None
+    _write_net(out / "net" / "cli.json", control_net(plan, host, topo))  # for `kinswarm fault/status`
+
+    def nets(role: str, ident: str) -> Path:
+        identity = plan.identity(role, ident, host)
+        path = out / "net" / f"{identity}.json"
+        return path if path.exists() else _write_net(path, plan.net(host, identity, supervisor=False, topo=topo))
+
     bar = None
     if progress:
         from tqdm import tqdm
 
-        bar = tqdm(total=cfg.epochs, unit="epoch", desc=cfg.run_id, dynamic_ncols=True)
+        bar = tqdm(total=cfg.epochs, unit="epoch", desc=cfg.run_id, dynamic_ncols=True) if lead else None
 
     def on_epoch(d: EpochDone) -> None:
         if bar is not None:
@@ -216,8 +334,8 @@ async def _supervise(cfg: RunConfig, topo: Topology, progress: bool) -> dict:
     if cfg.placement == "single":
         placement = SinglePlacement(cfg, topo, session)
     else:
-        placement = ProcessPlacement(out / "config.json", cfg.listen, out / "logs")
-    sup = Supervisor(cfg, topo, session, placement, on_epoch=on_epoch)
+        placement = ProcessPlacement(out / "config.json", nets, out / "logs", supervisor=sup_id)
+    sup = Supervisor(cfg, topo, session, placement, on_epoch=on_epoch, plan=plan, host=host)
     main = asyncio.current_task()
     loop = asyncio.get_running_loop()
     assert main is not None
@@ -231,6 +349,8 @@ async def _supervise(cfg: RunConfig, topo: Topology, progress: bool) -> dict:
         if bar is not None:
             bar.close()
         session.close()
+    if not lead:
+        return {"host": host, "error": result.error, "interrupted": result.interrupted, "restarts": result.restarts}
     summary = write_summary(
         out,
         {
@@ -246,20 +366,26 @@ async def _supervise(cfg: RunConfig, topo: Topology, progress: bool) -> dict:
     return summary
 
 
-def run_swarm(cfg: RunConfig, topo: Topology, progress: bool = False) -> dict:
-    """Run one swarm to the end and return its summary (used by the CLI, experiments and tests)."""
+def run_swarm(
+    cfg: RunConfig, topo: Topology, progress: bool = False, plan: Plan | None = None, host: str | None = None
+) -> dict:
+    """Run one swarm (or, with a deploy plan, one host's share of it) to the end and return its summary
+    (used by the CLI, experiments and tests). Without a plan: the one-host plan (`kinswarm run`)."""
+    plan = plan if plan is not None else local_plan(cfg.listen)
+    host = host if host is not None else plan.leader
     out = Path(cfg.out)
     out.mkdir(parents=True, exist_ok=True)
     cfg.write(out / "config.json")
-    (out / "metrics.jsonl").write_text("")
-    return asyncio.run(_supervise(cfg, topo, progress))
+    if host == plan.leader:
+        (out / "metrics.jsonl").write_text("")
+    return asyncio.run(_supervise(cfg, topo, progress, plan, host))
 
 
 def _control(a: argparse.Namespace) -> int:
-    from kinswarm.actors.control import Client, make_fault, parse_duration, run_config, show_status
+    from kinswarm.actors.control import Client, make_fault, parse_duration, run_config, show_status, tool_net
 
     cfg = run_config(a.run_id, a.run_dir)
-    connect = a.connect or cfg.listen
+    connect = tool_net(a.run_dir or Path("runs") / a.run_id, cfg, a.connect)
     if a.command == "status":
         asyncio.run(show_status(cfg, connect, a.watch))
         return 0
@@ -298,6 +424,7 @@ def _experiment(a: argparse.Namespace, argv: list[str]) -> int:
 
 def main(argv: list[str] | None = None) -> int:
     from kinswarm.actors.control import ControlError
+    from kinswarm.actors.deploy import DeployError
     from kinswarm.actors.scenario import ScenarioError
 
     a = build_parser().parse_args(argv)
@@ -314,9 +441,20 @@ def main(argv: list[str] | None = None) -> int:
             return _control(a)
         if a.command == "experiment":
             return _experiment(a, argv if argv is not None else sys.argv[1:])
-        cfg, topo = _resolve(a, "agents" if a.command == "run" else "baseline")
-        summary = run_swarm(cfg, topo, progress=not a.no_progress and sys.stderr.isatty())
-    except (TopologyError, ConfigError, CheckpointError, ScenarioError, ControlError, ValueError) as e:
+        if a.command in ("down", "router", "certs"):
+            return _deploy_tool(a)
+        if a.command == "up":
+            summary, cfg = _up(a)
+            if "host" in summary:  # another host's share: the leader has the results
+                if summary.get("error"):
+                    print(f"kinswarm: host {summary['host']} failed: {summary['error']}", file=sys.stderr)
+                    return 1
+                print(f"kinswarm: host {summary['host']} done ({cfg.run_id})")
+                return 130 if summary.get("interrupted") else 0
+        else:
+            cfg, topo = _resolve(a, "agents" if a.command == "run" else "baseline")
+            summary = run_swarm(cfg, topo, progress=not a.no_progress and sys.stderr.isatty())
+    except (TopologyError, ConfigError, CheckpointError, ScenarioError, ControlError, ValueError, DeployError) as e:
         print(f"kinswarm: error: {e}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:

@@ -17,7 +17,7 @@ import time
 from pathlib import Path
 
 from kinswarm.actors.config import ConfigError, RunConfig, load_run_config
-from kinswarm.actors.runtime import Node, open_session
+from kinswarm.actors.runtime import NetSpec, Node, open_session
 from kinswarm.protocol.faults import check_fault
 from kinswarm.protocol.keys import Keys
 from kinswarm.protocol.messages import Fault, FaultReply, JointStatus, SwarmStatus
@@ -38,6 +38,13 @@ def parse_duration(text: str) -> float:
     return float(m.group(1)) * _UNIT[m.group(2)]
 
 
+def tool_net(run_dir: Path, cfg: RunConfig, connect: str | None) -> NetSpec:
+    """How a tool reaches the run: the NetSpec its supervisor wrote (identity, TLS) or its endpoint."""
+    path = run_dir / "net" / "cli.json"
+    net = NetSpec.from_json(path.read_text()) if path.exists() else NetSpec(connect=(cfg.listen,), must_connect=True)
+    return net.with_(connect=(connect,)) if connect else net
+
+
 def run_config(run_id: str, run_dir: Path | None) -> RunConfig:
     path = (run_dir or Path("runs") / run_id) / "config.json"
     if not path.exists():
@@ -51,12 +58,15 @@ def run_config(run_id: str, run_dir: Path | None) -> RunConfig:
 class Client:
     """A short-lived member of a run: one session, one node, closed on exit."""
 
-    def __init__(self, cfg: RunConfig, connect: str) -> None:
-        self.cfg, self.connect = cfg, connect
+    def __init__(self, cfg: RunConfig, connect: str | NetSpec) -> None:
+        """`connect`: an endpoint, or the NetSpec the run wrote for its tools (`<run>/net/cli.json`)."""
+        self.cfg = cfg
+        self.net = connect if isinstance(connect, NetSpec) else NetSpec(connect=(connect,), must_connect=True)
+        self.connect = ", ".join(self.net.connect)
 
     async def __aenter__(self) -> Client:
         try:
-            self.session = open_session(connect=[self.connect], must_connect=True)
+            self.session = open_session(self.net)
         except Exception as e:
             raise ControlError(f"cannot reach {self.connect}: {e}") from None
         self.node = Node(self.session, Keys(self.cfg.run_id), "cli", f"cli-{os.getpid()}", self.cfg.key)
@@ -156,7 +166,7 @@ def render(status: SwarmStatus, joints: JointStatus | None, run_id: str) -> str:
     return "\n".join([head, line, *body])
 
 
-async def show_status(cfg: RunConfig, connect: str, watch: bool) -> None:
+async def show_status(cfg: RunConfig, connect: str | NetSpec, watch: bool) -> None:
     async with Client(cfg, connect) as c:
         async for status, joints in c.statuses():
             table = render(status, joints, cfg.run_id)

@@ -1,4 +1,4 @@
-"""Actor entry point: `python -m kinswarm.actors.main ROLE ID CONFIG --connect ENDPOINT [--restore]`.
+"""Actor entry point: `python -m kinswarm.actors.main ROLE ID CONFIG --net NETSPEC.json [--restore]`.
 
 This is the one spawn path of the `process` placement (the supervisor starts it with spawn semantics:
 a fresh interpreter, the Zenoh session opened inside the child). `build_actor` is shared with the
@@ -34,7 +34,7 @@ from pathlib import Path  # noqa: E402
 from typing import Any, Protocol  # noqa: E402
 
 from kinswarm.actors.config import RunConfig, load_run_config  # noqa: E402
-from kinswarm.actors.runtime import Node, open_session, setup_logging  # noqa: E402
+from kinswarm.actors.runtime import NetSpec, Node, open_session, setup_logging  # noqa: E402
 from kinswarm.protocol.keys import Keys  # noqa: E402
 from kinswarm.protocol.topology import Topology  # noqa: E402
 
@@ -68,10 +68,12 @@ def build_actor(role: str, ident: str, cfg: RunConfig, topo: Topology, node: Nod
     raise ValueError(f"unknown role {role!r}; expected one of {', '.join(ROLES)}")
 
 
-async def _serve(role: str, ident: str, cfg: RunConfig, connect: str, parent_pid: int, restore: bool) -> None:
+async def _serve(
+    role: str, ident: str, cfg: RunConfig, net: NetSpec, parent_pid: int, restore: bool, supervisor: str
+) -> None:
     log = logging.getLogger(f"kinswarm.{role}.{ident}")
     topo = cfg.topo()
-    session = open_session(listen=["tcp/127.0.0.1:0"], connect=[connect], must_connect=True)
+    session = open_session(net)
     loop = asyncio.get_running_loop()
     task = asyncio.current_task()
     assert task is not None
@@ -105,7 +107,7 @@ async def _serve(role: str, ident: str, cfg: RunConfig, connect: str, parent_pid
                 continue
             return
 
-    watch = session.liveliness().declare_subscriber(node.keys.alive("supervisor", "main"), on_supervisor)
+    watch = session.liveliness().declare_subscriber(node.keys.alive("supervisor", supervisor), on_supervisor)
     try:
         actor = build_actor(role, ident, cfg, topo, node, restore)
         async with asyncio.TaskGroup() as tg:
@@ -131,8 +133,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("role", choices=ROLES)
     p.add_argument("ident")
     p.add_argument("config", type=Path)
-    p.add_argument("--connect", required=True, help="the supervisor's endpoint")
+    p.add_argument("--net", type=Path, required=True, help="the NetSpec (JSON) this actor's session opens with")
     p.add_argument("--parent", type=int, default=None, help="the supervisor's pid: leave when it is gone")
+    p.add_argument("--supervisor", default="main", help="the id of the supervisor that spawned this actor")
     p.add_argument("--restore", action="store_true", help="a restart: resume from the run's newest checkpoint")
     p.add_argument("--log-level", default="INFO")
     a = p.parse_args(argv)
@@ -141,7 +144,8 @@ def main(argv: list[str] | None = None) -> int:
     sys.setswitchinterval(0.0005)  # zenoh callbacks need the GIL promptly (shared notes: p99 10 -> 3 ms)
     try:
         cfg = load_run_config(a.config)
-        asyncio.run(_serve(a.role, a.ident, cfg, a.connect, parent, a.restore))
+        net = NetSpec.from_json(a.net.read_text())
+        asyncio.run(_serve(a.role, a.ident, cfg, net, parent, a.restore, a.supervisor))
     except Exception as e:  # a clear last word in the actor's log; the supervisor reports it
         logging.getLogger(f"kinswarm.{a.role}.{a.ident}").error("failed: %s: %s", type(e).__name__, e)
         return 2

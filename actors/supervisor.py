@@ -12,6 +12,8 @@ from __future__ import annotations
 
 import asyncio
 import collections
+import contextlib
+import dataclasses
 import json
 import logging
 import math
@@ -29,7 +31,9 @@ from typing import Any
 import zenoh
 from kinswarm.actors.config import RunConfig
 from kinswarm.actors.main import build_actor
+from kinswarm.actors.plan import Plan, local_plan
 from kinswarm.actors.runtime import Node
+from kinswarm.protocol import codec
 from kinswarm.protocol.faults import (
     ALL,
     JOINT_FAULTS,
@@ -48,8 +52,11 @@ from kinswarm.protocol.messages import (
     Event,
     Fault,
     FaultReply,
+    Heartbeat,
     JointStatus,
+    Pause,
     Saved,
+    Setup,
     Stop,
     SwarmStatus,
 )
@@ -67,6 +74,10 @@ class _NoMessage(SwarmError):
     """The awaited message did not come in time."""
 
 
+class _Down(Exception):
+    """Someone asked the swarm to stop (`kinswarm down`: a Stop on ctl/stop)."""
+
+
 def actors_of(cfg: RunConfig, topo: Topology) -> list[ActorId]:
     if cfg.controller == "baseline":
         return [("sim", "sim"), ("controller", "baseline")]
@@ -79,8 +90,12 @@ class ProcessPlacement:
 
     supports = PROCESS_FAULTS
 
-    def __init__(self, config_path: Path, connect: str, logs: Path) -> None:
-        self.config_path, self.connect, self.logs = config_path, connect, logs
+    def __init__(
+        self, config_path: Path, nets: Callable[[str, str], Path], logs: Path, supervisor: str = "main"
+    ) -> None:
+        """`nets(role, ident)`: the file of the NetSpec that actor's session is opened with; `supervisor`: the
+        id of the supervisor the actors watch (they leave when it is gone for good)."""
+        self.config_path, self.nets, self.logs, self.supervisor = config_path, nets, logs, supervisor
         self.procs: dict[ActorId, subprocess.Popen] = {}
         self._reported: set[int] = set()  # pids whose exit was already handed to the supervisor
 
@@ -93,7 +108,7 @@ class ProcessPlacement:
         """The one spawn path: a fresh interpreter running `kinswarm.actors.main` (never fork)."""
         role, ident = actor
         argv = [sys.executable, "-m", "kinswarm.actors.main", role, ident, str(self.config_path)]
-        argv += ["--connect", self.connect, "--parent", str(os.getpid())]
+        argv += ["--net", str(self.nets(role, ident)), "--parent", str(os.getpid()), "--supervisor", self.supervisor]
         if restore:
             argv.append("--restore")
         with open(self.logs / f"{ident}.log", "ab") as logf:
@@ -239,6 +254,8 @@ class Supervisor:
     STATUS_EVERY = 0.5  # seconds between SwarmStatus messages
     TICK = 0.05  # seconds between checks of exits, restarts and thaws while waiting
 
+    LEADER_GRACE_S = 120.0  # a host that cannot hear its leader this long stops its share
+
     def __init__(
         self,
         cfg: RunConfig,
@@ -246,12 +263,29 @@ class Supervisor:
         session: zenoh.Session,
         placement: Placement,
         on_epoch: Callable[[EpochDone], None] | None = None,
+        plan: Plan | None = None,
+        host: str | None = None,
     ) -> None:
         self.cfg, self.topo, self.session, self.placement = cfg, topo, session, placement
         self.keys = Keys(cfg.run_id)
         self.out = Path(cfg.out)
         self.on_epoch = on_epoch
         self.expected = actors_of(cfg, topo)
+        # Several hosts: this supervisor spawns and restarts its host's share; the leader also trains.
+        self.plan = plan if plan is not None else local_plan(cfg.listen)
+        self.host = host if host is not None else self.plan.leader
+        self.lead = self.host == self.plan.leader
+        self.multi = len(self.plan.hosts) > 1
+        self.where = self.plan.placement(topo)  # actor ident -> host
+        self.local = [a for a in self.expected if self.host_of(a) == self.host]
+        self.heard: dict[str, float] = {}  # host -> when its heartbeat last came
+        self.missing: set[str] = set()  # hosts not heard for a lease: the swarm is paused
+        self.paused_s = 0.0  # seconds paused so far (epoch deadlines stretch by it)
+        self._paused_at = 0.0
+        self._hb_seq = 0
+        self._next_hb = 0.0
+        self._epoch_sent = 0.0
+        self._epoch_start: EpochStart | None = None  # while its EpochDone is awaited
         self.agents = list(topo.order) if cfg.controller == "agents" else []
         self.alive: set[ActorId] = set()
         self.node: Node | None = None
@@ -267,18 +301,29 @@ class Supervisor:
         self.link_faults: dict[str, list[tuple[str, float | None]]] = {}  # agent -> (description, expiry)
         self.byes: dict[str, Bye] = {}
         self._next_status = 0.0
-        self.host = socket.gethostname()  # every actor of a local run lives here
+        self.hostname = {h: h for h in self.plan.hosts} if self.multi else {self.host: socket.gethostname()}
+
+    def host_of(self, actor: ActorId) -> str:
+        role, ident = actor
+        return self.where[ident] if role == "agent" else self.where["sim"]  # the baseline runs beside the sim
 
     async def run(self) -> RunResult:
         t0 = time.perf_counter()
         loop = asyncio.get_running_loop()
-        self.node = node = Node(self.session, self.keys, "supervisor", "main", self.cfg.key)
+        ident = "main" if self.lead else self.host
+        self.node = node = Node(self.session, self.keys, "supervisor", ident, self.cfg.key)
         k = self.keys
         for key in (k.metrics("epoch"), k.metrics("event"), k.metrics("joints"), k.rep("agent", "*")):
             node.listen(key)
         node.listen(k.rep("bye", "*"))
         node.listen(k.rep("sim", "*"))
-        node.listen(k.fault("request"))
+        node.listen(k.ctl("stop"))
+        if self.lead:
+            node.listen(k.fault("request"))
+        else:
+            node.listen(k.ctl("fault"))  # process faults the leader forwards to this host's actors
+        if self.multi:
+            node.listen(k.host("*"))
 
         def on_alive(sample: Any) -> None:  # zenoh thread
             parsed = self.keys.parse_alive(str(sample.key_expr))
@@ -290,26 +335,23 @@ class Supervisor:
                     pass
 
         watch = self.session.liveliness().declare_subscriber(self.keys.alive_all, on_alive, history=True)
+        setup = self._serve_setup() if self.lead and self.multi else None
         node.declare_alive()
         self.events_file = open(self.out / "events.jsonl", "a")  # noqa: SIM115 -- closed in finally
         try:
-            await self.placement.start(self.expected)
-            await self._wait_alive(self.expected, timeout=60.0)
-            outputs = [k.ctl(v) for v in ("epoch", "checkpoint", "fault")]
-            await node.wait_matched(outputs, timeout=10.0)
-            self.metrics_file = open(self.out / "metrics.jsonl", "a")  # noqa: SIM115 -- closed in finally
-            self.training = True
-            for epoch in range(self.cfg.epochs):
-                done = await self._run_epoch(epoch)
-                self.result.epochs.append(done)
-                self._record(done)
-                last = epoch == self.cfg.epochs - 1
-                every = self.cfg.checkpoint_every
-                if self.agents and self.cfg.learn and (last or (every and (epoch + 1) % every == 0)):
-                    await self._checkpoint(epoch)
+            await self.placement.start(self.local)
+            await self._wait_alive(self.local, timeout=60.0)
+            if self.lead:
+                await self._wait_alive(self.expected, timeout=self.cfg_wait_s, what="the other hosts' actors")
+                await self._train()
+            else:
+                await self._serve()
         except asyncio.CancelledError:
             self.result.interrupted = True
             log.warning("interrupted: stopping the swarm")
+        except _Down as e:
+            self.result.interrupted = True
+            self._event("down", "swarm", str(e))
         except SwarmError as e:
             self.result.error = str(e)
             log.error("%s", e)
@@ -317,12 +359,16 @@ class Supervisor:
         finally:
             self.training = False
             try:
-                node.send(self.keys.ctl("stop"), Stop(reason="interrupted" if self.result.interrupted else "done"))
+                if self.lead:
+                    reason = "interrupted" if self.result.interrupted else "failed" if self.result.error else "done"
+                    node.send(self.keys.ctl("stop"), Stop(reason=reason))
                 await self._collect_byes(timeout=3.0)
             except Exception:  # the session may be closing
                 pass
             await self.placement.stop()
             watch.undeclare()
+            if setup is not None:
+                setup.undeclare()
             self.result.rejected_by = {"supervisor": node.rejected, **{a: b.rejected for a, b in self.byes.items()}}
             self.result.rejected = sum(self.result.rejected_by.values())
             self.result.restarts = {a: r.total for a, r in self.restarts.items()}
@@ -333,6 +379,46 @@ class Supervisor:
             self.result.wall_seconds = time.perf_counter() - t0
         return self.result
 
+    cfg_wait_s = 600.0  # how long the leader waits for the other hosts to come up
+
+    async def _train(self) -> None:
+        assert self.node is not None
+        k = self.keys
+        outputs = [k.ctl(v) for v in ("epoch", "checkpoint", "fault")]
+        await self.node.wait_matched(outputs, timeout=10.0)
+        self.metrics_file = open(self.out / "metrics.jsonl", "a")  # noqa: SIM115 -- closed in run()
+        self.training = True
+        for epoch in range(self.cfg.epochs):
+            done = await self._run_epoch(epoch)
+            self.result.epochs.append(done)
+            self._record(done)
+            last = epoch == self.cfg.epochs - 1
+            every = self.cfg.checkpoint_every
+            if self.agents and self.cfg.learn and (last or (every and (epoch + 1) % every == 0)):
+                await self._checkpoint(epoch)
+
+    async def _serve(self) -> None:
+        """Another host's share: keep it alive (restarts, forwarded faults, heartbeats) until the leader's Stop."""
+        self.training = True
+        log.info("host %s: %d actors up; serving the leader's run %s", self.host, len(self.local), self.cfg.run_id)
+        while True:
+            stop = await self._expect(Stop, lambda m: True, timeout=math.inf)
+            self._event("stop", self.host, f"the leader says: {stop.reason}")
+            return
+
+    def _serve_setup(self) -> Any:
+        """The leader answers the other hosts' `kinswarm up`: the resolved run, signed with the plan's digest."""
+        cfg, plan = self.cfg, self.plan
+        scenario = Path(cfg.scenario).read_text() if cfg.scenario else ""
+        msg = Setup(plan=plan.name, config=cfg.to_json(), topology=Path(cfg.topology).read_text(), scenario=scenario)
+        key = self.keys.setup(plan.name)
+        payload = codec.encode(msg, cfg.run_id, "supervisor/main", plan.digest)
+
+        def on_query(q: Any) -> None:  # zenoh thread
+            q.reply(key, payload)
+
+        return self.session.declare_queryable(key, on_query)
+
     # -- liveliness, exits, restarts -------------------------------------------------------------
     def _alive_changed(self, actor: ActorId, up: bool) -> None:
         if up:
@@ -342,14 +428,25 @@ class Supervisor:
         if self.training and actor[0] != "supervisor":
             self._event("alive" if up else "lost", actor[1], "liveliness token " + ("back" if up else "gone"))
 
-    async def _wait_alive(self, expected: list[ActorId], timeout: float) -> None:
+    async def _wait_alive(self, expected: list[ActorId], timeout: float, what: str = "") -> None:
         deadline = time.monotonic() + timeout
+        told = False
         while not set(expected) <= self.alive:
             for actor, how in self.placement.exited():
                 raise SwarmError(f"{actor[0]} {actor[1]} {how}; its log ends:\n{self.placement.log_tail(actor)}")
+            missing = sorted(set(expected) - self.alive)
             if time.monotonic() > deadline:
-                missing = sorted(set(expected) - self.alive)
                 raise SwarmError(f"not alive after {timeout:.0f} s: {missing}")
+            if what and not told:
+                told = True
+                hosts = sorted({self.host_of(a) for a in missing})
+                log.warning(
+                    "waiting for %s (on %s): start `kinswarm up PLAN --host NAME` there", what, ", ".join(hosts)
+                )
+            if self.multi:
+                self._heartbeat(time.monotonic())
+                while self.node is not None and len(self.node.mailbox):
+                    self._route(*await self.node.recv())
             await asyncio.sleep(0.02)
 
     def _tick(self) -> None:
@@ -367,14 +464,55 @@ class Supervisor:
                 self._thaw(agent)
         for faults in self.link_faults.values():
             faults[:] = [(d, exp) for d, exp in faults if exp is None or exp > now]
+        if self.multi:
+            self._heartbeat(now)
         if now >= self._next_status:
             self._next_status = now + self.STATUS_EVERY
-            self._publish_status(now)
+            if self.lead:
+                self._publish_status(now)
+            if self.missing:  # again and again: a Pause can be lost while its host is cut off
+                self._send_pause()
+
+    # -- several hosts: heartbeats, partitions -----------------------------------------------------
+    def _heartbeat(self, now: float) -> None:
+        """Send ours every quarter lease; a host not heard for a lease is cut off: pause until it is back."""
+        assert self.node is not None
+        lease = self.plan.lease_ms / 1000
+        if now >= self._next_hb:
+            self._next_hb = now + lease / 4
+            self._hb_seq += 1
+            self.node.send(
+                self.keys.host(self.host), Heartbeat(host=self.host, seq=self._hb_seq, leader=int(self.lead))
+            )
+        missing = {h for h, t in self.heard.items() if now - t > lease}
+        if missing == self.missing:
+            if missing and not self.lead:
+                leader_gone = now - self.heard.get(self.plan.leader, now)
+                if leader_gone > self.LEADER_GRACE_S:
+                    raise SwarmError(f"the leader ({self.plan.leader}) unheard for {leader_gone:.0f} s; stopping")
+            return
+        for h in sorted(missing - self.missing):
+            self._event("partition", h, f"no heartbeat from host {h} for {now - self.heard[h]:.2f} s: paused")
+        if missing and not self.missing:
+            self._paused_at = now
+        if self.missing and not missing:
+            self.paused_s += now - self._paused_at
+        for h in sorted(self.missing - missing):
+            self._event("rejoin", h, f"host {h} heard again after {now - self._paused_at:.1f} s")
+        self.missing = missing
+        self._send_pause()
+
+    def _send_pause(self) -> None:
+        assert self.node is not None
+        self.node.send(self.keys.ctl("pause"), Pause(host=self.host, missing=sorted(self.missing)))
+
+    def _paused_seconds(self, now: float) -> float:
+        return self.paused_s + (now - self._paused_at if self.missing else 0.0)
 
     def _on_exit(self, actor: ActorId, how: str, now: float) -> None:
         role, ident = actor
         if role != "agent":
-            raise SwarmError(f"{role} {ident} {how}; its log ends:\n{self.placement.log_tail(actor)}")
+            raise SwarmError(f"{role} {ident} on {self.host} {how}; its log ends:\n{self.placement.log_tail(actor)}")
         self._event("exited", ident, how)
         self.frozen.pop(ident, None)
         r = self.restarts[ident]
@@ -436,8 +574,14 @@ class Supervisor:
                 for t in targets:
                     self.link_faults.setdefault(t, []).append((describe(f), expiry))
             return ""
-        done, skipped = [], []
+        done, skipped, forwarded = [], [], []
+        remote = [t for t in targets if self.where[t] != self.host]
+        if remote and self.lead:  # their hosts' supervisors own those processes
+            self.node.send(self.keys.ctl("fault"), dataclasses.replace(f, targets=remote))
+            forwarded = [f"{t} (to {self.where[t]})" for t in remote]
         for t in targets:
+            if t in remote:
+                continue
             actor = ("agent", t)
             if f.fault == "kill":
                 ok = self.placement.signal(actor, signal.SIGKILL)
@@ -451,7 +595,10 @@ class Supervisor:
             else:  # thaw
                 ok = t in self.frozen and self._thaw(t)
             (done if ok else skipped).append(t)
-        return f"{f.fault}: {', '.join(done) or 'nobody'}" + (f"; not running: {', '.join(skipped)}" if skipped else "")
+        detail = f"{f.fault}: {', '.join(done) or 'nobody'}"
+        if forwarded:
+            detail += f"; forwarded: {', '.join(forwarded)}"
+        return detail + (f"; not running: {', '.join(skipped)}" if skipped else "")
 
     def _thaw(self, agent: str) -> bool:
         self.frozen.pop(agent, None)
@@ -499,7 +646,7 @@ class Supervisor:
             role=roles,
             alive={i: int((roles[i], i) in self.alive) for i in ids},
             pid={i: pids.get(i, 0) for i in ids},
-            host=dict.fromkeys(ids, self.host),
+            host={i: self.hostname.get(self.host_of((roles[i], i)), self.host_of((roles[i], i))) for i in ids},
             restarts={i: self.restarts[i].total if i in self.restarts else 0 for i in ids},
             faults=faults,
         )
@@ -524,18 +671,42 @@ class Supervisor:
         elif kind == "metrics/joints":
             if (j := self.node.decode(key, payload, JointStatus)) is not None:
                 self.joints = j
+                start = self._epoch_start
+                if start is not None and j.epoch < start.epoch and not self.missing:
+                    if time.monotonic() - self._epoch_sent > 1.0:  # lost in a partition: the sim never began it
+                        log.warning(
+                            "the sim is still at epoch %d: sending epoch %d's start again", j.epoch, start.epoch
+                        )
+                        self.node.send(self.keys.ctl("epoch"), start)
+                        self._epoch_sent = time.monotonic()
         elif kind == "fault/request":
             if (f := self.node.decode(key, payload, Fault)) is not None:
                 self._on_fault(f)
+        elif kind.startswith("ctl/host/"):
+            if (hb := self.node.decode(key, payload, Heartbeat)) is not None and hb.host in self.plan.hosts:
+                if hb.host != self.host:
+                    self.heard[hb.host] = time.monotonic()
+        elif kind == "ctl/stop":
+            return self.node.decode(key, payload, Stop)
+        elif kind == "ctl/fault" and not self.lead:
+            f = self.node.decode(key, payload, Fault)
+            if f is not None and f.fault in PROCESS_FAULTS:
+                mine = [t for t in expand_targets(f.targets, self.agents) if self.where.get(t) == self.host]
+                if mine:
+                    self._event("fault", ",".join(mine), describe(f) + f" (from the leader: {self._apply(f, mine)})")
         return None
 
-    async def _expect(self, kind: type, match: Callable[[Any], bool], timeout: float) -> Any:
+    async def _expect(self, kind: type, match: Callable[[Any], bool], timeout: float, stretch: bool = True) -> Any:
         """Serve the mailbox (faults, events, restarts) until a message of `kind` satisfying `match`."""
         assert self.node is not None
         deadline = time.monotonic() + timeout
+        paused0 = self._paused_seconds(time.monotonic())
         while True:
             self._tick()
-            remaining = deadline - time.monotonic()
+            now = time.monotonic()
+            remaining = deadline - now
+            if stretch:  # a partition stops the clock
+                remaining += self._paused_seconds(now) - paused0
             if remaining <= 0:
                 raise _NoMessage(f"no {kind.__name__} within {timeout:.0f} s")
             try:
@@ -543,6 +714,8 @@ class Supervisor:
             except TimeoutError:
                 continue
             m = self._route(key, payload)
+            if isinstance(m, Stop) and self.lead and kind is not Stop:
+                raise _Down(f"stop requested ({m.reason})")
             if isinstance(m, kind) and match(m):
                 return m
 
@@ -561,10 +734,16 @@ class Supervisor:
         assert self.node is not None
         self.epoch = epoch
         goal = self.cfg.resolved_goal(self.topo)
-        self.node.send(self.keys.ctl("epoch"), EpochStart(epoch=epoch, steps=self.cfg.steps, goal=goal))
+        self._epoch_start = EpochStart(epoch=epoch, steps=self.cfg.steps, goal=goal)
+        while self.missing:  # not into a partition: the other side would miss the start
+            with contextlib.suppress(_NoMessage):
+                await self._expect(Saved, lambda m: False, timeout=0.2, stretch=False)
+        self.node.send(self.keys.ctl("epoch"), self._epoch_start)
+        self._epoch_sent = time.monotonic()
         # generous: every step may run into its deadline and still finish
         timeout = 30.0 + self.cfg.steps * self.cfg.deadline_ms / 1000 * 1.5
         done = await self._expect(EpochDone, lambda m: m.epoch == epoch, timeout)
+        self._epoch_start = None
         if self.on_epoch is not None:
             self.on_epoch(done)
         return done
@@ -583,7 +762,10 @@ class Supervisor:
             waiting = {
                 a
                 for a in waiting
-                if ("agent", a) in self.alive and a not in self.frozen and self.restarts[a].total == before[a]
+                if ("agent", a) in self.alive
+                and a not in self.frozen
+                and self.restarts[a].total == before[a]
+                and self.where[a] not in self.missing
             }
             if not waiting:
                 break

@@ -68,6 +68,14 @@ class Keys:
     def ctl(self, verb: str) -> str:
         return f"{self.root}/ctl/{verb}"
 
+    def host(self, name: str) -> str:
+        """A supervisor's heartbeat (several hosts); under ctl/ so only supervisors may speak there."""
+        return f"{self.root}/ctl/host/{name}"
+
+    def setup(self, plan: str) -> str:
+        """The leader's queryable: the resolved run of a deploy plan, for the other hosts."""
+        return f"{self.root}/ctl/setup/{plan}"
+
     @property
     def ctl_all(self) -> str:
         return f"{self.root}/ctl/*"

@@ -10,10 +10,11 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import ClassVar
 
-SCHEMA_VERSION = 4  # 2: faults, events, status, bye; payloads carry a MAC (codec.py). 3: Up.action is the
+SCHEMA_VERSION = 5  # 2: faults, events, status, bye; payloads carry a MAC (codec.py). 3: Up.action is the
 # sender's action of the step before (sent before it learns), plus a closing Up after an epoch's last step.
 # 4: scenes with obstacles (§5.4): Obs.clearance/collided, Task.clearance/collisions, EpochDone.collisions/clearance;
 # the grasp scene (§5.5): `sense` maps on Obs, Task and Down (contacts, force errors), `traces` on EpochDone
+# 5: several hosts (deploy plans): Setup (the leader's run for the other hosts), Heartbeat, Pause
 
 Vec2 = tuple[float, float]
 Vec3 = tuple[float, float, float]
@@ -129,7 +130,8 @@ class EpochDone:
 
 @dataclass(frozen=True)
 class Checkpoint:
-    """supervisor -> agents (ctl/checkpoint): write your learned state into `directory` now."""
+    """supervisor -> agents (ctl/checkpoint): write your learned state now, into your run directory's agents/
+    (`directory` is the leader's; on one host the same place)."""
 
     KIND: ClassVar[str] = "checkpoint"
     epoch: int
@@ -233,6 +235,40 @@ class SwarmStatus:
     faults: dict[str, list[str]]
 
 
+@dataclass(frozen=True)
+class Setup:
+    """leader -> the other hosts' supervisors (a reply on ctl/setup/<plan>): the resolved run, so every host
+    runs the same one. Signed with the plan's digest, not the run's key (which it carries): only a host
+    with the same plan file can read it, and a different plan is refused by name."""
+
+    KIND: ClassVar[str] = "setup"
+    plan: str
+    config: str  # the leader's RunConfig as JSON (paths are the leader's; each host rewrites its own)
+    topology: str  # the topology TOML text
+    scenario: str  # the scenario TOML text, "" when the run has none
+
+
+@dataclass(frozen=True)
+class Heartbeat:
+    """supervisor -> supervisors (ctl/host/<host>), every quarter lease: a host hears another host's
+    silence within one lease, whatever Zenoh's own link detection does (measured: 1-10 s across a cut)."""
+
+    KIND: ClassVar[str] = "heartbeat"
+    host: str
+    seq: int
+    leader: int  # 1 from the leading supervisor
+
+
+@dataclass(frozen=True)
+class Pause:
+    """supervisor -> sim (ctl/pause): the hosts this supervisor cannot hear. The sim steps only while every
+    supervisor's latest Pause is empty: no learning on stale or missing data."""
+
+    KIND: ClassVar[str] = "pause"
+    host: str
+    missing: list[str]
+
+
 _ALL = (Obs, Task, Down, Up, Cmd, EpochStart, EpochDone, Checkpoint, Saved, Stop)
-_ALL += (Bye, Fault, FaultReply, Event, JointStatus, SwarmStatus)
+_ALL += (Bye, Fault, FaultReply, Event, JointStatus, SwarmStatus, Setup, Heartbeat, Pause)
 MESSAGE_TYPES: dict[str, type] = {m.KIND: m for m in _ALL}

@@ -25,7 +25,19 @@ from kinswarm.actors.config import RunConfig
 from kinswarm.actors.runtime import Node
 from kinswarm.actors.scenario import ScenarioEntry, load_scenario
 from kinswarm.protocol.faults import DISTURB_AMPLITUDE_DEG, JOINT_FAULTS, check_fault, describe, expand_targets
-from kinswarm.protocol.messages import Bye, Cmd, EpochDone, EpochStart, Event, Fault, JointStatus, Obs, Stop, Task
+from kinswarm.protocol.messages import (
+    Bye,
+    Cmd,
+    EpochDone,
+    EpochStart,
+    Event,
+    Fault,
+    JointStatus,
+    Obs,
+    Pause,
+    Stop,
+    Task,
+)
 from kinswarm.protocol.topology import Topology
 from kinswarm.sim.contact import GraspScene
 from kinswarm.sim.obstacles import Scene
@@ -90,6 +102,10 @@ class SimActor:
         self.step_started = 0.0
         self.longest_step = 0.0
         self._deadline: asyncio.TimerHandle | None = None
+        # Host partitions (deploy plans): supervisor host -> the hosts it cannot hear. While any is missing the
+        # next step is held back, not run on stale or missing data, and published when all are back.
+        self.paused_by: dict[str, list[str]] = {}
+        self.held = False
         self._status: asyncio.TimerHandle | None = None
         self._cmd_prefix = self.keys.cmd_all[:-1]
         self._due: dict[int, list[tuple[int, ScenarioEntry]]] = {}  # scenario entries by step
@@ -155,11 +171,29 @@ class SimActor:
         elif key == k.ctl("epoch"):
             if (e := node.decode(key, payload, EpochStart)) is not None:
                 self._on_epoch(e)
+        elif key == k.ctl("pause"):
+            if (p := node.decode(key, payload, Pause)) is not None:
+                self._on_pause(p)
         elif key == k.ctl("stop"):
             if node.decode(key, payload, Stop) is not None:
                 node.send(k.rep(node.role, node.ident), Bye(steps=self.total_steps, rejected=node.rejected))
                 return True
         return False
+
+    def _on_pause(self, p: Pause) -> None:
+        was = self.paused
+        self.paused_by[p.host] = list(p.missing)
+        if self.paused and not was:
+            self._event("pause", "sim", f"{p.host} cannot hear {', '.join(p.missing)}; steps held")
+        elif was and not self.paused:
+            self._event("resume", "sim", "every host heard again")
+            if self.held and self.epoch is not None:
+                self.held = False
+                self._publish_step()
+
+    @property
+    def paused(self) -> bool:
+        return any(self.paused_by.values())
 
     # -- handlers ----------------------------------------------------------------------------------
     def _on_epoch(self, e: EpochStart) -> None:
@@ -188,6 +222,9 @@ class SimActor:
         self.missed = 0
         self.started = time.perf_counter()
         self.longest_step = 0.0
+        if self.paused:
+            self.held = True
+            return
         self._publish_step()
 
     def _on_cmd(self, agent: str, m: Cmd) -> None:
@@ -387,6 +424,9 @@ class SimActor:
         if self.disturbed:
             self._count_disturbances()
         if self.t < e.steps:
+            if self.paused:
+                self.held = True
+                return
             self._publish_step()
             return
         self.node.send(

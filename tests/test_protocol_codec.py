@@ -24,6 +24,7 @@ from kinswarm.protocol.messages import (
     Task,
     Up,
 )
+from kinswarm.protocol.messages import Heartbeat, Pause, Setup
 
 KEY = b"0123456789abcdef0123456789abcdef"
 OTHER_KEY = b"fedcba9876543210fedcba9876543210"
@@ -53,6 +54,9 @@ SAMPLES = [
     SwarmStatus(epoch=2, epochs=60, role={"sim": "sim", "a1": "agent"}, alive={"sim": 1, "a1": 0},
                 pid={"sim": 100, "a1": 101}, host={"sim": "h", "a1": "h"}, restarts={"sim": 0, "a1": 2},
                 faults={"sim": [], "a1": ["drop rate=0.05"]}),
+    Setup(plan="two-hosts", config="{}", topology="[robot]", scenario=""),
+    Heartbeat(host="brain", seq=7, leader=1),
+    Pause(host="brain", missing=["limbs"]),
 ]
 
 
