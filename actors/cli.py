@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import dataclasses
 import json
 import logging
 import os
@@ -221,6 +222,8 @@ def _up(a: argparse.Namespace) -> tuple[dict, RunConfig]:
         checkpoint_every=1,
     )
     cfg, topo = _resolve(ns, "agents")
+    if len(plan.hosts) > 1:  # the sim holds its steps while one of them is silent
+        cfg = dataclasses.replace(cfg, hosts=list(plan.hosts), lease_ms=plan.lease_ms)
     print(f"kinswarm: host {a.host} leads run {cfg.run_id} of plan {plan.name} -> {cfg.out}", flush=True)
     return run_swarm(cfg, topo, progress=progress, plan=plan, host=a.host), cfg
 

@@ -47,12 +47,16 @@ class RunConfig:
     scenario: str | None = None  # absolute path of a scenario TOML (timed faults), read by the sim
     max_restarts: int = 5  # restart policy: at most this many restarts of one agent ...
     restart_window_s: float = 60.0  # ... within this many seconds, else the run fails
+    # Several hosts (a deploy plan): the hosts whose heartbeats the sim must hear to step, within lease_ms
+    hosts: list[str] = field(default_factory=list)
+    lease_ms: int = 1000
     # Key of the messages' MAC (codec.py): only holders of config.json can speak on this run's keys.
     secret: str = field(default_factory=lambda: secrets.token_hex(16), repr=False)
 
     def __post_init__(self) -> None:
         check_id("run id", self.run_id)
         ints = (("epochs", 1), ("steps", 1), ("deadline_ms", 1), ("checkpoint_every", 0), ("max_restarts", 0))
+        ints += (("lease_ms", 100),)
         for name, lo in ints:
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or v < lo:
@@ -69,6 +73,8 @@ class RunConfig:
             raise ConfigError(f"restart_window_s: expected a number > 0, got {self.restart_window_s!r}")
         if not (isinstance(self.secret, str) and len(self.secret) >= 16):
             raise ConfigError("secret: expected a string of at least 16 characters")
+        if not (isinstance(self.hosts, list) and all(isinstance(h, str) for h in self.hosts)):
+            raise ConfigError(f"hosts: expected a list of host names, got {self.hosts!r}")
         if self.goal is not None and (len(self.goal) != 2 or not all(math.isfinite(g) for g in self.goal)):
             raise ConfigError(f"goal: expected two finite numbers, got {self.goal!r}")
 

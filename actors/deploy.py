@@ -41,7 +41,10 @@ def control_net(plan: Plan, host: str, topo: Topology | None) -> NetSpec:
     if plan.mode == "client":
         spec = NetSpec(mode="client", connect=plan.routers, lease_ms=plan.lease_ms, must_connect=True)
     else:
-        spec = NetSpec(connect=(plan.hosts[host].listen,), lease_ms=plan.lease_ms, must_connect=True)
+        multi = len(plan.hosts) > 1
+        spec = NetSpec(
+            connect=(plan.hosts[host].listen,), lease_ms=plan.lease_ms, must_connect=True, gossip_multihop=multi
+        )
     return plan.secure(spec, plan.identity("supervisor", "", host), topo)
 
 
@@ -107,21 +110,29 @@ def follower_config(setup: Setup, host: str, plan: Plan, out: Path | None) -> tu
 
 
 async def down(plan: Plan, host: str, wait_s: float = 10.0) -> str:
-    """Ask the running swarm of `plan` to stop; returns its run id."""
+    """Ask the running swarm of `plan` to stop, until its leader has left; returns its run id."""
     run, setup = await asyncio.to_thread(fetch_setup, plan, host, wait_s)
     key = json.loads(setup.config)["secret"].encode()
     topo = load_topology_text(setup.topology)
-    session = open_session(control_net(plan, host, topo))
+    spec = control_net(plan, host, topo)
+    if plan.mode == "peer":  # straight to the leader, who tells everyone: a Stop only our own host heard
+        spec = spec.with_(connect=tuple(dict.fromkeys((plan.hosts[plan.leader].listen, *spec.connect))))
+    session = open_session(spec)
     node = Node(session, Keys(run), "cli", f"down-{os.getpid()}", key)
+    leader = node.keys.alive("supervisor", "main")
     try:
         stop = node.keys.ctl("stop")
         await node.wait_matched([stop], timeout=5.0)
-        node.send(stop, Stop(reason=f"kinswarm down from {host}"))
-        await asyncio.sleep(0.3)  # let the put leave before the session closes
+        deadline = time.monotonic() + wait_s
+        while time.monotonic() < deadline:
+            node.send(stop, Stop(reason=f"kinswarm down from {host}"))
+            await asyncio.sleep(1.0)
+            if not list(session.liveliness().get(leader, timeout=1.0)):
+                return run
+        raise DeployError(f"run {run}: the leader ({plan.leader}) is still there {wait_s:.0f} s after the stop")
     finally:
         node.close()
         session.close()
-    return run
 
 
 def load_topology_text(text: str) -> Topology:

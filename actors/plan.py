@@ -128,14 +128,17 @@ class Plan:
         """The NetSpec of a process of `host`: its host's supervisor (`supervisor`) or an actor there."""
         h = self.hosts[host]
         if self.mode == "client":
-            spec = NetSpec(mode="client", connect=self.routers, lease_ms=self.lease_ms, must_connect=not supervisor)
-        elif supervisor:  # every other host's supervisor: whoever comes up first, they find each other
-            others = tuple(o.listen for o in self.hosts.values() if o.name != host)
-            spec = NetSpec(listen=(h.listen,), connect=others, lease_ms=self.lease_ms)
+            spec = NetSpec(mode="client", connect=self.routers, lease_ms=self.lease_ms, must_connect=True)
+        elif supervisor:  # the others connect to the leader; gossip does the rest. (Each connecting to each
+            # other, both retrying at once after a cut, left them apart for good in 1 of 3 trials.)
+            leader = () if host == self.leader else (self.hosts[self.leader].listen,)
+            spec = NetSpec(listen=(h.listen,), connect=leader, lease_ms=self.lease_ms)
         else:
             spec = NetSpec(
                 listen=(self.endpoint(h.address, 0),), connect=(h.listen,), lease_ms=self.lease_ms, must_connect=True
             )
+        if len(self.hosts) > 1 and self.mode == "peer":
+            spec = spec.with_(gossip_multihop=True)
         return self.secure(spec, identity, topo)
 
     def secure(self, spec: NetSpec, identity: str, topo: Topology | None) -> NetSpec:

@@ -68,6 +68,7 @@ class NetSpec:
     password: str = field(default="", repr=False)
     dictionary: str = ""
     acl: dict[str, Any] | None = None  # Zenoh's access_control section, applied to what this process receives
+    gossip_multihop: bool = False  # several hosts: peers relearn each other across hosts after a cut
 
     def to_json(self) -> str:
         return json.dumps(dataclasses.asdict(self), indent=2)
@@ -96,6 +97,9 @@ def zenoh_config(spec: NetSpec) -> zenoh.Config:
     put("connect/endpoints", list(spec.connect))
     put("scouting/multicast/enabled", False)
     put("transport/link/tx/lease", spec.lease_ms)
+    # A BLOCK put towards a cut-off host waited 5 s (the default) before Zenoh closed that link, holding up
+    # its sender: a supervisor's Pause reached the sim beside it 9 s late. One lease, like the liveliness.
+    put("transport/link/tx/queue/congestion_control/block/wait_before_close", spec.lease_ms * 1000)
     # A handshake with a frozen (SIGSTOPped) peer never completes; the 10 s default then also held up
     # every new session's close (`kinswarm status` took 10 s during a freeze, 0.5 s with 2 s here).
     put("transport/unicast/open_timeout", HANDSHAKE_MS)
@@ -117,6 +121,8 @@ def zenoh_config(spec: NetSpec) -> zenoh.Config:
         put("transport/auth/usrpwd/password", spec.password)
     if spec.dictionary:
         put("transport/auth/usrpwd/dictionary_file", spec.dictionary)
+    if spec.gossip_multihop:
+        put("scouting/gossip/multihop", True)
     if spec.acl is not None:
         put("access_control", spec.acl)
     return c
@@ -241,6 +247,7 @@ class Node:
         # link faults: empty on the fast path (the one check); touched only on the loop
         self._link_faults: dict[str, LinkFault] = {}
         self._step_prefixes = (f"{keys.root}/sim/", f"{keys.root}/a/")
+        self._periodic_prefixes = tuple(f"{keys.root}/{k}" for k in ("ctl/host/", "metrics/status", "metrics/joints"))
         self.fault_rng = random.Random(f"link-faults/{ident}")  # seeded from the ident: faulted runs are reproducible
         self.link_counts: dict[str, int] = dict.fromkeys(LINK_COUNTS, 0)  # what the faults did, for reports
         self.on_fault_expired: Callable[[str], None] | None = None  # told the description when one expires
@@ -250,8 +257,11 @@ class Node:
     def publisher(self, key: str) -> Any:
         pub = self._pubs.get(key)
         if pub is None:
-            # BLOCK: the default DROP silently loses messages under load; lockstep cannot afford that.
-            pub = self.session.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK, express=True)
+            # BLOCK: the default DROP silently loses messages under load; lockstep cannot afford that. Periodic
+            # state (heartbeats, pauses, status) is resent anyway and must never wait behind a dead link: DROP.
+            periodic = key.startswith(self._periodic_prefixes)
+            cc = zenoh.CongestionControl.DROP if periodic else zenoh.CongestionControl.BLOCK
+            pub = self.session.declare_publisher(key, congestion_control=cc, express=True)
             self._pubs[key] = pub
         return pub
 

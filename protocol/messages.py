@@ -14,7 +14,7 @@ SCHEMA_VERSION = 5  # 2: faults, events, status, bye; payloads carry a MAC (code
 # sender's action of the step before (sent before it learns), plus a closing Up after an epoch's last step.
 # 4: scenes with obstacles (§5.4): Obs.clearance/collided, Task.clearance/collisions, EpochDone.collisions/clearance;
 # the grasp scene (§5.5): `sense` maps on Obs, Task and Down (contacts, force errors), `traces` on EpochDone
-# 5: several hosts (deploy plans): Setup (the leader's run for the other hosts), Heartbeat, Pause
+# 5: several hosts (deploy plans): Setup (the leader's run for the other hosts), Heartbeat
 
 Vec2 = tuple[float, float]
 Vec3 = tuple[float, float, float]
@@ -250,8 +250,9 @@ class Setup:
 
 @dataclass(frozen=True)
 class Heartbeat:
-    """supervisor -> supervisors (ctl/host/<host>), every quarter lease: a host hears another host's
-    silence within one lease, whatever Zenoh's own link detection does (measured: 1-10 s across a cut)."""
+    """supervisor -> supervisors and the sim (ctl/host/<host>), every quarter lease: a host's silence is
+    noticed within one lease, whatever Zenoh's own link detection does (measured: 1-10 s across a cut).
+    The sim holds its next step while any host is silent: no learning on stale or missing data."""
 
     KIND: ClassVar[str] = "heartbeat"
     host: str
@@ -259,16 +260,6 @@ class Heartbeat:
     leader: int  # 1 from the leading supervisor
 
 
-@dataclass(frozen=True)
-class Pause:
-    """supervisor -> sim (ctl/pause): the hosts this supervisor cannot hear. The sim steps only while every
-    supervisor's latest Pause is empty: no learning on stale or missing data."""
-
-    KIND: ClassVar[str] = "pause"
-    host: str
-    missing: list[str]
-
-
 _ALL = (Obs, Task, Down, Up, Cmd, EpochStart, EpochDone, Checkpoint, Saved, Stop)
-_ALL += (Bye, Fault, FaultReply, Event, JointStatus, SwarmStatus, Setup, Heartbeat, Pause)
+_ALL += (Bye, Fault, FaultReply, Event, JointStatus, SwarmStatus, Setup, Heartbeat)
 MESSAGE_TYPES: dict[str, type] = {m.KIND: m for m in _ALL}
