@@ -136,7 +136,8 @@ def test_restart_policy_gives_up_and_says_why(tmp_path, chain4):
 
 
 def test_bad_faults_are_refused_with_a_reason(tmp_path, chain4):
-    run = Run(tmp_path, chain4, "--epochs", "200", "--steps", "100", "--placement", "single")
+    # enough epochs that the run cannot end by itself before the Ctrl-C below, however loaded the machine
+    run = Run(tmp_path, chain4, "--epochs", "5000", "--steps", "100", "--placement", "single")
     run.wait_epochs(1)
     r = run.fault("kill", "a9")
     assert r.returncode == 2 and "'a9' is not an agent" in r.stderr
