@@ -287,6 +287,14 @@ def test_secured_swarm_refuses_strangers_and_agent_faults(hosts: Hosts, tmp_path
     assert probe("fault", spec_file("agent", agent), str(tmp_path / "limbs"), "as-agent") == "no reply"
     assert probe("fault", spec_file("sup", supervisor), str(tmp_path / "limbs"), "as-sup").startswith("reply")
     assert not [e for e in _events(tmp_path / "brain") if e["event"] == "fault" and "as-agent" in e["detail"]]
+    # a process fault on the leader, aimed at an agent of the other host: that host's supervisor applies it
+    run_id = json.loads((tmp_path / "brain" / "config.json").read_text())["run_id"]
+    kill = hosts.run("brain", [*KINSWARM, "fault", run_id, "kill", "a3", "--run-dir", str(tmp_path / "brain")], 60)
+    assert kill.returncode == 0 and "forwarded: a3 (to limbs)" in kill.stdout, kill.stdout + kill.stderr
+    deadline = time.monotonic() + 30
+    while not [e for e in _events(tmp_path / "limbs") if e["event"] == "restart" and e["target"] == "a3"]:
+        assert time.monotonic() < deadline, _events(tmp_path / "limbs")
+        time.sleep(0.2)
     # `kinswarm down` from the other host stops every host
     down = hosts.run("limbs", [*KINSWARM, "down", str(plan), "--host", "limbs"], timeout=60)
     assert down.returncode == 0, down.stdout + down.stderr
