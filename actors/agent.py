@@ -35,7 +35,7 @@ from pathlib import Path
 import numpy as np
 from kinswarm.actors.checkpoint import CheckpointError, digest, load_checkpoint, load_latest, save_checkpoint
 from kinswarm.actors.config import RunConfig
-from kinswarm.actors.learning.grasp import GraspReward, grasp_learner_settings
+from kinswarm.actors.learning.grasp import GraspReward, goal_along_motion, grasp_learner_settings
 from kinswarm.actors.learning.learner import Learner
 from kinswarm.actors.learning.reward import corridor_reward, path_distance, reach_reward
 from kinswarm.actors.learning.settings import LearnerSettings
@@ -106,7 +106,10 @@ class Agent:
         self.grasp: GraspReward | None = None
         obj = topo.object
         if self.is_root and obj is not None:
-            self.grasp = GraspReward(cfg.reward, obj.grasp, obj.center, obj.half_extents)
+            fine = learner_settings(cfg, topo, topo.dof_agents[0]).fine_action  # the fingers' fine steps
+            self.grasp = GraspReward(
+                cfg.reward, obj.grasp, obj.center, obj.half_extents, kn=obj.kn, kt=obj.kt, fine_action=fine
+            )
             self.finger_of = {c: topo.subtree_leaves(c)[0] for c in self.spec.children}
         self.grasp_in: dict[Key, dict[str, float]] = {}  # my own Obs.sense by step (a fingertip's contact)
         self.epoch = -1
@@ -443,7 +446,10 @@ class Agent:
             if cur.sense[0] is not None:
                 s, reward = self._scene_state(s, reward, cur.sense)
             if self.extra_state:  # named extra variables (a grasp finger's force error, contact force)
-                s = np.concatenate([s, [self.sense_now.get(n, 0.0) for n in self.extra_state]])
+                local = dict(self.sense_now)
+                if "g_perp" in self.extra_state:  # the goal along my joint's motion of the tip (grasp "goal")
+                    local["g_perp"] = goal_along_motion(cur.frame, tip, cur.goal)
+                s = np.concatenate([s, [local.get(n, 0.0) for n in self.extra_state]])
             action = self.learner.decide(s, reward, learn=self.cfg.learn, explore=self.cfg.explore)
             self.decided = (cur.key, action)
             if self.visible:
@@ -460,6 +466,8 @@ class Agent:
                     Up(epoch=epoch, step=self.cfg.steps, tips=tips, action=action),
                 )
             delta = (action - 1) * self.cfg.action_rad  # actions 0, 1, 2: decrease, keep, increase
+            if self.sense_now.get("fine", 0.0) > 0.5:  # a grasp finger near its contact goal: fine steps
+                delta *= self.learner.settings.fine_action
             self.node.send(self.keys.cmd(self.id), Cmd(epoch=epoch, step=step, delta=delta))
         self.last_finished = cur.key
         self.steps_done += 1
@@ -491,7 +499,7 @@ class Agent:
         out = {}
         for child, leaf in self.finger_of.items():
             r = None if rewards is None else rewards[leaf]
-            out[child] = (self.topo.object.grasp[leaf], r, {"force_error": context[leaf]})
+            out[child] = (self.grasp.goals[leaf], r, context[leaf])
         return out
 
     def _observe(self, cur: _Step) -> None:

@@ -15,7 +15,7 @@ from typing import Any
 from kinswarm.protocol.keys import check_id
 from kinswarm.protocol.topology import Topology, load_topology
 
-REWARDS = ("paper", "strict", "shaped", "contact", "global")  # contact, global: grasp scenes only
+REWARDS = ("paper", "strict", "shaped", "contact", "global", "force")  # contact, global, force: grasp scenes only
 PLACEMENTS = ("process", "single")
 CONTROLLERS = ("agents", "baseline")
 

@@ -1,8 +1,10 @@
 """§5.5, Figs. 24-29: the three-finger quasi-static grasp by 13 nested agents (examples/grasp3.toml).
 
-Trains the swarm with the default reward (`shaped`: the grasp agent's per-finger credit) on every seed,
-and Eq. 12 as printed (`paper`), its contact-gated variant (`contact`) and the shaped potential paid
-globally (`global`) on the first seed, then scores each epoch's last step: all three fingertips in
+Trains the swarm with the default reward (`shaped`: the grasp agent sends each finger a contact goal, the
+tip position where its contact carries a balancing force, and the fingers move with fine steps near it) on
+every seed, and Eq. 12 as printed (`paper`), its contact-gated variant (`contact`), round 1's per-finger
+force-error reward (`force`) and the same paid globally (`global`) on the first seed, then scores each
+epoch's last step: all three fingertips in
 contact (fn > 0) inside their friction cones, |net force| < 10 % of the mean normal force and |net torque|
 < 10 % of the mean normal force x L (L = the object's larger half-extent, 1.0 length unit): the issue's
 bar is >= 80 % of the last 20 epochs, over 5 seeds.
@@ -14,6 +16,7 @@ import math
 from typing import Any
 
 from kinswarm.actors.grasp_report import BALANCE, epoch_quality, write_grasp_plots
+from kinswarm.actors.learning.grasp import GraspParams
 from kinswarm.protocol.topology import load_topology
 
 from .common import Context, Report, plt_module, run_specs
@@ -56,7 +59,7 @@ def run(ctx: Context) -> dict[str, Any]:
     epochs, steps = (3, 60) if ctx.quick else (30, 400)
     base = {"topology": str(GRASP3), "epochs": epochs, "steps": steps}
     specs = [Spec(name=f"grasp-shaped-s{s}", seed=s, reward="shaped", **base) for s in ctx.seed_list]  # type: ignore[arg-type]
-    variants = ("paper", "contact", "global")
+    variants = ("paper", "contact", "global", "force")
     specs += [Spec(name=f"grasp-{v}-s0", seed=0, reward=v, **base) for v in variants]  # type: ignore[arg-type]
     outcomes = run_specs(ctx, specs, desc="grasp")
     scores = [_score(o, topo) for o in outcomes]
@@ -65,7 +68,8 @@ def run(ctx: Context) -> dict[str, Any]:
         "A compound grasp agent (no DOF) over three 4-joint fingers around a fixed rectangle (examples/grasp3.toml:"
         " finger 1 opposes fingers 2 and 3; balanced with pure normal forces at fn1 = fn2 + fn3, fn2 = fn3). "
         "Contacts: Fig. 25's spring-dampers (kn = kt = 20, cn = ct = 2, mu = 0.5, sim/contact.py). "
-        f"Training: {epochs} epochs x {steps} steps (paper: 200 x 500), 1 degree per action.",
+        f"Training: {epochs} epochs x {steps} steps (paper: 200 x 500), 1 degree per action (`shaped`: 0.1 degree "
+        f"within {GraspParams.D_fine} of the contact goal).",
         "",
         f"**Good grasp** at an epoch's last step: all fingertips touch (fn > 0) inside their friction cones, |F| < "
         f"{BALANCE} x mean fn (force units) and |tau| < {BALANCE} x mean fn x L, L = "

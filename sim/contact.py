@@ -219,6 +219,10 @@ class GraspScene:
             if r.contact:
                 out[f"px/{leaf}"], out[f"py/{leaf}"] = r.point
                 out[f"nx/{leaf}"], out[f"ny/{leaf}"] = r.normal
+                out[f"depth/{leaf}"] = r.depth
+                anchor = self.model.anchor(leaf)
+                if anchor is not None:
+                    out[f"ax/{leaf}"], out[f"ay/{leaf}"] = anchor
         return out
 
     def tip_sense(self, leaf: str) -> dict[str, float]:

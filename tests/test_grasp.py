@@ -12,8 +12,11 @@ from kinswarm.actors.learning.grasp import (
     GraspParams,
     GraspReward,
     balance_targets,
+    contact_goals,
     eq12,
+    goal_along_motion,
     grasp_learner_settings,
+    grip_forces,
     scene_reward_problem,
 )
 from kinswarm.protocol.topology import ObjectSpec, TopologyError, load_topology, parse_topology
@@ -231,21 +234,24 @@ def test_reward_modes():
     tips0 = {"a": (-1.5, 0.0, 0.0), "b": (1.5, 0.35, 0.0), "c": (1.5, -0.35, 0.0)}
     tips1 = {"a": (-1.4, 0.0, 0.0), "b": (1.5, 0.35, 0.0), "c": (1.5, -0.35, 0.0)}
     out: dict = {}
-    for mode in ("paper", "contact", "global", "shaped"):
+    for mode in ("paper", "contact", "global", "force"):
         g = GraspReward(mode, GRASP, (0.0, 0.0), (1.0, 0.5))
         first, ctx = g.step(tips0, _sense({}))
-        assert first is None and ctx == pytest.approx({"a": -2.0, "b": -1.0, "c": -1.0})  # e / f_grip
+        assert first is None and {t: c["force_error"] for t, c in ctx.items()} == pytest.approx(
+            {"a": -2.0, "b": -1.0, "c": -1.0}
+        )  # e / f_grip
+        assert g.goals == GRASP  # every mode but shaped: the goals are the grasp points
         out[mode], _ = g.step(tips1, _sense({}))
     D0, D1 = 0.5, (0.4 + 0.5 + 0.5) / 3
     assert out["paper"] == pytest.approx(dict.fromkeys(TIPS, math.exp(-D1) + 3.0))  # D <= D_min, approaching
     assert D1 < D0 and out["contact"] == pytest.approx(dict.fromkeys(TIPS, math.exp(-D1)))
-    # shaped: per finger, out of contact the chain's -2 + k (D_i(t-1) - D_i(t)); a moved closer by 0.1
-    assert out["shaped"] == pytest.approx({"a": -2.0 + 20 * 0.1, "b": -2.0, "c": -2.0})
+    # force: per finger, out of contact the chain's -2 + k (D_i(t-1) - D_i(t)); a moved closer by 0.1
+    assert out["force"] == pytest.approx({"a": -2.0 + 20 * 0.1, "b": -2.0, "c": -2.0})
     assert out["global"] == pytest.approx(dict.fromkeys(TIPS, (0.0 - 2.0 - 2.0) / 3))
 
 
-def test_shaped_reward_in_contact_credits_a_fingers_own_move():
-    g = GraspReward("shaped", GRASP, (0.0, 0.0), (1.0, 0.5))
+def test_force_reward_in_contact_credits_a_fingers_own_move():
+    g = GraspReward("force", GRASP, (0.0, 0.0), (1.0, 0.5))
     tips = {t: (*GRASP[t], 0.0) for t in TIPS}
     g.step(tips, _sense({"a": 1.0, "b": 1.0, "c": 1.0}, net=(-1.0, 0.0, 0.0)))
     target = g._target
@@ -258,7 +264,7 @@ def test_shaped_reward_in_contact_credits_a_fingers_own_move():
     assert r["a"] > r["b"]
     # a finger that slips pays 1 more
     r2, _ = g.step(tips, _sense({"a": 2.0, "b": 1.0, "c": 1.0}, margin={"b": -0.1}, net=(-0.5, 0.0, 0.0)))
-    r3, _ = GraspReward("shaped", GRASP, (0.0, 0.0), (1.0, 0.5)).step(tips, _sense({"a": 2.0, "b": 1.0, "c": 1.0}))
+    r3, _ = GraspReward("force", GRASP, (0.0, 0.0), (1.0, 0.5)).step(tips, _sense({"a": 2.0, "b": 1.0, "c": 1.0}))
     assert r2 is not None and r3 is None and r2["b"] < r2["c"] - 0.99
 
 
@@ -277,6 +283,162 @@ def test_state_of_each_kind_of_agent():
     assert inner.state_names == ("q", "theta", "d", "g1", "g2", "g3", "force_error")
     assert tip.state_ranges[-1] == (0.0, 6.6) and tip.state_ranges[2] == (0.0, 3.2) and len(tip.state_sets) == 8
     assert grasp_learner_settings(3.2, True, 6.6, {"grasp_state": "reach"}).state_names[-1] == "g3"
-    assert grasp_learner_settings(3.2, True, 6.6, {}).extra_state == ("force_error",)  # the default: force
+    assert grasp_learner_settings(3.2, True, 6.6, {"grasp_state": "force"}).extra_state == ("force_error",)
+    default = grasp_learner_settings(3.2, False, 6.6, {})  # goal: S_i + g_perp, fine sets over +-0.05
+    assert default.state_names[-1] == "g_perp" and default.state_ranges[-1] == (-0.05, 0.05)
+    assert default.fine_action == 0.1 and grasp_learner_settings(3.2, False, 6.6, {"fine_action": 1.0}).fine_action == 1
+    with pytest.raises(ValueError, match="fine_action"):
+        grasp_learner_settings(3.2, True, 6.6, {"fine_action": 0.0})
     with pytest.raises(ValueError, match="grasp_state"):
         grasp_learner_settings(3.2, True, 6.6, {"grasp_state": "telepathy"})
+
+
+def _wrench_of(fn: dict, ft: dict, points: dict, normals: dict) -> tuple[float, float, float]:
+    return net_wrench({t: _reading(points[t], normals[t], fn[t], ft[t]) for t in fn}, (0.0, 0.0))
+
+
+def test_grip_forces_balance_with_the_least_grip():
+    normals = {"a": (-1.0, 0.0), "b": (1.0, 0.0), "c": (1.0, 0.0)}
+    fn0 = {"a": 4.0, "b": 2.0, "c": 2.0}
+    # at the grasp points the planned grip is already balanced: no tangential force needed
+    fn, ft = grip_forces(GRASP, normals, (0.0, 0.0), fn0, 2.0)
+    assert fn == pytest.approx(fn0) and ft == pytest.approx(dict.fromkeys(TIPS, 0.0), abs=1e-9)
+    # off the grasp points, with finger a below both others: no normal forces alone can cancel the torque
+    # (fn_b (y_b - y_a) + fn_c (y_c - y_a) > 0); friction does, inside the cones, the least normal force f_grip
+    off = {"a": (-1.0, -0.39), "b": (1.0, 0.46), "c": (1.0, -0.36)}
+    fn, ft = grip_forces(off, normals, (0.0, 0.0), fn0, 2.0)
+    assert _wrench_of(fn, ft, off, normals) == pytest.approx((0.0, 0.0, 0.0), abs=1e-9)
+    assert min(fn.values()) == pytest.approx(2.0) and all(abs(ft[t]) < 0.5 * fn[t] for t in TIPS)
+    # a grip below f_grip is scaled up (it stays balanced)
+    fn, ft = grip_forces(off, normals, (0.0, 0.0), {"a": 1.0, "b": 0.5, "c": 0.5}, 3.0)
+    assert min(fn.values()) == pytest.approx(3.0)
+    assert _wrench_of(fn, ft, off, normals) == pytest.approx((0.0, 0.0, 0.0), abs=1e-9)
+
+
+def _contact_sense(touch: dict, anchor: dict, depth: dict, normals: dict) -> dict:
+    s = _sense(dict.fromkeys(touch, 1.0))
+    for t, p in touch.items():
+        s[f"px/{t}"], s[f"py/{t}"] = p
+        s[f"nx/{t}"], s[f"ny/{t}"] = normals[t]
+        s[f"ax/{t}"], s[f"ay/{t}"] = anchor[t]
+        s[f"depth/{t}"] = depth[t]
+    return s
+
+
+def test_contact_goals_by_hand():
+    faces = {"a": (-1.0, 0.0), "b": (1.0, 0.0), "c": (1.0, 0.0)}
+    tips = {"a": (-0.95, 0.12), "b": (1.02, 0.35), "c": (1.6, -0.35)}
+    # a touches off its grasp point, 0.15 deep, its spring stretched 0.05 from the anchor; b on the top face
+    sense = _contact_sense(
+        {"a": (-1.0, 0.1), "b": (0.9, 0.5)}, {"a": (-1.0, 0.05), "b": (0.9, 0.5)}, {"a": 0.15, "b": 0.1},
+        {"a": (-1.0, 0.0), "b": (0.0, 1.0)},
+    )  # fmt: skip
+    obs = Contacts.from_sense(sense, TIPS)
+    goals, fn, ft = contact_goals(obs, GRASP, faces, (0.0, 0.0), 2.0, 10.0, 4.0, tips)
+    # the forces: balanced at a's contact point and b's and c's grasp points (b is on the wrong face)
+    points = {"a": (-1.0, 0.1), "b": GRASP["b"], "c": GRASP["c"]}
+    fn_want, ft_want = grip_forces(points, faces, (0.0, 0.0), {"a": 4.0, "b": 2.0, "c": 2.0}, 2.0)
+    assert fn == pytest.approx(fn_want) and ft == pytest.approx(ft_want) and abs(ft["a"]) > 0.01
+    # a: t = (-n_y, n_x) = (0, -1), u = (p - anchor) . t = -0.05; goal = tip + n (depth - fn/kn) + (ft/kt - u) t
+    dn, du = 0.15 - fn["a"] / 10.0, ft["a"] / 4.0 + 0.05
+    assert goals["a"] == pytest.approx((-0.95 - dn, 0.12 - du))
+    # b touches the wrong face, c does not touch: both are sent to their grasp points
+    assert goals["b"] == GRASP["b"] and goals["c"] == GRASP["c"]
+
+
+def test_goal_along_motion():
+    # joint at the origin, tip at (1, 0): increasing the angle moves the tip towards +y
+    assert goal_along_motion((0.0, 0.0, 0.3), (1.0, 0.0), (1.0, 0.1)) == pytest.approx(0.1)
+    assert goal_along_motion((0.0, 0.0, 0.3), (1.0, 0.0), (1.2, -0.1)) == pytest.approx(-0.1)
+    assert goal_along_motion((1.0, 1.0, 0.0), (1.0, 3.0), (0.5, 3.0)) == pytest.approx(0.5)
+    assert goal_along_motion((1.0, 1.0, 0.0), (1.0, 1.0), (0.5, 3.0)) == 0.0
+
+
+def test_shaped_reward_reaches_for_the_contact_goals_with_fine_steps():
+    g = GraspReward("shaped", GRASP, (0.0, 0.0), (1.0, 0.5), fine_action=0.1)
+    p = g.p
+    tips0 = {"a": (-1.5, 0.0), "b": (1.03, 0.35), "c": (1.5, -0.35)}
+    r, ctx = g.step(tips0, _sense({}))
+    assert r is None and g.goals == GRASP  # nobody touches: the goals are the grasp points
+    assert {t: c["fine"] for t, c in ctx.items()} == {"a": 0.0, "b": 1.0, "c": 0.0}  # b within D_fine
+    tips1 = {"a": (-1.4, 0.0), "b": (1.02, 0.35), "c": (1.5, -0.35)}
+    r, _ = g.step(tips1, _sense({}))
+    assert r is not None
+    # -min(1, D/D_tol) + k (D(t-1) - D(t)) / a; b moved with fine steps: its progress counts 1/0.1 times
+    assert r["a"] == pytest.approx(-1.0 + p.k * 0.1)
+    assert r["b"] == pytest.approx(-0.02 / p.D_tol + p.k * 0.01 / 0.1)
+    assert r["c"] == pytest.approx(-1.0)
+
+
+def _ik(world, fingers, q: dict, leaf: str, target, iters: int = 100) -> dict:
+    """Damped least-squares IK of one finger's tip (finite differences on the real PyBullet world)."""
+    import numpy as np
+
+    chain = fingers[leaf]
+    for _ in range(iters):
+        world.reset(q)
+        p = np.array(world.tip_poses()[leaf][:2])
+        e = np.array(target) - p
+        if np.linalg.norm(e) < 1e-6:
+            break
+        J = np.zeros((2, len(chain)))
+        for j, a in enumerate(chain):
+            world.reset({**q, a: q[a] + 1e-6})
+            J[:, j] = (np.array(world.tip_poses()[leaf][:2]) - p) / 1e-6
+        dq = J.T @ np.linalg.solve(J @ J.T + 1e-6 * np.eye(2), e)
+        q = {**q, **{a: q[a] + float(dq[j]) for j, a in enumerate(chain)}}
+    world.reset(q)
+    return q
+
+
+def test_fingertips_at_their_contact_goals_balance_the_real_object():
+    """The goals agree with the simulated contacts: three tips touching off their grasp points, in the real
+    PyBullet scene, moved to the goals the grasp agent computes, leave the object balanced."""
+    from kinswarm.actors.grasp_report import BALANCE
+    from kinswarm.sim.contact import GraspScene
+    from kinswarm.sim.world import World
+
+    topo = load_topology(GRASP3)
+    obj = topo.object
+    world = World(topo)
+    try:
+        scene = GraspScene(world, obj)
+        q = world.joint_positions()
+        start = {"f1_4": (-0.97, -0.2), "f2_4": (1.02, 0.45), "f3_4": (0.97, -0.3)}  # touching, unbalanced
+        for leaf, (x, y) in start.items():
+            q = _ik(world, scene.fingers, q, leaf, (x + (-0.5 if x < 0 else 0.5), y))
+        scene.reset()
+        for leaf, t in start.items():
+            q = _ik(world, scene.fingers, q, leaf, t)
+        g = GraspReward("shaped", obj.grasp, obj.center, obj.half_extents, kn=obj.kn, kt=obj.kt)
+        before = []
+        for _ in range(3):
+            scene.sense_contacts()
+            scene.sense_contacts()  # at rest: no damper force
+            before.append(math.hypot(*scene.wrench[:2]))
+            g.step(world.tip_poses(), scene.task_sense())
+            for leaf, goal in g.goals.items():
+                q = _ik(world, scene.fingers, q, leaf, goal)
+        scene.sense_contacts()
+        scene.sense_contacts()
+        r = scene.readings
+        mean_fn = sum(x.fn for x in r.values()) / 3
+        F, tau = math.hypot(*scene.wrench[:2]), abs(scene.wrench[2])
+        assert all(x.contact and x.margin >= 0.0 for x in r.values())
+        assert before[0] > 1.0, before  # it started unbalanced
+        assert F < BALANCE * mean_fn and tau < BALANCE * mean_fn * obj.char_length, (F, tau, mean_fn)
+    finally:
+        world.close()
+
+
+def test_a_finger_not_in_front_of_its_face_goes_to_the_pre_grasp_point():
+    g = GraspReward("shaped", GRASP, (0.0, 0.0), (1.0, 0.5))
+    out = g.p.approach
+    # a below the object (not in front of the left face), b beside its face, c pressing the bottom face
+    tips = {"a": (-0.8, -0.9), "b": (1.4, 0.3), "c": (0.9, -0.55)}
+    sense = _contact_sense({"c": (0.9, -0.5)}, {"c": (0.9, -0.5)}, {"c": 0.05}, {"c": (0.0, -1.0)})
+    g.step(tips, sense)
+    assert g.goals["a"] == pytest.approx((-1.0 - out, 0.0)) and g.goals["b"] == GRASP["b"]
+    assert g.goals["c"] == pytest.approx((1.0 + out, -0.35))  # wrong face, below its own: out and round
+    g.step({**tips, "a": (-1.3, 0.2)}, _sense({}))  # now in front of its face: straight to the grasp point
+    assert g.goals["a"] == GRASP["a"]

@@ -37,7 +37,7 @@ def test_grasp_swarm_runs_in_processes(tmp_path):
 def test_grasp_rejects_a_reaching_reward(tmp_path, capsys):
     args = ["run", str(GRASP3), "--reward", "strict", "--out", str(tmp_path / "x"), "--no-progress"]
     assert cli_main(args) == 2
-    assert "grasp scene takes paper, contact, global, shaped" in capsys.readouterr().err
+    assert "grasp scene takes paper, contact, global, force, shaped" in capsys.readouterr().err
     assert not (tmp_path / "x").exists()
 
 
@@ -54,9 +54,27 @@ def test_quick_grasp_experiment(tmp_path):
     for f in ("report.md", "results.json", "grasp.png", "grasp_forces.png", "grasp_cone.png", "grasp_balance.png"):
         assert (out / f).is_file(), f
     scores = res["scores"]
-    assert [s["reward"] for s in scores] == ["shaped", "paper", "contact", "global"]
+    assert [s["reward"] for s in scores] == ["shaped", "paper", "contact", "global", "force"]
     for s in scores:
         assert s["epochs"] == 3 and 0.0 <= s["good_share_last"] <= 1.0
         assert s["meets_bar"] == (s["good_share_last"] >= 0.8)
     results = json.loads((out / "results.json").read_text())
     assert results["quick"] and results["bar"] == {"share": 0.8, "last": 20, "balance": 0.1}
+
+
+def _final_angles(tmp_path, name: str, extra: list[str]) -> dict:
+    out = tmp_path / name
+    args = ["run", str(GRASP3), "--placement", "single", "--epochs", "1", "--steps", "200", "--seed", "0"]
+    args += ["--listen", f"tcp/127.0.0.1:{free_port()}", "--out", str(out), "--no-progress", *extra]
+    assert cli_main(args) == 0
+    return json.loads((out / "metrics.jsonl").read_text().splitlines()[0])["final_angles_deg"]
+
+
+def test_fingers_near_their_contact_goals_move_with_fine_steps(tmp_path):
+    """From whole-degree start angles, 1-degree steps keep every angle whole; the default `shaped` grasp
+    sends "fine" near a contact goal and those fingers move 0.1 degree (fine_action)."""
+    fine = _final_angles(tmp_path, "fine", [])
+    coarse = _final_angles(tmp_path, "coarse", ["--learner", "fine_action=1.0"])
+    frac = lambda a: abs(a - round(a))  # noqa: E731
+    assert all(frac(a) < 1e-6 for a in coarse.values()), coarse
+    assert any(frac(a) > 0.05 for a in fine.values()), fine

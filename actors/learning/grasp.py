@@ -9,15 +9,30 @@ paper    Eq. 12 as printed, one global reward for all fingers: the reaching case
          R_f = e^(-c |F|), R_tau = e^(-c |tau|), R_s = e^(-c FC), FC = the summed friction-cone
          violation (sum of max(0, -margin)). With no contact every R_i is at its maximum.
 contact  as paper, but R_f, R_tau, R_s are paid only while all fingertips touch (0 otherwise).
-global   the shaped potential below, summed over the fingers: one global reward (no per-finger credit).
-shaped   (default) per finger i, from the grasp agent: out of contact, the reaching reward that works
-         for the chain (-2 + k (D_i(t-1) - D_i(t)), D_i = distance to its grasp point); in contact,
+global   the `force` terms below, averaged over the fingers: one global reward (no per-finger credit).
+force    (round 1's default, then named `shaped`) per finger i, from the grasp agent: out of contact,
+         the reaching reward that works for the chain (-2 + k (D_i(t-1) - D_i(t)), D_i = distance to its
+         grasp point); in contact,
          -|e_i|/f_grip (capped at 1) + k_f (|e_i(t-1)| - |e_i(t)|)/f_grip - 1 if it slips, where
          e_i = fn_i - fn_i* and fn* are the normal forces nearest to the present ones that balance the
          object (zero net force and torque with the present tangential forces) with at least f_grip
          each; e_i(t) is taken against the target of t-1, so other fingers' moves do not count as
          finger i's (a difference reward). The same e_i / f_grip goes down the finger as the state
          variable "force_error".
+shaped   (default) contact goals: the grasp agent turns the balancing forces into a *position goal* per
+         fingertip and each finger learns to reach it. In contact on its grasp point's face, the goal is
+         where the tip must be for the contact to carry (fn_i*, ft_i*): goal_i = tip_i + n_i (depth_i -
+         fn_i*/kn) + (ft_i*/kt - u_i) t_i (depth_i the present penetration, u_i = (p_i - anchor_i) . t_i
+         the tangential spring's stretch, both sensed; kn, kt the contact stiffnesses from the scene).
+         (fn*, ft*) balance the object at the present contact points: normal forces nearest the planned
+         grip (the grasp points' balanced set, least force f_grip), tangential ones only as needed
+         (grip_forces). Out of contact (or on another face) the goal is the grasp point if the tip is in
+         front of its face, else the pre-grasp point `approach` out along the face normal.
+         Reward per finger, against the goal of t-1 (a difference reward, as for `force`):
+         -min(1, D_i(t)/D_tol) + k (D_i(t-1) - D_i(t)) / a_i, D_i = |tip_i - goal_i(t-1)|, a_i = the
+         action scale the finger moved with. The grasp agent sends each finger "fine" = 1 while it
+         is within D_fine of its goal; the finger then moves fine_action x the action
+         size (a 1 degree step changes fn by more than the balance bound allows).
 
 Numpy only, like the rest of actors/learning.
 """
@@ -32,7 +47,7 @@ import numpy as np
 
 from .settings import LearnerSettings
 
-GRASP_REWARDS: tuple[str, ...] = ("paper", "contact", "global", "shaped")
+GRASP_REWARDS: tuple[str, ...] = ("paper", "contact", "global", "force", "shaped")
 REACH_REWARDS: tuple[str, ...] = ("paper", "strict", "shaped")  # reward.py's modes
 
 
@@ -58,6 +73,11 @@ class GraspParams:
     k_f: float = 2.0
     f_grip: float = 2.0
     err_cap: float = 3.0  # force_error is sent clipped to [-err_cap, err_cap]
+    D_tol: float = 0.05  # shaped: the distance to the contact goal at which the reward's penalty saturates
+    D_fine: float = 0.05  # shaped: within this of its goal a finger moves with fine actions
+    g_perp: float = 0.05  # the range of the state variable g_perp: [-g_perp, g_perp] (clipped)
+    approach: float = 0.3  # shaped: a finger not in front of its grasp point's face goes first to the point
+    # this far out along the face normal (the pre-grasp point), so that it does not press into another face
 
 
 @dataclass(frozen=True)
@@ -71,6 +91,8 @@ class Contacts:
     point: dict[str, Vec]  # contact points (only for fingertips in contact)
     normal: dict[str, Vec]
     net: tuple[float, float, float]  # F_x, F_y, tau
+    depth: dict[str, float] | None = None  # penetration (only for fingertips in contact)
+    anchor: dict[str, Vec] | None = None  # the tangential spring's anchor (only for fingertips in contact)
 
     @classmethod
     def from_sense(cls, sense: Mapping[str, float], tips: Sequence[str]) -> Contacts:
@@ -83,6 +105,8 @@ class Contacts:
             point={t: (sense[f"px/{t}"], sense[f"py/{t}"]) for t in tips if c[t] and f"px/{t}" in sense},
             normal={t: (sense[f"nx/{t}"], sense[f"ny/{t}"]) for t in tips if c[t] and f"nx/{t}" in sense},
             net=(sense.get("net_fx", 0.0), sense.get("net_fy", 0.0), sense.get("net_torque", 0.0)),
+            depth={t: sense[f"depth/{t}"] for t in tips if c[t] and f"depth/{t}" in sense},
+            anchor={t: (sense[f"ax/{t}"], sense[f"ay/{t}"]) for t in tips if c[t] and f"ax/{t}" in sense},
         )
 
     @property
@@ -160,8 +184,122 @@ def face_normal(point: Vec, center: Vec, half_extents: Vec) -> Vec:
     return (0.0, math.copysign(1.0, dy))
 
 
+def contact_on_face(obs: Contacts, normals: Mapping[str, Vec]) -> dict[str, bool]:
+    """Per fingertip: in contact on its grasp point's face (the contact normal within ~25 degrees of the
+    face's), with the depth and anchor the goals need."""
+    return {
+        t: obs.contact[t]
+        and t in obs.point
+        and t in (obs.depth or {})
+        and t in (obs.anchor or {})
+        and obs.normal[t][0] * n[0] + obs.normal[t][1] * n[1] > 0.9
+        for t, n in normals.items()
+    }
+
+
+def grip_forces(
+    points: Mapping[str, Vec],
+    normals: Mapping[str, Vec],
+    center: Vec,
+    fn0: Mapping[str, float],
+    f_grip: float,
+    lam: float = 1.0,
+) -> tuple[dict[str, float], dict[str, float]]:
+    """(fn*, ft*): contact forces at `points` (outward `normals`) with zero net force and torque, the
+    normal ones nearest to the preferred `fn0` and the tangential ones small: minimise
+    |fn - fn0|^2 + lam |ft|^2 subject to G_n fn + G_t ft = 0 (a linear KKT system), then scaled up (a
+    balanced set stays balanced) until the least normal force is f_grip. Tangential forces are along
+    t = (-n_y, n_x), as the contact model's."""
+    tips = list(points)
+    n = len(tips)
+    A = np.zeros((3, 2 * n))  # wrench on the object of a unit normal push / unit tangential force
+    for j, t in enumerate(tips):
+        (px, py), (nx, ny) = points[t], normals[t]
+        rx, ry = px - center[0], py - center[1]
+        tx, ty = -ny, nx
+        A[:, j] = (-nx, -ny, -(rx * ny - ry * nx))
+        A[:, n + j] = (tx, ty, rx * ty - ry * tx)
+    h_inv = np.concatenate([np.ones(n), np.full(n, 1.0 / lam)])
+    g = np.concatenate([[fn0[t] for t in tips], np.zeros(n)])
+    AH = A * h_inv
+    x = g - h_inv * (A.T @ (np.linalg.pinv(AH @ A.T) @ (A @ g)))
+    least = x[:n].min()
+    if least > 1e-9 and least < f_grip:
+        x *= f_grip / least
+    return {t: float(x[j]) for j, t in enumerate(tips)}, {t: float(x[n + j]) for j, t in enumerate(tips)}
+
+
+def contact_goals(
+    obs: Contacts,
+    grasp: Mapping[str, Vec],
+    normals: Mapping[str, Vec],
+    center: Vec,
+    f_grip: float,
+    kn: float,
+    kt: float,
+    tips: Mapping[str, Sequence[float]],
+    half_extents: Vec | None = None,
+    approach: float = 0.0,
+) -> tuple[dict[str, Vec], dict[str, float], dict[str, float]]:
+    """(goal per fingertip, fn*, ft*) of the `shaped` reward: where each tip must be for its contact to
+    carry (fn_i*, ft_i*). The forces balance the object at the present contact points (grip_forces: normal
+    forces nearest to the planned grip, the least normal force of the grasp points' balanced set at
+    f_grip; tangential ones only as needed), with the planned grasp point and face normal for a finger out
+    of contact or touching another face than its grasp point's; such a finger is sent to its grasp point
+    when its tip is in front of that face (outside it, within its extent; `half_extents` given), else to the
+    pre-grasp point `approach` out along the face normal. In contact: goal = tip + n (depth - fn*/kn) +
+    (ft*/kt - u) t, u the tangential spring's stretch."""
+    on_face = contact_on_face(obs, normals)
+    planned = Contacts(
+        contact=dict.fromkeys(grasp, False),
+        fn=dict.fromkeys(grasp, 0.0),
+        ft=dict.fromkeys(grasp, 0.0),
+        margin=dict.fromkeys(grasp, 0.0),
+        point={},
+        normal={},
+        net=(0.0, 0.0, 0.0),
+    )
+    fn0 = balance_targets(planned, grasp, normals, center, f_grip)  # the planned grip, least force f_grip
+    points = {t: obs.point[t] if on_face[t] else grasp[t] for t in grasp}
+    nrm = {t: obs.normal[t] if on_face[t] else normals[t] for t in grasp}
+    fn_t, ft_t = grip_forces(points, nrm, center, fn0, f_grip)
+    goals: dict[str, Vec] = {}
+    for t, g in grasp.items():
+        if not on_face[t]:
+            goals[t] = (float(g[0]), float(g[1]))
+            if half_extents is not None and not _in_front(tips[t], g, normals[t], center, half_extents):
+                goals[t] = (g[0] + approach * normals[t][0], g[1] + approach * normals[t][1])
+            continue
+        assert obs.depth is not None and obs.anchor is not None
+        (nx, ny), (px, py), (ax, ay) = obs.normal[t], obs.point[t], obs.anchor[t]
+        tx, ty = -ny, nx
+        u = (px - ax) * tx + (py - ay) * ty  # the tangential spring's stretch
+        dn = obs.depth[t] - fn_t[t] / kn  # > 0: too deep, the goal is outwards
+        du = ft_t[t] / kt - u
+        goals[t] = (tips[t][0] + dn * nx + du * tx, tips[t][1] + dn * ny + du * ty)
+    return goals, fn_t, ft_t
+
+
+def _in_front(tip: Sequence[float], point: Vec, normal: Vec, center: Vec, half_extents: Vec) -> bool:
+    """Whether `tip` lies outside the face through `point` (outward `normal`) and within its extent."""
+    nx, ny = normal
+    outside = (tip[0] - point[0]) * nx + (tip[1] - point[1]) * ny > 0.0
+    along = abs((tip[0] - center[0]) * -ny + (tip[1] - center[1]) * nx)
+    return outside and along < (half_extents[1] if abs(nx) > abs(ny) else half_extents[0])
+
+
+def goal_along_motion(frame: Sequence[float], tip: Sequence[float], goal: Sequence[float]) -> float:
+    """g_perp: the component of goal - tip along the direction this agent's joint moves the tip (z x
+    (tip - joint), unit): > 0 means increasing the joint angle brings the tip towards the goal."""
+    rx, ry = tip[0] - frame[0], tip[1] - frame[1]
+    r = math.hypot(rx, ry)
+    if r == 0.0:
+        return 0.0
+    return ((goal[0] - tip[0]) * -ry + (goal[1] - tip[1]) * rx) / r
+
+
 class GraspReward:
-    """The grasp agent's reward and per-finger context, one call per step (it keeps t-1)."""
+    """The grasp agent's reward, goals and per-finger context, one call per step (it keeps t-1)."""
 
     def __init__(
         self,
@@ -170,11 +308,17 @@ class GraspReward:
         center: Vec,
         half_extents: Vec,
         params: GraspParams | None = None,
+        kn: float = 20.0,
+        kt: float = 20.0,
+        fine_action: float = 1.0,
     ) -> None:
+        """kn, kt: the contact stiffnesses (the scene's), to turn forces into displacements; fine_action: the
+        fingers' action scale within D_fine of their goal (LearnerSettings.fine_action), for the k term."""
         if mode not in GRASP_REWARDS:
             raise ValueError(f"unknown grasp reward {mode!r}; allowed: {', '.join(GRASP_REWARDS)}")
-        self.mode, self.grasp, self.center = mode, dict(grasp), center
-        self.tips = tuple(grasp)
+        self.mode, self.grasp, self.center, self.fine_action = mode, dict(grasp), center, fine_action
+        self.kn, self.kt = kn, kt
+        self.tips, self.half_extents = tuple(grasp), half_extents
         self.normals = {t: face_normal(g, center, half_extents) for t, g in grasp.items()}
         self.p = params or GraspParams()
         self.reset()
@@ -183,12 +327,18 @@ class GraspReward:
         self._D: dict[str, float] | None = None
         self._err: dict[str, float] | None = None
         self._target: dict[str, float] | None = None
+        self._tips: dict[str, Vec] | None = None
+        self._fine: dict[str, bool] = dict.fromkeys(self.tips, False)
+        self.goals: dict[str, Vec] = {t: (float(g[0]), float(g[1])) for t, g in self.grasp.items()}
 
     def step(
         self, tips: Mapping[str, Sequence[float]], sense: Mapping[str, float]
-    ) -> tuple[dict[str, float] | None, dict[str, float]]:
+    ) -> tuple[dict[str, float] | None, dict[str, dict[str, float]]]:
         """(reward per fingertip for the transition into this step, or None at an epoch's first step;
-        force_error per fingertip for the fingers' state)."""
+        context per fingertip for the finger's state: force_error, and with `shaped` the flag "fine").
+        `goals` then holds each fingertip's goal for this step (its grasp point except with `shaped`)."""
+        if self.mode == "shaped":
+            return self._step_goals(tips, sense)
         p = self.p
         obs = Contacts.from_sense(sense, self.tips)
         D = {t: math.hypot(tips[t][0] - g[0], tips[t][1] - g[1]) for t, g in self.grasp.items()}
@@ -211,7 +361,35 @@ class GraspReward:
                     rewards = per
         self._D, self._err, self._target = D, err, target
         cap = p.err_cap
-        context = {t: max(-cap, min(cap, err[t] / p.f_grip)) for t in self.tips}
+        context = {t: {"force_error": max(-cap, min(cap, err[t] / p.f_grip))} for t in self.tips}
+        return rewards, context
+
+    def _step_goals(
+        self, tips: Mapping[str, Sequence[float]], sense: Mapping[str, float]
+    ) -> tuple[dict[str, float] | None, dict[str, dict[str, float]]]:
+        p = self.p
+        obs = Contacts.from_sense(sense, self.tips)
+        now = {t: (float(tips[t][0]), float(tips[t][1])) for t in self.tips}
+        rewards: dict[str, float] | None = None
+        if self._tips is not None:  # against the goals of t-1 (a difference reward)
+            rewards = {}
+            for t in self.tips:
+                gx, gy = self.goals[t]
+                D_prev = math.hypot(self._tips[t][0] - gx, self._tips[t][1] - gy)
+                D = math.hypot(now[t][0] - gx, now[t][1] - gy)
+                scale = self.fine_action if self._fine[t] else 1.0
+                rewards[t] = -min(1.0, D / p.D_tol) + p.k * (D_prev - D) / scale
+        goals, target, self.ft_target = contact_goals(
+            obs, self.grasp, self.normals, self.center, p.f_grip, self.kn, self.kt, tips, self.half_extents, p.approach
+        )
+        self.goals, self._tips, self._target = goals, now, target
+        cap = p.err_cap
+        context = {}
+        for t in self.tips:
+            D = math.hypot(now[t][0] - goals[t][0], now[t][1] - goals[t][1])
+            self._fine[t] = D < p.D_fine
+            e = (obs.fn[t] - target[t]) / p.f_grip
+            context[t] = {"force_error": max(-cap, min(cap, e)), "fine": 1.0 if self._fine[t] else 0.0}
         return rewards, context
 
     def _finger(self, t: str, obs: Contacts, D: float, D_prev: float, err: float, err_prev: float) -> float:
@@ -224,12 +402,17 @@ class GraspReward:
         return r
 
 
+#: The grasp fingers' default fine action scale (LearnerSettings.fine_action): 0.1 degree steps near the goal.
+GRASP_FINE_ACTION = 0.1
+
+
 def grasp_learner_settings(
     finger_length: float, is_tip: bool, fn_max: float, overrides: Mapping[str, object]
 ) -> LearnerSettings:
     """A finger agent's settings in a grasp scene: the reach ranges of one finger (d in [0, L], g in
     [-2L, 2L]) and the extra state variables of `grasp_state` for its kind (fingertip or not):
-    force_error in [-err_cap, err_cap] and fn in [0, fn_max], 7 sets each (extra_state/sets/ranges)."""
+    force_error in [-err_cap, err_cap] and fn in [0, fn_max], 7 sets each; g_perp in [-g_perp, g_perp],
+    7 sets (extra_state/sets/ranges). fine_action defaults to GRASP_FINE_ACTION here (1 elsewhere)."""
     ov = dict(overrides)
     gs = str(ov.get("grasp_state", LearnerSettings.grasp_state))
     extra: list[tuple[str, int, tuple[float, float]]] = []
@@ -238,7 +421,11 @@ def grasp_learner_settings(
         extra.append(("force_error", 7, (-cap, cap)))
     if gs == "contact" and is_tip:
         extra.append(("fn", 7, (0.0, fn_max)))
+    if gs == "goal":
+        gp = GraspParams.g_perp
+        extra.append(("g_perp", 7, (-gp, gp)))
     ov.pop("extra_state", None)
+    ov.setdefault("fine_action", GRASP_FINE_ACTION)
     return LearnerSettings.for_reach(
         finger_length,
         extra_state=tuple(n for n, _, _ in extra),

@@ -9,7 +9,7 @@ from dataclasses import dataclass, replace
 STATE_NAMES: tuple[str, ...] = ("q", "theta", "d", "g1", "g2", "g3")
 BOOTSTRAPS: tuple[str, ...] = ("joint_max", "expected")
 #: State of a grasp scene's finger agents (paper §5.5), see `grasp_state` below.
-GRASP_STATES: tuple[str, ...] = ("reach", "force", "contact")
+GRASP_STATES: tuple[str, ...] = ("reach", "force", "contact", "goal")
 
 #: Reach of the paper's planar 4R chain (4 links of length 3); default ranges scale with it.
 DEFAULT_REACH = 12.0
@@ -53,8 +53,13 @@ class LearnerSettings:
         grasp_state: the finger agents' state in a grasp scene (paper §5.5): "reach" = the paper's S_i
             (6 variables, goal = the finger's grasp point); "force" (default) = S_i + force_error, the
             grasp agent's (fn_i - fn_i*) / f_grip for the finger, sent down the finger; "contact" = "force"
-            plus, for fingertip agents only, their own normal force fn from the contact reading.
+            plus, for fingertip agents only, their own normal force fn from the contact reading; "goal"
+            (default, for the `shaped` grasp reward's contact goals) = S_i + g_perp, the component of
+            goal - tip along the direction the agent's own joint moves the tip (fine sets over +-0.05).
             Every agent's action is the same: -1, 0, +1 times the run's action size (`action_deg`).
+        fine_action: the action scale while the parent's context says "fine" (a grasp finger within D_fine
+            of its contact goal): -1, 0, +1 times fine_action x action_deg. 1 (off) by default; the grasp
+            fingers' default is 0.1 (actors/learning/grasp.py).
 
     Scenes with obstacles (paper §5.4; the corridor): the agent's obs carries its own link's signed clearance
     and whether its own increment was refused by a wall. Both are off by default (the paper's six variables):
@@ -97,8 +102,9 @@ class LearnerSettings:
     extra_state: tuple[str, ...] = ()
     extra_sets: tuple[int, ...] = ()
     extra_ranges: tuple[tuple[float, float], ...] = ()
-    grasp_state: str = "force"
+    grasp_state: str = "goal"
     epsilon_decay: float = 0.0
+    fine_action: float = 1.0
 
     @property
     def state_names(self) -> tuple[str, ...]:
@@ -190,5 +196,7 @@ class LearnerSettings:
                 )
         if self.grasp_state not in GRASP_STATES:
             raise ValueError(f"grasp_state must be one of {GRASP_STATES}, got {self.grasp_state!r}")
+        if not (isinstance(self.fine_action, (int, float)) and 0.0 < self.fine_action <= 1.0):
+            raise ValueError(f"fine_action must be in (0, 1], got {self.fine_action!r}")
         if self.top_k > min(self.state_sets):
             raise ValueError(f"top_k must be <= the fewest sets of any state variable ({min(self.state_sets)})")
