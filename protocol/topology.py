@@ -34,6 +34,7 @@ kt = 20.0                       # tangential spring (force / length)
 cn = 2.0                        # normal damper (force / (length / time unit))
 ct = 2.0                        # tangential damper
 max_depth = 0.3                 # the object is solid: no link may sink deeper than this
+contact = "tip"                 # optional: "link" (default, the fingertip link's capsule) or "tip" (its end)
 [object.grasp]                  # the grasp point (goal) of every end effector, on the object's boundary
 f1_4 = [-1.0, 0.0]
 ```
@@ -97,6 +98,9 @@ class ObjectSpec:
     ct: float
     max_depth: float
     grasp: dict[str, tuple[float, float]]  # end effector -> grasp point (its goal)
+    # what presses on the object: "link" = the fingertip agent's whole capsule; "tip" = a sphere of the
+    # capsule's radius at the fingertip only (a point contact at the fingertip)
+    contact: str = "link"
 
     @property
     def char_length(self) -> float:
@@ -311,6 +315,8 @@ def load_topology(path: str | Path) -> Topology:
 
 
 _OBJECT_KEYS = ("center", "half_extents", "mu", "kn", "kt", "cn", "ct", "max_depth", "grasp")
+_OBJECT_OPTIONAL = ("contact",)
+OBJECT_CONTACTS = ("link", "tip")
 
 
 def _parse_object(src: str, table: Any, leaves: list[str]) -> ObjectSpec:
@@ -318,9 +324,13 @@ def _parse_object(src: str, table: Any, leaves: list[str]) -> ObjectSpec:
     on the object's boundary."""
     if not isinstance(table, dict):
         raise TopologyError(src, "object", "must be a table")
-    bad = set(table) - set(_OBJECT_KEYS)
+    bad = set(table) - set(_OBJECT_KEYS) - set(_OBJECT_OPTIONAL)
     if bad:
-        raise TopologyError(src, f"object.{sorted(bad)[0]}", f"unknown field (expected {', '.join(_OBJECT_KEYS)})")
+        known = ", ".join(_OBJECT_KEYS + _OBJECT_OPTIONAL)
+        raise TopologyError(src, f"object.{sorted(bad)[0]}", f"unknown field (expected {known})")
+    contact = table.get("contact", "link")
+    if contact not in OBJECT_CONTACTS:
+        raise TopologyError(src, "object.contact", f"must be one of {', '.join(OBJECT_CONTACTS)}, got {contact!r}")
     missing = [k for k in _OBJECT_KEYS if k not in table]
     if missing:
         raise TopologyError(src, f"object.{missing[0]}", "missing")
@@ -353,4 +363,4 @@ def _parse_object(src: str, table: Any, leaves: list[str]) -> ObjectSpec:
     lacking = [leaf for leaf in leaves if leaf not in grasp]
     if lacking:
         raise TopologyError(src, "object.grasp", f"no grasp point for end effector(s) {', '.join(lacking)}")
-    return ObjectSpec(center=(cx, cy), half_extents=(hx, hy), grasp=grasp, **consts)
+    return ObjectSpec(center=(cx, cy), half_extents=(hx, hy), grasp=grasp, contact=contact, **consts)

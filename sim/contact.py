@@ -5,9 +5,11 @@ net torque about its centre, the quantities the grasp must drive to zero.
 
 Contact model, per fingertip, one step = one time unit (dt = 1; the paper's epochs last 500 time units):
 
-- penetration depth delta >= 0 of the fingertip capsule (the leaf's link) into the object, and the contact
-  point p on the object's surface with its outward normal n, from PyBullet `getClosestPoints` (capsule vs
-  box: exact);
+- penetration depth delta >= 0 into the object, and the contact point p on the object's surface with its
+  outward normal n, from PyBullet `getClosestPoints` (exact for these shapes), of what the scene's
+  `[object] contact` names: "link" (the default) the fingertip agent's whole capsule, so a distal link
+  lying along a face presses with its side or its base; "tip" a sphere of the capsule's radius at the
+  fingertip only, a point contact at the fingertip as the paper models it (examples/grasp3.toml);
 - normal force (a linear spring-damper, Fig. 25): fn = max(0, kn delta + cn d(delta)/dt) -- no adhesion;
 - tangential spring anchored at the first contact point p0 (set when a contact begins, dropped when it
   ends): u = (p - p0) . t, with t = (-n_y, n_x) the surface tangent; ft_trial = kt u + ct du/dt;
@@ -22,13 +24,14 @@ the object's centre c, counter-clockwise positive), in force x length units.
 The object is solid for the fingers (a choice, documented in docs/science.md): a step that would put any
 link of a finger deeper than `max_depth` into the object is not executed for that finger (its joints
 hold, the sim counts it as blocked). Penetration, and so every contact force, is bounded: fn <= kn
-max_depth + cn max_depth. Only the fingertip link makes contact forces; an inner link touching the object
-is blocked the same way but pushes nothing.
+max_depth + cn max_depth. Only the fingertip (link or sphere) makes contact forces; an inner link touching
+the object is blocked the same way but pushes nothing.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 from kinswarm.protocol.topology import ObjectSpec, Topology
@@ -165,6 +168,10 @@ class GraspScene:
             basePosition=(spec.center[0], spec.center[1], 0.0),
             physicsClientId=self.client,
         )
+        self.tip_contact = spec.contact == "tip"
+        self._tip_shape = pb.createCollisionShape(
+            pb.GEOM_SPHERE, radius=float(getattr(world, "radius", 0.1)), physicsClientId=self.client
+        )
         self.model = ContactModel(spec)
         self.readings: dict[str, ContactReading] = dict.fromkeys(self.tips, NO_CONTACT)
         self.wrench = (0.0, 0.0, 0.0)
@@ -175,6 +182,24 @@ class GraspScene:
         """(signed distance, contact point on the object, its outward normal) of one link's capsule."""
         pts = self.pb.getClosestPoints(
             self.body, self.object, _QUERY_DISTANCE, linkIndexA=link, physicsClientId=self.client
+        )
+        if not pts:
+            return math.inf, None, None
+        best = min(pts, key=lambda p: p[8])
+        pos_b, normal_b = best[6], best[7]
+        return float(best[8]), (pos_b[0], pos_b[1]), (normal_b[0], normal_b[1])
+
+    def _closest_tip(self, tip: Sequence[float]) -> tuple[float, Vec | None, Vec | None]:
+        """(signed distance, contact point, outward normal) of the fingertip sphere (radius = the capsule's,
+        centred on the fingertip `tip`) against the object: a point contact at the fingertip."""
+        x, y = tip[0], tip[1]
+        pts = self.pb.getClosestPoints(
+            bodyA=-1,
+            bodyB=self.object,
+            distance=_QUERY_DISTANCE,
+            collisionShapeA=self._tip_shape,
+            collisionShapePositionA=(x, y, 0.0),
+            physicsClientId=self.client,
         )
         if not pts:
             return math.inf, None, None
@@ -202,8 +227,12 @@ class GraspScene:
     def sense_contacts(self) -> None:
         """Read every fingertip's contact and advance the contact model by one step."""
         self.pb.performCollisionDetection(physicsClientId=self.client)
+        poses = self.world.tip_poses() if self.tip_contact else {}  # type: ignore[attr-defined]
         for leaf in self.tips:
-            dist, point, normal = self._closest(self._tip_link[leaf])
+            if self.tip_contact:
+                dist, point, normal = self._closest_tip(poses[leaf])
+            else:
+                dist, point, normal = self._closest(self._tip_link[leaf])
             self.readings[leaf] = self.model.update(leaf, -dist, point, normal)
         self.wrench = net_wrench(self.readings, self.spec.center)
 

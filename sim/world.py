@@ -56,6 +56,7 @@ class World:
         if urdf_dir is None:
             self._tmpdir = tempfile.mkdtemp(prefix="kinswarm-urdf-")
             urdf_dir = Path(self._tmpdir)
+        self.radius = radius  # the links' capsule radius
         self.urdf_path = urdf.write_urdf(topo, urdf_dir, radius=radius)
         with _quiet_fd2():
             self.client = pb.connect(pb.DIRECT)

@@ -80,12 +80,15 @@ def test_scene_parses():
         max_depth=0.2,
         grasp={"f1": (-1.0, 0.0), "f2": (0.3, 0.5)},
     )
+    assert t.object.contact == "link"  # the default: the fingertip link's whole capsule presses
+    assert _parse(SCENE.replace("[object]\n", '[object]\ncontact = "tip"\n')).object.contact == "tip"
 
 
 @pytest.mark.parametrize(
     ("change", "where", "what"),
     [
         (("[object]\n", "[object]\ncolour = 1\n"), "object.colour", "unknown field"),
+        (("[object]\n", '[object]\ncontact = "palm"\n'), "object.contact", "must be one of link, tip"),
         (("mu = 0.5\n", ""), "object.mu", "missing"),
         (("mu = 0.5\n", "mu = -0.1\n"), "object.mu", ">= 0"),
         (("kn = 10.0\n", "kn = 0.0\n"), "object.kn", "> 0"),
@@ -368,38 +371,59 @@ def test_shaped_reward_reaches_for_the_contact_goals_with_fine_steps():
     assert r["a"] == pytest.approx(-1.0 + p.k * 0.1)
     assert r["b"] == pytest.approx(-0.02 / p.D_tol + p.k * 0.01 / 0.1)
     assert r["c"] == pytest.approx(-1.0)
+    # holding a reached goal costs nothing, holding 0.02 short of it costs, moving away from it costs more
+    g.step({**tips1, "b": GRASP["b"]}, _sense({}))
+    r_held, _ = g.step({**tips1, "b": GRASP["b"]}, _sense({}))
+    r_short, _ = g.step({**tips1, "b": (1.02, 0.35)}, _sense({}))
+    r_away, _ = g.step({**tips1, "b": (1.03, 0.35)}, _sense({}))
+    assert r_held is not None and r_short is not None and r_away is not None
+    assert r_held["b"] == pytest.approx(0.0) and r_held["b"] > r_away["b"]
+    assert r_away["b"] == pytest.approx(-0.03 / p.D_tol - p.k * 0.01 / 0.1)
 
 
-def _ik(world, fingers, q: dict, leaf: str, target, iters: int = 100) -> dict:
-    """Damped least-squares IK of one finger's tip (finite differences on the real PyBullet world)."""
+def _ik(world, fingers, q: dict, leaf: str, target, heading: float | None = None, iters: int = 100) -> dict:
+    """Damped least-squares IK of one finger's tip (and its heading, if given), by finite differences on
+    the real PyBullet world."""
     import numpy as np
 
+    def pose(qq: dict) -> np.ndarray:
+        world.reset(qq)
+        x, y, h = world.tip_poses()[leaf]
+        return np.array([x, y] if heading is None else [x, y, h])
+
+    want = np.array(list(target) + ([] if heading is None else [heading]))
     chain = fingers[leaf]
     for _ in range(iters):
-        world.reset(q)
-        p = np.array(world.tip_poses()[leaf][:2])
-        e = np.array(target) - p
+        p = pose(q)
+        e = want - p
+        if heading is not None:
+            e[2] = (e[2] + math.pi) % (2 * math.pi) - math.pi
         if np.linalg.norm(e) < 1e-6:
             break
-        J = np.zeros((2, len(chain)))
+        J = np.zeros((len(e), len(chain)))
         for j, a in enumerate(chain):
-            world.reset({**q, a: q[a] + 1e-6})
-            J[:, j] = (np.array(world.tip_poses()[leaf][:2]) - p) / 1e-6
-        dq = J.T @ np.linalg.solve(J @ J.T + 1e-6 * np.eye(2), e)
+            d = pose({**q, a: q[a] + 1e-6}) - p
+            if heading is not None:
+                d[2] = (d[2] + math.pi) % (2 * math.pi) - math.pi
+            J[:, j] = d / 1e-6
+        dq = J.T @ np.linalg.solve(J @ J.T + 1e-6 * np.eye(len(e)), e)
         q = {**q, **{a: q[a] + float(dq[j]) for j, a in enumerate(chain)}}
     world.reset(q)
     return q
 
 
-def test_fingertips_at_their_contact_goals_balance_the_real_object():
+@pytest.mark.parametrize("contact", ["link", "tip"])
+def test_fingertips_at_their_contact_goals_balance_the_real_object(contact):
     """The goals agree with the simulated contacts: three tips touching off their grasp points, in the real
     PyBullet scene, moved to the goals the grasp agent computes, leave the object balanced."""
+    import dataclasses
+
     from kinswarm.actors.grasp_report import BALANCE
     from kinswarm.sim.contact import GraspScene
     from kinswarm.sim.world import World
 
     topo = load_topology(GRASP3)
-    obj = topo.object
+    obj = dataclasses.replace(topo.object, contact=contact)
     world = World(topo)
     try:
         scene = GraspScene(world, obj)
@@ -442,3 +466,42 @@ def test_a_finger_not_in_front_of_its_face_goes_to_the_pre_grasp_point():
     assert g.goals["c"] == pytest.approx((1.0 + out, -0.35))  # wrong face, below its own: out and round
     g.step({**tips, "a": (-1.3, 0.2)}, _sense({}))  # now in front of its face: straight to the grasp point
     assert g.goals["a"] == GRASP["a"]
+
+
+def test_tip_contact_is_the_fingertip_sphere_only():
+    """contact = "tip": only a sphere of the capsule's radius at the fingertip presses (depth = r - its
+    distance to the face); "link": the fingertip link's whole capsule. A distal link lying along the face
+    with its tip sticking out touches in "link" mode only."""
+    import dataclasses
+
+    from kinswarm.sim.contact import GraspScene
+    from kinswarm.sim.world import World
+
+    topo = load_topology(GRASP3)
+    world = World(topo)
+    try:
+        q = world.joint_positions()
+        q = _ik(world, GraspScene(world, topo.object).fingers, q, "f1_4", (-1.03, 0.1))  # 0.07 deep
+        readings = {}
+        for contact in ("link", "tip"):
+            scene = GraspScene(world, dataclasses.replace(topo.object, contact=contact))
+            scene.reset()
+            readings[contact] = scene.readings["f1_4"]
+        tip = readings["tip"]
+        assert tip.contact and tip.depth == pytest.approx(0.07, abs=1e-6) and tip.normal == pytest.approx((-1.0, 0.0))
+        assert tip.point == pytest.approx((-1.0, 0.1), abs=1e-6)
+        assert readings["link"].depth >= tip.depth - 1e-9  # the capsule is at least as deep as its end
+        # the distal link's base 0.05 from the face (its capsule 0.05 deep), the link pointing away up-left:
+        # its fingertip is 0.57 off the face
+        h = math.radians(135.0)
+        tip_xy = (-1.05 + 0.8 * math.cos(h), 0.8 * math.sin(h))
+        q = _ik(world, GraspScene(world, topo.object).fingers, q, "f1_4", tip_xy, heading=h)
+        for contact in ("link", "tip"):
+            scene = GraspScene(world, dataclasses.replace(topo.object, contact=contact))
+            scene.reset()
+            readings[contact] = scene.readings["f1_4"]
+        assert readings["link"].contact and readings["link"].depth == pytest.approx(0.05, abs=1e-4)
+        assert readings["link"].point == pytest.approx((-1.0, 0.0), abs=1e-4)
+        assert not readings["tip"].contact and readings["tip"].fn == 0.0
+    finally:
+        world.close()

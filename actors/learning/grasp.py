@@ -283,7 +283,7 @@ def contact_goals(
 def _in_front(tip: Sequence[float], point: Vec, normal: Vec, center: Vec, half_extents: Vec) -> bool:
     """Whether `tip` lies outside the face through `point` (outward `normal`) and within its extent."""
     nx, ny = normal
-    outside = (tip[0] - point[0]) * nx + (tip[1] - point[1]) * ny > 0.0
+    outside = (tip[0] - point[0]) * nx + (tip[1] - point[1]) * ny >= 0.0
     along = abs((tip[0] - center[0]) * -ny + (tip[1] - center[1]) * nx)
     return outside and along < (half_extents[1] if abs(nx) > abs(ny) else half_extents[0])
 
