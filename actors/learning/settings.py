@@ -51,7 +51,7 @@ class LearnerSettings:
             parent), with their membership sets and ranges. Empty for reaching; set per agent from
             `grasp_state` in a grasp scene (actors/learning/grasp.py, grasp_learner_settings).
         grasp_state: the finger agents' state in a grasp scene (paper §5.5): "reach" = the paper's S_i
-            (6 variables, goal = the finger's grasp point); "force" (default) = S_i + force_error, the
+            (6 variables, goal = the finger's grasp point); "force" (round 1's default) = S_i + force_error, the
             grasp agent's (fn_i - fn_i*) / f_grip for the finger, sent down the finger; "contact" = "force"
             plus, for fingertip agents only, their own normal force fn from the contact reading; "goal"
             (default, for the `shaped` grasp reward's contact goals) = S_i + g_perp, the component of
