@@ -10,8 +10,10 @@ Each configuration trains from scratch on every seed; then the trained swarm run
             5 seeds
 
 Configurations (reasoning and measurements: docs/science.md, "Corridor (§5.4)"):
-  paper     Eq. 11 as printed (`--reward paper`), the paper's six state variables, the default learner
-  kinswarm  what made the task learnable here (CONFIGS below)
+  paper             Eq. 11 as printed (`--reward paper`), the paper's six state variables, the default learner
+  kinswarm          the best variant found here (CONFIGS below), on every seed
+  kinswarm-relaxed  the same on the relaxed set-up (examples/corridor7-relaxed.toml: gap 1.2, target 1.0 deep)
+The reference configurations run on the first REFERENCE_SEEDS seeds only in the full version.
 """
 
 from __future__ import annotations
@@ -29,32 +31,33 @@ from .common import Context, Report, band, mean_std, plt_module, pm, run_specs, 
 from .swarm import ROOT, RunOutcome, Spec
 
 TOPOLOGY = ROOT / "examples" / "corridor7.toml"
+RELAXED = ROOT / "examples" / "corridor7-relaxed.toml"
 TOL = 0.3  # issue 6: "within 0.3 of the target"
 TAIL = 50  # the last 50 training epochs
 LAST_STEPS = 100  # no collision in the epoch's last 100 steps
-EPOCHS, STEPS = 150, 500
+EPOCHS, STEPS = 120, 500
 QUICK_EPOCHS, QUICK_STEPS = 3, 100
-PAPER_SEEDS = 2  # the paper configuration is a reference: fewer seeds in the full version
+REFERENCE_SEEDS = 2  # paper and kinswarm-relaxed are references: fewer seeds in the full version
+MAIN = "kinswarm"  # the configuration issue 6's bars are checked on
 
 _PI = math.pi
 _REACH = 7.0
 # g1, g2 over [-reach, reach] rather than the default [-2 reach, 2 reach]: finer sets where the goal is
 _RANGES = ((-_PI, _PI), (-_PI, _PI), (0.0, _REACH), (-_REACH, _REACH), (-_REACH, _REACH), (-_PI, _PI))
 
-#: label -> (reward, LearnerSettings overrides)
-CONFIGS: dict[str, tuple[str, dict[str, Any]]] = {
-    "paper": ("paper", {}),
-    "kinswarm": (
-        "shaped",
-        {
-            "clearance_state": True,
-            "collision_state": True,
-            "collision_penalty": -5.0,
-            "s": 0.01,
-            "epsilon_decay": 0.03,
-            "ranges": _RANGES,
-        },
-    ),
+_KINSWARM: dict[str, Any] = {
+    "clearance_state": True,
+    "collision_state": True,
+    "collision_penalty": -5.0,
+    "s": 0.01,
+    "epsilon_decay": 0.03,
+    "ranges": _RANGES,
+}
+#: label -> (reward, LearnerSettings overrides, topology)
+CONFIGS: dict[str, tuple[str, dict[str, Any], Path]] = {
+    "paper": ("paper", {}, TOPOLOGY),
+    MAIN: ("shaped", _KINSWARM, TOPOLOGY),
+    "kinswarm-relaxed": ("shaped", _KINSWARM, RELAXED),
 }
 
 
@@ -86,13 +89,11 @@ def seed_metrics(train: RunOutcome, frozen: RunOutcome) -> dict[str, Any]:
 
 def run(ctx: Context) -> dict[str, Any]:
     epochs, steps = (QUICK_EPOCHS, QUICK_STEPS) if ctx.quick else (EPOCHS, STEPS)
-    topo_path = str(TOPOLOGY)
     seeds_of = {
-        label: ctx.seed_list if label != "paper" or ctx.quick else ctx.seed_list[: max(1, min(PAPER_SEEDS, ctx.seeds))]
-        for label in CONFIGS
+        label: ctx.seed_list if label == MAIN or ctx.quick else ctx.seed_list[:REFERENCE_SEEDS] for label in CONFIGS
     }
     train_specs: dict[tuple[str, int], Spec] = {}
-    for label, (reward, over) in CONFIGS.items():
+    for label, (reward, over, topo_file) in CONFIGS.items():
         for seed in seeds_of[label]:
             train_specs[(label, seed)] = Spec(
                 f"corr-{label}",
@@ -101,7 +102,7 @@ def run(ctx: Context) -> dict[str, Any]:
                 steps=steps,
                 reward=reward,
                 learner=settings(**over),
-                topology=topo_path,
+                topology=str(topo_file),
                 checkpoint=True,
             )
     trained = dict(zip(train_specs, run_specs(ctx, list(train_specs.values()), "train"), strict=True))
@@ -113,7 +114,7 @@ def run(ctx: Context) -> dict[str, Any]:
             steps=steps,
             reward=spec.reward,
             learner=spec.learner,
-            topology=topo_path,
+            topology=spec.topology,
             from_dir=str(trained[key].out),
             learn=False,
             explore=False,
@@ -134,8 +135,9 @@ def run(ctx: Context) -> dict[str, Any]:
             "seeds": seeds,
             "success_last_mean": mean_std(shares)[0],
             "frozen_successes": n_frozen,
-            "bar_training_met": bool(len(shares) >= 5 and mean_std(shares)[0] >= 0.8),
-            "bar_frozen_met": bool(len(seeds) >= 5 and n_frozen >= 4),
+            "topology": str(CONFIGS[label][2].relative_to(ROOT)),
+            "bar_training_met": bool(CONFIGS[label][2] == TOPOLOGY and len(shares) >= 5 and mean_std(shares)[0] >= 0.8),
+            "bar_frozen_met": bool(CONFIGS[label][2] == TOPOLOGY and len(seeds) >= 5 and n_frozen >= 4),
         }
 
     rep = Report(ctx, "Corridor: a 7-DOF chain into a narrow corridor", "5.4, Fig. 23")
@@ -143,11 +145,13 @@ def run(ctx: Context) -> dict[str, Any]:
     rep.text(
         "## Set-up",
         "",
-        f"`{Path(topo_path).relative_to(ROOT)}`: 7 links of length 1 (capsules of radius 0.1), walls spanning "
+        f"`{TOPOLOGY.relative_to(ROOT)}`: 7 links of length 1 (capsules of radius 0.1), walls spanning "
         "x in [3, 6] with a gap of 0.8 around y = 2, target (5.5, 2.0) 2.5 deep, start angles (90, -5, ..., -5) deg. "
         "Walls are solid: an increment that would make a link penetrate a wall is refused (the joint holds) and "
         f"counted as a collision. {epochs} training epochs of {steps} steps per seed, then one frozen epoch "
-        "(`--learn off --explore off`) from the trained swarm.",
+        "(`--learn off --explore off`) from the trained swarm. `kinswarm-relaxed` runs the same learner on "
+        f"`{RELAXED.relative_to(ROOT)}` (gap 1.2, target (4.0, 2.0) 1.0 deep), the prototype's easier set-up. "
+        "A bar counts as met only on the hard set-up with ≥ 5 seeds.",
     )
     rows = []
     for label, p in per.items():
@@ -211,10 +215,13 @@ def run(ctx: Context) -> dict[str, Any]:
     _figures(ctx, rep, per, trained, frozen, seeds_of)
     rep.write(
         {
-            "topology": str(Path(topo_path).relative_to(ROOT)),
+            "topology": str(TOPOLOGY.relative_to(ROOT)),
             "epochs": epochs,
             "steps_per_epoch": steps,
-            "configs": {label: {"reward": r, "learner": o} for label, (r, o) in CONFIGS.items()},
+            "configs": {
+                label: {"reward": r, "learner": o, "topology": str(t.relative_to(ROOT))}
+                for label, (r, o, t) in CONFIGS.items()
+            },
             "learner_defaults": LearnerSettings().__dict__,
         },
         [*trained.values(), *frozen.values()],
@@ -231,15 +238,17 @@ def _figures(
     seeds_of: dict[str, list[int]],
 ) -> None:
     plt = plt_module()
-    topo = load_topology(TOPOLOGY)
-    goal = topo.goal
+    topos = {label: load_topology(CONFIGS[label][2]) for label in CONFIGS}
     labels = list(CONFIGS)
 
     # Fig. 23: the final configuration over training epochs (first seed), per configuration
     fig, axes = plt.subplots(1, len(labels), figsize=(6.2 * len(labels), 6.0), squeeze=False)
     for ax, label in zip(axes[0], labels, strict=True):
         seed = seeds_of[label][0]
-        plot_scene_epochs(ax, topo, goal, trained[(label, seed)].rows, f"{label}, seed {seed}: final configurations")
+        topo = topos[label]
+        plot_scene_epochs(
+            ax, topo, topo.goal, trained[(label, seed)].rows, f"{label}, seed {seed}: final configurations"
+        )
     rep.save_figure(fig, "corridor.png", "Fig. 23 analogue: the chain's final configuration across training epochs")
 
     # the frozen swarm's path: the chain every 50 steps and the tip's path, per seed
@@ -254,7 +263,8 @@ def _figures(
             seed = seeds_of[label][col]
             out = frozen[(label, seed)]
             tr = out.trace()
-            draw_scene(ax, topo, goal)
+            topo = topos[label]
+            draw_scene(ax, topo, topo.goal)
             q, agents = tr["q"], [str(a) for a in tr["agents"]]
             picks = list(range(0, len(q), 50)) + [len(q) - 1]
             cmap = plt.get_cmap("viridis")
