@@ -37,7 +37,7 @@ from kinswarm.actors.checkpoint import CheckpointError, digest, load_checkpoint,
 from kinswarm.actors.config import RunConfig
 from kinswarm.actors.learning.grasp import GraspReward, goal_along_motion, grasp_learner_settings
 from kinswarm.actors.learning.learner import Learner
-from kinswarm.actors.learning.reward import corridor_reward, path_distance, reach_reward
+from kinswarm.actors.learning.reward import corridor_reward, next_waypoint, path_distance, reach_reward
 from kinswarm.actors.learning.settings import LearnerSettings
 from kinswarm.actors.learning.state import agent_state, joint_frame, link_end
 from kinswarm.actors.runtime import Node
@@ -121,6 +121,7 @@ class Agent:
         self.sense_in: dict[Key, tuple[float | None, int]] = {}  # my obs' clearance and collided, by step
         self.ups_early: dict[Key, dict[str, Up]] = {}
         self.D_prev: float | None = None  # root only: D_goal(t-1)
+        self.waypoint = 0  # root only: the current sub-goal of the scene's [task] waypoints in this epoch
         self.steps_done = 0
         self.down: set[str] = set()  # descendants whose liveliness token went away
         self.adopted: tuple[str, ...] = ()  # the lost agents this agent stood in for at its last step
@@ -312,6 +313,7 @@ class Agent:
         if epoch != self.epoch:
             self.epoch = epoch
             self.D_prev = None
+            self.waypoint = 0
             if self.learner is not None:
                 self.learner.start_epoch(self.epochs_before + epoch, t=step)
         elif self.learner is not None and key != (epoch, self.last_finished[1] + 1):
@@ -328,7 +330,14 @@ class Agent:
             goal = head.goal
             tip = _centroid([head.tips[leaf] for leaf in self.leaves if leaf in head.tips])
             via = self.topo.via  # a scene's approach path ([task] via): D_goal along it
-            D = _distance(tip, goal) if via is None else path_distance(tip, goal, via, self.topo.via_width)
+            if self.topo.waypoints:  # sub-goals ([task] waypoints): the swarm aims at the current one
+                self.waypoint, goal, D = next_waypoint(
+                    tip, goal, self.topo.waypoints, self.waypoint, self.topo.waypoint_radius
+                )
+            elif via is not None:
+                D = path_distance(tip, goal, via, self.topo.via_width)
+            else:
+                D = _distance(tip, goal)
             if self.D_prev is None:
                 reward = None
             elif head.clearance is not None:  # a scene with obstacles: the corridor's Eq. 11
@@ -450,7 +459,11 @@ class Agent:
                 if "g_perp" in self.extra_state:  # the goal along my joint's motion of the tip (grasp "goal")
                     local["g_perp"] = goal_along_motion(cur.frame, tip, cur.goal)
                 s = np.concatenate([s, [local.get(n, 0.0) for n in self.extra_state]])
-            action = self.learner.decide(s, reward, learn=self.cfg.learn, explore=self.cfg.explore)
+            avoid = None
+            if cur.sense[1] and self.learner.settings.collision_tabu:  # my last move was refused: not again
+                d = self.decided
+                avoid = d[1] if d is not None and d[0] == (epoch, step - 1) else None
+            action = self.learner.decide(s, reward, learn=self.cfg.learn, explore=self.cfg.explore, avoid=avoid)
             self.decided = (cur.key, action)
             if self.visible:
                 # a lost child's joint holds: to this agent's fictitious play it chose "keep"

@@ -123,6 +123,9 @@ class Topology:
     # actors/learning/reward.py path_distance); None: straight to the goal
     via: tuple[float, float] | None = None
     via_width: float = 0.0
+    # [task] waypoints, waypoint_radius: sub-goals the root hands down one after the other (reward.next_waypoint)
+    waypoints: tuple[tuple[float, float], ...] = ()
+    waypoint_radius: float = 0.0
 
     @property
     def dof_agents(self) -> tuple[str, ...]:
@@ -272,7 +275,7 @@ def parse_topology(data: dict[str, Any], source: str = "<memory>") -> Topology:
     task = data.get("task", {})
     if not isinstance(task, dict):
         raise TopologyError(src, "task", "must be a table")
-    bad = set(task) - {"goal", "via", "via_width"}
+    bad = set(task) - {"goal", "via", "via_width", "waypoints", "waypoint_radius"}
     if bad:
         raise TopologyError(src, f"task.{sorted(bad)[0]}", "unknown field")
     goal = _vec(src, "task.goal", task["goal"], 2) if "goal" in task else None
@@ -282,6 +285,15 @@ def parse_topology(data: dict[str, Any], source: str = "<memory>") -> Topology:
         raise TopologyError(src, "task.via_width", f"must be > 0 with task.via, got {via_width}")
     if via is None and "via_width" in task:
         raise TopologyError(src, "task.via_width", "only with task.via")
+    raw_wp = task.get("waypoints", [])
+    if not isinstance(raw_wp, list):
+        raise TopologyError(src, "task.waypoints", f"expected a list of [x, y] points, got {raw_wp!r}")
+    waypoints = tuple(_vec(src, f"task.waypoints[{i}]", w, 2) for i, w in enumerate(raw_wp))
+    radius = _num(src, "task.waypoint_radius", task.get("waypoint_radius", 0.0))
+    if waypoints and radius <= 0:
+        raise TopologyError(src, "task.waypoint_radius", f"must be > 0 with task.waypoints, got {radius}")
+    if not waypoints and "waypoint_radius" in task:
+        raise TopologyError(src, "task.waypoint_radius", "only with task.waypoints")
 
     leaves = [a for a in order if not agents[a].children]
     obj = _parse_object(src, data["object"], leaves) if "object" in data else None
@@ -298,6 +310,8 @@ def parse_topology(data: dict[str, Any], source: str = "<memory>") -> Topology:
         object=obj,
         via=via,  # type: ignore[arg-type]
         via_width=via_width,
+        waypoints=waypoints,  # type: ignore[arg-type]
+        waypoint_radius=radius,
     )
 
 

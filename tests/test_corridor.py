@@ -14,7 +14,8 @@ from kinswarm.actors.agent import learner_settings
 from kinswarm.actors.cli import main as cli_main
 from kinswarm.actors.config import RunConfig
 from kinswarm.actors.learning.fuzzy import FuzzyPartition
-from kinswarm.actors.learning.reward import corridor_reward, path_distance
+from kinswarm.actors.learning.learner import Learner
+from kinswarm.actors.learning.reward import corridor_reward, next_waypoint, path_distance
 from kinswarm.actors.learning.settings import LearnerSettings
 from kinswarm.protocol import codec
 from kinswarm.protocol.messages import EpochDone, Obs, Task
@@ -266,6 +267,31 @@ def test_via_parsing(tmp_path):
     assert load_topology(CORRIDOR).via is None or load_topology(CORRIDOR).via_width > 0
 
 
+def test_waypoints_advance_and_distance():
+    goal, wps = (5.5, 2.0), ((2.0, 2.0), (3.5, 2.0))
+    # far from the first: aim at it, D = |tip - w0| + 1.5 + 2.0
+    k, target, D = next_waypoint((2.0, 5.0), goal, wps, 0, 0.2)
+    assert (k, target) == (0, (2.0, 2.0)) and D == pytest.approx(3.0 + 3.5)
+    # within the radius of w0: the next one, D continues to fall smoothly (no jump up)
+    k, target, D2 = next_waypoint((2.1, 2.1), goal, wps, 0, 0.2)
+    assert (k, target) == (1, (3.5, 2.0)) and D2 == pytest.approx(math.hypot(1.4, 0.1) + 2.0)
+    assert D2 < math.hypot(0.1, 0.1) + 3.5
+    # k never goes back within an epoch: leaving w0 again keeps aiming at w1
+    assert next_waypoint((0.0, 0.0), goal, wps, 1, 0.2)[:2] == (1, (3.5, 2.0))
+    # both passed in one step, then the goal itself
+    assert next_waypoint((3.45, 2.0), goal, ((3.4, 2.0), (3.5, 2.0)), 0, 0.2)[:2] == (2, goal)
+    assert next_waypoint((5.0, 2.0), goal, wps, 2, 0.2) == (2, goal, pytest.approx(0.5))
+    doc = _doc([])
+    doc["task"] = {"goal": [5.5, 2.0], "waypoints": [[2.0, 2.0], [3.5, 2.0]], "waypoint_radius": 0.2}
+    assert parse_topology(doc, source="w.toml").waypoints == wps
+    doc["task"] = {"goal": [5.5, 2.0], "waypoints": [[2.0, 2.0], [3.5]], "waypoint_radius": 0.2}
+    with pytest.raises(TopologyError, match=r"w.toml: task.waypoints\[1\]: expected a list of 2"):
+        parse_topology(doc, source="w.toml")
+    doc["task"] = {"goal": [5.5, 2.0], "waypoints": [[2.0, 2.0]]}
+    with pytest.raises(TopologyError, match=r"w.toml: task.waypoint_radius: must be > 0"):
+        parse_topology(doc, source="w.toml")
+
+
 # -- learner settings ---------------------------------------------------------------------------------
 def test_scene_state_settings():
     st = LearnerSettings(clearance_state=True, collision_state=True, clearance_sets=4)
@@ -291,6 +317,25 @@ def test_scene_state_settings():
     cfg = RunConfig(run_id="r", topology=str(EXAMPLES / "chain4.toml"), out="/tmp/x", learner={"clearance_state": True})
     with pytest.raises(ValueError, match="need a scene with obstacles.*chain4.toml"):
         learner_settings(cfg, cfg.topo())
+
+
+def test_collision_tabu_never_repeats_the_refused_action():
+    """The greedy deadlock: the same state, the same greedy choice. With `avoid` the refused action is neither
+    chosen greedily nor sampled while exploring, whatever Q says."""
+    st = LearnerSettings(T_max=10.0, s=0.0)  # exploration stays high: sampling is exercised too
+    learner = Learner(st, 0, seed=1)
+    s0 = np.array([0.1, 0.2, 3.0, 1.0, -1.0, 0.3])
+    for _ in range(30):  # teach it that action 2 is by far the best here
+        learner.decide(s0, 5.0 if learner._own == 2 else -5.0)
+        learner.observe([])
+    learner.start_epoch(1)
+    picks = {learner.decide(s0, None, learn=False, explore=False) for _ in range(20)}
+    assert picks == {2}  # deadlock material: greedy always 2
+    picks = set()
+    for explore in (False, True):
+        for _ in range(200):
+            picks.add(learner.decide(s0, None, learn=False, explore=explore, avoid=2))
+    assert 2 not in picks and picks <= {0, 1}
 
 
 # -- a run through the corridor ---------------------------------------------------------------------

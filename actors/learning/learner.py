@@ -98,7 +98,14 @@ class Learner:
             if not 0 <= b < self.n_actions:
                 raise ValueError(f"visible action {b!r} of agent {j} is not in [0, {self.n_actions})")
 
-    def decide(self, state: np.ndarray, reward: float | None, learn: bool = True, explore: bool = True) -> int:
+    def decide(
+        self,
+        state: np.ndarray,
+        reward: float | None,
+        learn: bool = True,
+        explore: bool = True,
+        avoid: int | None = None,
+    ) -> int:
         """(a)-(b) of step(): the TD update of the previous transition, if observe() completed its joint
         action, then the choice of a(t). The visible actions at t are for observe()."""
         st = self.settings
@@ -125,6 +132,9 @@ class Learner:
         E = jasm.expected_values(q_now, P, self.n_actions)
         T = jasm.temperature(self.t, st.T_max, st.s)
         pi = jasm.boltzmann(E, T)
+        if avoid is not None and 0 <= avoid < self.n_actions and self.n_actions > 1:
+            pi[avoid] = 0.0  # an action known to be futile now (a wall refused it): neither chosen nor sampled
+            pi /= pi.sum()
         a = jasm.select_action(pi, jasm.explore_probability(T, st.T_max, self.epsilon), self.rng, explore)
 
         # (d) remember s(t) for the next update; observe() adds the joint action.

@@ -94,9 +94,7 @@ def corridor_reward(
     return reach_reward(D, D_prev, mode, D_min=D_min, c=c1, k=k) - (weight * penalty if close else 0.0)
 
 
-def path_distance(
-    tip: tuple[float, float], goal: tuple[float, float], via: tuple[float, float], width: float
-) -> float:
+def path_distance(tip: tuple[float, float], goal: tuple[float, float], via: tuple[float, float], width: float) -> float:
     """D_goal measured along an approach path through `via` (a corridor's axis, declared in the scene's
     [task] table): straight to the goal once the tip is "past" via -- ahead of it towards the goal and within
     `width` of the line via -> goal -- else |tip - via| + |via - goal|. This is the task designer's knowledge
@@ -111,3 +109,22 @@ def path_distance(
         if along >= 0.0 and across <= width:
             return math.hypot(tip[0] - goal[0], tip[1] - goal[1])
     return math.hypot(dx, dy) + length
+
+
+def next_waypoint(
+    tip: tuple[float, float],
+    goal: tuple[float, float],
+    waypoints: tuple[tuple[float, float], ...],
+    k: int,
+    radius: float,
+) -> tuple[int, tuple[float, float], float]:
+    """Sub-goals along a path (the scene's [task] waypoints, e.g. a corridor's axis): the root aims the swarm at
+    waypoint k until the tip comes within `radius` of it, then at the next one, and at the goal after the last.
+    Returns (k, the current target, D_goal = |tip - target| + the path's length from the target to the goal),
+    so D_goal falls steadily along the path and barely jumps when k advances. k only grows within an epoch."""
+    while k < len(waypoints) and math.hypot(tip[0] - waypoints[k][0], tip[1] - waypoints[k][1]) <= radius:
+        k += 1
+    points = [*waypoints[k:], goal]
+    rest = sum(math.hypot(b[0] - a[0], b[1] - a[1]) for a, b in zip(points, points[1:], strict=False))
+    target = points[0]
+    return k, target, math.hypot(tip[0] - target[0], tip[1] - target[1]) + rest

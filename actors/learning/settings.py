@@ -68,6 +68,9 @@ class LearnerSettings:
         collision_state: append a 0/1 flag "my increment of the previous step was refused" (2 sets over [0, 1]).
             It breaks the greedy deadlock against a wall: a refused move leaves q and the tips unchanged, so
             without it the state, and hence the greedy choice, would repeat forever.
+        collision_tabu: right after the wall refused the agent's own increment, that action is left out of
+            the next choice (greedy and exploring): a refused move left the state unchanged, so choosing it again
+            is futile unless others moved; this breaks the greedy deadlock even with learning off.
         epsilon_decay: per-epoch decay of epsilon, epsilon(epoch) = epsilon * (1 - epsilon_decay) ** epoch (default 0:
             the same exploration every epoch). With a slow T(t) decay (small s) exploration then lasts through
             the epoch early in training and fades over the epochs.
@@ -105,6 +108,7 @@ class LearnerSettings:
     grasp_state: str = "goal"
     epsilon_decay: float = 0.0
     fine_action: float = 1.0
+    collision_tabu: bool = False
 
     @property
     def state_names(self) -> tuple[str, ...]:
@@ -172,7 +176,7 @@ class LearnerSettings:
         if not (isinstance(self.n_actions, int) and self.n_actions >= 1):
             raise ValueError(f"n_actions must be an int >= 1, got {self.n_actions}")
         object.__setattr__(self, "clearance_range", tuple(float(v) for v in self.clearance_range))
-        for name in ("clearance_state", "collision_state"):
+        for name in ("clearance_state", "collision_state", "collision_tabu"):
             if not isinstance(getattr(self, name), bool):
                 raise ValueError(f"{name} must be true or false, got {getattr(self, name)!r}")
         if not (isinstance(self.clearance_sets, int) and self.clearance_sets >= 1):
