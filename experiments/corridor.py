@@ -13,6 +13,8 @@ Configurations (reasoning and measurements: docs/science.md, "Corridor (§5.4)")
   paper             Eq. 11 as printed (`--reward paper`), the paper's six state variables, the default learner
   kinswarm          the best variant found here (CONFIGS below), on every seed
   kinswarm-relaxed  the same on the relaxed set-up (examples/corridor7-relaxed.toml: gap 1.2, target 1.0 deep)
+  guided            the same plus collision_tabu, with the goal distance along the corridor's axis
+                    (examples/corridor7-guided.toml: the hard set-up with [task] via)
 The reference configurations run on the first REFERENCE_SEEDS seeds only in the full version.
 """
 
@@ -32,10 +34,11 @@ from .swarm import ROOT, RunOutcome, Spec
 
 TOPOLOGY = ROOT / "examples" / "corridor7.toml"
 RELAXED = ROOT / "examples" / "corridor7-relaxed.toml"
+GUIDED = ROOT / "examples" / "corridor7-guided.toml"
 TOL = 0.3  # issue 6: "within 0.3 of the target"
 TAIL = 50  # the last 50 training epochs
 LAST_STEPS = 100  # no collision in the epoch's last 100 steps
-EPOCHS, STEPS = 120, 500
+EPOCHS, STEPS = 100, 500
 QUICK_EPOCHS, QUICK_STEPS = 3, 100
 REFERENCE_SEEDS = 2  # paper and kinswarm-relaxed are references: fewer seeds in the full version
 MAIN = "kinswarm"  # the configuration issue 6's bars are checked on
@@ -58,6 +61,7 @@ CONFIGS: dict[str, tuple[str, dict[str, Any], Path]] = {
     "paper": ("paper", {}, TOPOLOGY),
     MAIN: ("shaped", _KINSWARM, TOPOLOGY),
     "kinswarm-relaxed": ("shaped", _KINSWARM, RELAXED),
+    "guided": ("shaped", {**_KINSWARM, "collision_tabu": True}, GUIDED),
 }
 
 
@@ -136,8 +140,8 @@ def run(ctx: Context) -> dict[str, Any]:
             "success_last_mean": mean_std(shares)[0],
             "frozen_successes": n_frozen,
             "topology": str(CONFIGS[label][2].relative_to(ROOT)),
-            "bar_training_met": bool(CONFIGS[label][2] == TOPOLOGY and len(shares) >= 5 and mean_std(shares)[0] >= 0.8),
-            "bar_frozen_met": bool(CONFIGS[label][2] == TOPOLOGY and len(seeds) >= 5 and n_frozen >= 4),
+            "bar_training_met": bool(label != "kinswarm-relaxed" and len(shares) >= 5 and mean_std(shares)[0] >= 0.8),
+            "bar_frozen_met": bool(label != "kinswarm-relaxed" and len(seeds) >= 5 and n_frozen >= 4),
         }
 
     rep = Report(ctx, "Corridor: a 7-DOF chain into a narrow corridor", "5.4, Fig. 23")
@@ -150,7 +154,9 @@ def run(ctx: Context) -> dict[str, Any]:
         "Walls are solid: an increment that would make a link penetrate a wall is refused (the joint holds) and "
         f"counted as a collision. {epochs} training epochs of {steps} steps per seed, then one frozen epoch "
         "(`--learn off --explore off`) from the trained swarm. `kinswarm-relaxed` runs the same learner on "
-        f"`{RELAXED.relative_to(ROOT)}` (gap 1.2, target (4.0, 2.0) 1.0 deep), the prototype's easier set-up. "
+        f"`{RELAXED.relative_to(ROOT)}` (gap 1.2, target (4.0, 2.0) 1.0 deep), the prototype's easier set-up; "
+        f"`guided` adds `collision_tabu` and runs on `{GUIDED.relative_to(ROOT)}` (the hard set-up; the root "
+        "measures the goal distance along the corridor's axis through [task] via). "
         "A bar counts as met only on the hard set-up with ≥ 5 seeds.",
     )
     rows = []
