@@ -20,6 +20,7 @@ The reference configurations run on the first REFERENCE_SEEDS seeds only in the 
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from pathlib import Path
 from typing import Any
@@ -65,7 +66,7 @@ CONFIGS: dict[str, tuple[str, dict[str, Any], Path]] = {
 }
 
 
-def seed_metrics(train: RunOutcome, frozen: RunOutcome) -> dict[str, Any]:
+def seed_metrics(train: RunOutcome, frozen: RunOutcome, tabu: RunOutcome) -> dict[str, Any]:
     rows = train.rows
     tail = rows[-TAIL:]
     ok = [r["final_error"] <= TOL and sum(r["collisions"][-LAST_STEPS:]) == 0 for r in tail]
@@ -86,6 +87,10 @@ def seed_metrics(train: RunOutcome, frozen: RunOutcome) -> dict[str, Any]:
         "frozen_collisions_last100": sum(f["collisions"][-LAST_STEPS:]),
         "frozen_min_clearance": min(f["clearance"]),
         "frozen_success": bool(f["final_error"] <= TOL and sum(f["collisions"]) == 0),
+        # the same trained swarm, frozen, with collision_tabu at evaluation (a decision rule, nothing learned)
+        "tabu_final_error": tabu.rows[0]["final_error"],
+        "tabu_collisions": sum(tabu.rows[0]["collisions"]),
+        "tabu_success": bool(tabu.rows[0]["final_error"] <= TOL and sum(tabu.rows[0]["collisions"]) == 0),
         "train_run": train.out.name,
         "frozen_run": frozen.out.name,
     }
@@ -127,18 +132,30 @@ def run(ctx: Context) -> dict[str, Any]:
         for key, spec in train_specs.items()
     }
     frozen = dict(zip(frozen_specs, run_specs(ctx, list(frozen_specs.values()), "frozen"), strict=True))
+    tabu_specs = {
+        key: dataclasses.replace(
+            spec,
+            name=f"corr-{key[0]}-frozen-tabu",
+            learner=settings(**{**CONFIGS[key[0]][1], "collision_tabu": True}),
+            observe=False,
+        )
+        for key, spec in frozen_specs.items()
+    }
+    tabu = dict(zip(tabu_specs, run_specs(ctx, list(tabu_specs.values()), "frozen+tabu"), strict=True))
 
     per: dict[str, dict[str, Any]] = {}
     for label in CONFIGS:
-        seeds = {s: seed_metrics(trained[(label, s)], frozen[(label, s)]) for s in seeds_of[label]}
+        seeds = {s: seed_metrics(trained[(label, s)], frozen[(label, s)], tabu[(label, s)]) for s in seeds_of[label]}
         shares = [m["success_last"] for m in seeds.values()]
         n_frozen = sum(m["frozen_success"] for m in seeds.values())
+        n_tabu = sum(m["tabu_success"] for m in seeds.values())
         per[label] = {
             "reward": CONFIGS[label][0],
             "learner": CONFIGS[label][1],
             "seeds": seeds,
             "success_last_mean": mean_std(shares)[0],
             "frozen_successes": n_frozen,
+            "frozen_tabu_successes": n_tabu,
             "topology": str(CONFIGS[label][2].relative_to(ROOT)),
             "bar_training_met": bool(label != "kinswarm-relaxed" and len(shares) >= 5 and mean_std(shares)[0] >= 0.8),
             "bar_frozen_met": bool(label != "kinswarm-relaxed" and len(seeds) >= 5 and n_frozen >= 4),
@@ -153,7 +170,9 @@ def run(ctx: Context) -> dict[str, Any]:
         "x in [3, 6] with a gap of 0.8 around y = 2, target (5.5, 2.0) 2.5 deep, start angles (90, -5, ..., -5) deg. "
         "Walls are solid: an increment that would make a link penetrate a wall is refused (the joint holds) and "
         f"counted as a collision. {epochs} training epochs of {steps} steps per seed, then one frozen epoch "
-        "(`--learn off --explore off`) from the trained swarm. `kinswarm-relaxed` runs the same learner on "
+        "(`--learn off --explore off`) from the trained swarm; a second frozen epoch adds `collision_tabu` at "
+        "evaluation only (a refused action is not chosen at the next step; nothing learned changes). "
+        "`kinswarm-relaxed` runs the same learner on "
         f"`{RELAXED.relative_to(ROOT)}` (gap 1.2, target (4.0, 2.0) 1.0 deep), the prototype's easier set-up; "
         f"`guided` adds `collision_tabu` and runs on `{GUIDED.relative_to(ROOT)}` (the hard set-up; the root "
         "measures the goal distance along the corridor's axis through [task] via). "
@@ -174,6 +193,7 @@ def run(ctx: Context) -> dict[str, Any]:
                     f"{m['frozen_final_error']:.3f}",
                     m["frozen_collisions"],
                     "yes" if m["frozen_success"] else "no",
+                    f"{m['tabu_final_error']:.3f} / {m['tabu_collisions']} / {'yes' if m['tabu_success'] else 'no'}",
                 ]
             )
     rep.text("## Per seed", "")
@@ -189,6 +209,7 @@ def run(ctx: Context) -> dict[str, Any]:
             "frozen: final error",
             "frozen: collisions",
             "frozen: success",
+            "frozen + tabu: error / collisions / success",
         ],
         rows,
     )
@@ -201,7 +222,7 @@ def run(ctx: Context) -> dict[str, Any]:
                 label,
                 n,
                 pm([100 * s for s in shares], 0) + " %",
-                f"{p['frozen_successes']} of {n}",
+                f"{p['frozen_successes']} of {n} ({p['frozen_tabu_successes']} with tabu)",
                 "met" if p["bar_training_met"] else "not met",
                 "met" if p["bar_frozen_met"] else "not met",
             ]
@@ -230,7 +251,7 @@ def run(ctx: Context) -> dict[str, Any]:
             },
             "learner_defaults": LearnerSettings().__dict__,
         },
-        [*trained.values(), *frozen.values()],
+        [*trained.values(), *frozen.values(), *tabu.values()],
     )
     return rep.results
 
