@@ -12,6 +12,7 @@ bar is >= 80 % of the last 20 epochs, over 5 seeds.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from typing import Any
 
@@ -23,6 +24,7 @@ from .common import Context, Report, plt_module, run_specs
 from .swarm import ROOT, RunOutcome, Spec
 
 GRASP3 = ROOT / "examples" / "grasp3.toml"
+CONTACT = {"tip": "a sphere of the link radius at each fingertip presses", "link": "the distal link's capsule presses"}
 BAR = 0.8  # share of the last 20 epochs
 LAST = 20
 
@@ -58,18 +60,52 @@ def run(ctx: Context) -> dict[str, Any]:
     topo = load_topology(GRASP3)
     epochs, steps = (3, 60) if ctx.quick else (30, 400)
     base = {"topology": str(GRASP3), "epochs": epochs, "steps": steps}
-    specs = [Spec(name=f"grasp-shaped-s{s}", seed=s, reward="shaped", **base) for s in ctx.seed_list]  # type: ignore[arg-type]
+    specs = [
+        Spec(name=f"grasp-shaped-s{s}", seed=s, reward="shaped", checkpoint=True, **base)  # type: ignore[arg-type]
+        for s in ctx.seed_list
+    ]
     variants = ("paper", "contact", "global", "force")
     specs += [Spec(name=f"grasp-{v}-s0", seed=0, reward=v, **base) for v in variants]  # type: ignore[arg-type]
     outcomes = run_specs(ctx, specs, desc="grasp")
     scores = [_score(o, topo) for o in outcomes]
+    # the trained swarms frozen (`--learn off --explore off`): one epoch from the start configuration
+    frozen_specs = [
+        Spec(
+            name=f"grasp-shaped-frozen-s{o.spec.seed}",
+            seed=o.spec.seed,
+            reward="shaped",
+            topology=str(GRASP3),
+            epochs=1,
+            steps=steps,
+            from_dir=str(o.out),
+            learn=False,
+            explore=False,
+        )
+        for o in outcomes
+        if o.spec.reward == "shaped"
+    ]
+    # ... and replayed greedily but still learning (`--learn on --explore off`): what the TD updates within the
+    # epoch add to the frozen policy
+    replay_specs = [dataclasses.replace(f, name=f"grasp-shaped-greedy-s{f.seed}", learn=True) for f in frozen_specs]
+    frozen = run_specs(ctx, frozen_specs + replay_specs, desc="grasp frozen")
+    frozen_q = {o.spec.seed: epoch_quality(o.rows[-1], topo) for o in frozen if not o.spec.learn}
+    greedy_q = {o.spec.seed: epoch_quality(o.rows[-1], topo) for o in frozen if o.spec.learn}
     rep = Report(ctx, "Three-finger grasp by 13 nested agents", "5.5 (Figs. 24-29)")
+    obj = topo.object
+    assert obj is not None
     rep.text(
         "A compound grasp agent (no DOF) over three 4-joint fingers around a fixed rectangle (examples/grasp3.toml:"
         " finger 1 opposes fingers 2 and 3; balanced with pure normal forces at fn1 = fn2 + fn3, fn2 = fn3). "
-        "Contacts: Fig. 25's spring-dampers (kn = kt = 20, cn = ct = 2, mu = 0.5, sim/contact.py). "
+        f"Contacts: Fig. 25's spring-dampers (kn = {obj.kn:g}, kt = {obj.kt:g}, cn = {obj.cn:g}, ct = {obj.ct:g}, "
+        f"mu = {obj.mu:g}, sim/contact.py), contact = {obj.contact} ({CONTACT[obj.contact]}). "
         f"Training: {epochs} epochs x {steps} steps (paper: 200 x 500), 1 degree per action (`shaped`: 0.1 degree "
         f"within {GraspParams.D_fine} of the contact goal).",
+        "",
+        "Rewards: `shaped` (default): the grasp agent sends each finger a contact goal, the tip position where its "
+        "contact carries a force that balances the object, and rewards reaching it; `force`: round 1's per-finger "
+        "normal-force error (round 1's default, then named `shaped`); `global`: `force` averaged over the fingers; "
+        "`paper`: Eq. 12 as printed; `contact`: Eq. 12 with its force, torque and slip terms paid only while all "
+        "three touch (docs/science.md, Grasp).",
         "",
         f"**Good grasp** at an epoch's last step: all fingertips touch (fn > 0) inside their friction cones, |F| < "
         f"{BALANCE} x mean fn (force units) and |tau| < {BALANCE} x mean fn x L, L = "
@@ -90,6 +126,7 @@ def run(ctx: Context) -> dict[str, Any]:
                 f"{s['median_net_force_last']:.2f}",
                 f"{s['median_net_torque_last']:.2f}",
                 f"{s['median_mean_fn_last']:.2f}",
+                f"{s['good_tail_steps_last']:.0%}",
                 "yes" if s["meets_bar"] else "**no**",
             ]
         )
@@ -105,6 +142,7 @@ def run(ctx: Context) -> dict[str, Any]:
             "median |F|",
             "median |tau|",
             "median mean fn",
+            "good steps (last 50 of each)",
             "bar met",
         ],
         rows,
@@ -117,6 +155,30 @@ def run(ctx: Context) -> dict[str, Any]:
         f"the bar is met in {met} of {len(shaped)} seeds; mean share of good last epochs "
         f"{sum(s['good_share_last'] for s in shaped) / max(1, len(shaped)):.0%}, all three touching in "
         f"{sum(s['touch_share_last'] for s in shaped) / max(1, len(shaped)):.0%}."
+    )
+    rep.text(
+        "The trained swarm of each seed replayed for one epoch from the start configuration: frozen "
+        "(`--learn off --explore off`) it ends good in "
+        f"{sum(q['good'] for q in frozen_q.values())} of {len(frozen_q)} seeds; greedy but still learning "
+        f"(`--learn on --explore off`) in {sum(q['good'] for q in greedy_q.values())} of {len(greedy_q)}: the "
+        "balance is held by the TD updates within the epoch (a finger whose move is penalised changes its "
+        "choice at once, lr = 0.5), not by the Q-table alone."
+    )
+    rep.table(
+        ["seed", "replay", "good (last step)", "|F|", "|tau|", "mean fn", "good steps (last 50)"],
+        [
+            [
+                seed,
+                label,
+                "yes" if q["good"] else "**no**",
+                f"{q['net_force']:.3f}",
+                f"{q['net_torque']:.3f}",
+                f"{q['mean_fn']:.2f}",
+                f"{q['good_tail_share']:.0%}",
+            ]
+            for label, qs in (("frozen", frozen_q), ("learning, greedy", greedy_q))
+            for seed, q in sorted(qs.items())
+        ],
     )
     plt = plt_module()
     first = next(o for o in outcomes if o.spec.reward == "shaped")
@@ -140,6 +202,15 @@ def run(ctx: Context) -> dict[str, Any]:
     ax.set_ylabel("|F| / mean fn at the last step")
     ax.legend(fontsize=6, ncol=2)
     rep.save_figure(fig, "grasp_balance.png", "|net force| / mean normal force at each epoch's last step")
-    rep.results = {"scores": scores, "bar": {"share": BAR, "last": LAST, "balance": BALANCE}, "seeds_meeting_bar": met}
-    rep.write({"epochs": epochs, "steps": steps, "topology": "examples/grasp3.toml", "variants": variants}, outcomes)
+    rep.results = {
+        "scores": scores,
+        "bar": {"share": BAR, "last": LAST, "balance": BALANCE},
+        "seeds_meeting_bar": met,
+        "frozen": {str(seed): q for seed, q in sorted(frozen_q.items())},
+        "greedy_learning": {str(seed): q for seed, q in sorted(greedy_q.items())},
+    }
+    rep.write(
+        {"epochs": epochs, "steps": steps, "topology": "examples/grasp3.toml", "variants": variants},
+        [*outcomes, *frozen],
+    )
     return rep.results

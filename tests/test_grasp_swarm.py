@@ -60,6 +60,11 @@ def test_quick_grasp_experiment(tmp_path):
         assert s["meets_bar"] == (s["good_share_last"] >= 0.8)
     results = json.loads((out / "results.json").read_text())
     assert results["quick"] and results["bar"] == {"share": 0.8, "last": 20, "balance": 0.1}
+    # the trained swarm replayed frozen (--learn off --explore off) and greedy but learning (--learn on)
+    for replay in ("frozen", "greedy_learning"):
+        q = results[replay]["0"]
+        assert set(q) >= {"good", "net_force", "net_torque", "mean_fn"} and q["net_force"] >= 0.0
+    assert "frozen (`--learn off --explore off`) it ends good in" in (out / "report.md").read_text()
 
 
 def _final_angles(tmp_path, name: str, extra: list[str]) -> dict:
