@@ -35,8 +35,22 @@ def free_port() -> int:
 def swarm_rate(placement: str, epochs: int, steps: int, seed: int) -> float:
     with tempfile.TemporaryDirectory() as d:
         a = build_parser().parse_args(
-            ["run", str(ROOT / "examples" / "chain4.toml"), "--placement", placement, "--epochs", str(epochs),
-             "--steps", str(steps), "--seed", str(seed), "--out", d, "--listen", f"tcp/127.0.0.1:{free_port()}"]
+            [
+                "run",
+                str(ROOT / "examples" / "chain4.toml"),
+                "--placement",
+                placement,
+                "--epochs",
+                str(epochs),
+                "--steps",
+                str(steps),
+                "--seed",
+                str(seed),
+                "--out",
+                d,
+                "--listen",
+                f"tcp/127.0.0.1:{free_port()}",
+            ]
         )
         cfg, topo = _resolve(a, "agents")
         run_swarm(cfg, topo)
@@ -48,8 +62,12 @@ def swarm_rate(placement: str, epochs: int, steps: int, seed: int) -> float:
 def wire_floor(mode: str) -> float | None:
     if not FLOOR.exists():
         return None
-    out = subprocess.run([sys.executable, str(FLOOR), "--n", "4", "--passes", "2000", "--mode", mode],
-                         capture_output=True, text=True, timeout=300).stdout
+    out = subprocess.run(
+        [sys.executable, str(FLOOR), "--n", "4", "--passes", "2000", "--mode", mode],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    ).stdout
     m = re.search(r"= ~(\d+) steps/s", out)
     return float(m.group(1)) if m else None
 

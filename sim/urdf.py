@@ -26,8 +26,7 @@ _INERTIAL = (
     '<inertia ixx="1e-3" ixy="0" ixz="0" iyy="1e-3" iyz="0" izz="1e-3"/></inertial>\n'
 )
 _TINY_INERTIAL = (
-    '    <inertial><mass value="1e-6"/>'
-    '<inertia ixx="1e-9" ixy="0" ixz="0" iyy="1e-9" iyz="0" izz="1e-9"/></inertial>\n'
+    '    <inertial><mass value="1e-6"/><inertia ixx="1e-9" ixy="0" ixz="0" iyy="1e-9" iyz="0" izz="1e-9"/></inertial>\n'
 )
 
 

@@ -140,9 +140,7 @@ class World:
     def tip_poses(self) -> dict[str, Pose]:
         """(x, y, heading) of every end effector from PyBullet's link frames ([4], float32 precision).
         The heading comes from a quaternion, so it is wrapped to (-pi, pi]."""
-        states = pb.getLinkStates(
-            self.body, self._tip_idx, computeForwardKinematics=1, physicsClientId=self.client
-        )
+        states = pb.getLinkStates(self.body, self._tip_idx, computeForwardKinematics=1, physicsClientId=self.client)
         out: dict[str, Pose] = {}
         for leaf, st in zip(self._leaves, states, strict=True):
             (x, y, _), (qx, qy, qz, qw) = st[4], st[5]

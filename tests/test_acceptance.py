@@ -16,8 +16,21 @@ pytestmark = [pytest.mark.slow, pytest.mark.timeout(1800)]
 
 def last20(topology: Path, tmp: Path, seed: int, extra: list[str]) -> list[float]:
     a = build_parser().parse_args(
-        ["run", str(topology), "--placement", "single", "--epochs", "60", "--seed", str(seed), "--out", str(tmp),
-         "--listen", f"tcp/127.0.0.1:{free_port()}", *extra]
+        [
+            "run",
+            str(topology),
+            "--placement",
+            "single",
+            "--epochs",
+            "60",
+            "--seed",
+            str(seed),
+            "--out",
+            str(tmp),
+            "--listen",
+            f"tcp/127.0.0.1:{free_port()}",
+            *extra,
+        ]
     )
     cfg, topo = _resolve(a, "agents")
     return run_swarm(cfg, topo)["final_error"][-20:]

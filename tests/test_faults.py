@@ -159,6 +159,10 @@ def test_bad_faults_are_refused_with_a_reason(tmp_path, chain4):
 
 
 def test_fault_needs_the_runs_key(tmp_path):
-    r = subprocess.run([*CLI, "fault", "nosuchrun", "kill", "a1", "--run-dir", str(tmp_path)],
-                       capture_output=True, text=True, timeout=60)
+    r = subprocess.run(
+        [*CLI, "fault", "nosuchrun", "kill", "a1", "--run-dir", str(tmp_path)],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert r.returncode == 2 and "config.json not found" in r.stderr

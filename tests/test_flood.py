@@ -126,13 +126,22 @@ def plausible(key: str, epoch: int, step: int, evil: Path) -> Any:
         "rep/agent": Saved(epoch=epoch, path=str(evil / "a1.npz"), error="flood"),
         "rep/bye": Bye(steps=step, rejected=0),
         "rep/sim": Bye(steps=step, rejected=0),
-        "metrics/epoch": EpochDone(epoch=epoch, steps=STEPS, final_error=0.0, mean_error=0.0, errors=[0.0],
-                                   final_angles={"a1": 0.0}, missed_cmds=0, seconds=1.0,
-                                   max_step_seconds=0.1),  # fmt: skip
+        "metrics/epoch": EpochDone(
+            epoch=epoch,
+            steps=STEPS,
+            final_error=0.0,
+            mean_error=0.0,
+            errors=[0.0],
+            final_angles={"a1": 0.0},
+            missed_cmds=0,
+            seconds=1.0,
+            max_step_seconds=0.1,
+        ),  # fmt: skip
         "metrics/event": Event(epoch=epoch, step=step, event="restart", target="a2", detail="flood"),
         "metrics/joints": JointStatus(epoch=epoch, step=step, q={"a1": 0.0}, delta={"a1": 0.0}, faults={}),
-        "metrics/status": SwarmStatus(epoch=epoch, epochs=EPOCHS, role={}, alive={}, pid={}, host={}, restarts={},
-                                      faults={}),  # fmt: skip
+        "metrics/status": SwarmStatus(
+            epoch=epoch, epochs=EPOCHS, role={}, alive={}, pid={}, host={}, restarts={}, faults={}
+        ),  # fmt: skip
     }[kind]
 
 

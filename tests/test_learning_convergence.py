@@ -30,8 +30,7 @@ def _chain(q):
 
 
 def _train(seed, goal=(4.16, 6.18), epochs=60, steps=500, reward="shaped"):
-    agents = [Learner(LearnerSettings.for_reach(LINK * N), n_visible=int(i < N - 1), seed=[seed, i])
-              for i in range(N)]
+    agents = [Learner(LearnerSettings.for_reach(LINK * N), n_visible=int(i < N - 1), seed=[seed, i]) for i in range(N)]
     finals = []
     for e in range(epochs):
         q = [math.radians(a) for a in (0, 10, 20, 30)]

@@ -16,8 +16,9 @@ from kinswarm.actors.learning.jasm import greedy
 
 
 def test_eq7_probabilities():
-    np.testing.assert_allclose(probabilities(np.array([[1.0, 2.0, 1.0], [3.0, 0.5, 0.5]])),
-                               [[0.25, 0.5, 0.25], [0.75, 0.125, 0.125]])
+    np.testing.assert_allclose(
+        probabilities(np.array([[1.0, 2.0, 1.0], [3.0, 0.5, 0.5]])), [[0.25, 0.5, 0.25], [0.75, 0.125, 0.125]]
+    )
 
 
 def test_eq9_hand_3x3():

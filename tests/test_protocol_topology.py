@@ -40,14 +40,18 @@ link_length = 1.0
         (BASE.replace('id = "a2"', 'id = "a/2"'), "agent[1].id", "letters"),
         (BASE + "[robot]\nbase = [0, 0]\n", "robot.base", "list of 3"),
         (BASE.replace("link_length = 1.0\n[[agent]]", "link_length = -1.0\n[[agent]]"), "agent[0].link_length", "> 0"),
-        (BASE + 'limits_deg = [10, -10]\n', "agent[1].limits_deg", "below upper"),
+        (BASE + "limits_deg = [10, -10]\n", "agent[1].limits_deg", "below upper"),
         (BASE + "initial_deg = 500\n", "agent[1].initial_deg", "outside limits"),
         (BASE + 'colour = "red"\n', "agent[1].colour", "unknown field"),
         (BASE + '[[agent]]\nid = "c"\nparent = "a2"\ncompound = true\n', "agent[2].compound", "must have children"),
         (BASE + "[task]\ngoal = [1, 2, 3]\n", "task.goal", "list of 2"),
         (BASE + "[task]\ngoal = [1, nan]\n", "task.goal[1]", "finite"),
-        ("[[agent]]\nid = 'a'\nlink_length = 1\n[[agent]]\nid = 'b'\nparent = 'c'\nlink_length = 1\n"
-         "[[agent]]\nid = 'c'\nparent = 'b'\nlink_length = 1\n", "agent.parent", "not reachable"),
+        (
+            "[[agent]]\nid = 'a'\nlink_length = 1\n[[agent]]\nid = 'b'\nparent = 'c'\nlink_length = 1\n"
+            "[[agent]]\nid = 'c'\nparent = 'b'\nlink_length = 1\n",
+            "agent.parent",
+            "not reachable",
+        ),
         ("this is = = not toml", "toml", ""),
         ("[ghost]\n", "ghost", "unknown table"),
     ],

@@ -29,10 +29,33 @@ def run(args: list[str]) -> dict:
 
 def test_single_run_leaves_its_files(tmp_path, chain4, endpoint):
     out = tmp_path / "r"
-    s = run(["run", str(chain4), "--placement", "single", "--epochs", "2", "--steps", "60",
-             "--listen", endpoint, "--out", str(out), "--seed", "3"])
-    for f in ("config.json", "metrics.jsonl", "summary.json", "learning_curve.png", "arm.png",
-              "agents/a1.npz", "agents/a4.npz"):
+    s = run(
+        [
+            "run",
+            str(chain4),
+            "--placement",
+            "single",
+            "--epochs",
+            "2",
+            "--steps",
+            "60",
+            "--listen",
+            endpoint,
+            "--out",
+            str(out),
+            "--seed",
+            "3",
+        ]
+    )
+    for f in (
+        "config.json",
+        "metrics.jsonl",
+        "summary.json",
+        "learning_curve.png",
+        "arm.png",
+        "agents/a1.npz",
+        "agents/a4.npz",
+    ):
         assert (out / f).is_file(), f
     assert s["epochs"] == 2 and s["steps_per_epoch"] == 60 and s["seed"] == 3
     assert s["placement"] == "single" and s["reward"] == "shaped"
@@ -43,10 +66,32 @@ def test_single_run_leaves_its_files(tmp_path, chain4, endpoint):
 
 def test_process_and_single_give_the_same_run(tmp_path, chain4):
     common = ["--epochs", "3", "--steps", "120", "--seed", "11"]
-    a = run(["run", str(chain4), "--placement", "single", "--out", str(tmp_path / "s"),
-             "--listen", f"tcp/127.0.0.1:{free_port()}", *common])
-    b = run(["run", str(chain4), "--placement", "process", "--out", str(tmp_path / "p"),
-             "--listen", f"tcp/127.0.0.1:{free_port()}", *common])
+    a = run(
+        [
+            "run",
+            str(chain4),
+            "--placement",
+            "single",
+            "--out",
+            str(tmp_path / "s"),
+            "--listen",
+            f"tcp/127.0.0.1:{free_port()}",
+            *common,
+        ]
+    )
+    b = run(
+        [
+            "run",
+            str(chain4),
+            "--placement",
+            "process",
+            "--out",
+            str(tmp_path / "p"),
+            "--listen",
+            f"tcp/127.0.0.1:{free_port()}",
+            *common,
+        ]
+    )
     assert a["final_error"] == b["final_error"]
     assert a["mean_error"] == b["mean_error"]
     assert b["missed_cmds"] == 0
@@ -54,8 +99,22 @@ def test_process_and_single_give_the_same_run(tmp_path, chain4):
 
 
 def test_tree_runs_in_processes(tmp_path, tree5, endpoint):
-    s = run(["run", str(tree5), "--placement", "process", "--epochs", "2", "--steps", "50",
-             "--listen", endpoint, "--out", str(tmp_path / "t")])
+    s = run(
+        [
+            "run",
+            str(tree5),
+            "--placement",
+            "process",
+            "--epochs",
+            "2",
+            "--steps",
+            "50",
+            "--listen",
+            endpoint,
+            "--out",
+            str(tmp_path / "t"),
+        ]
+    )
     assert s["missed_cmds"] == 0 and len(s["final_error"]) == 2
 
 
@@ -64,13 +123,28 @@ def _spam(run_id: str, connect: str, stop: threading.Event) -> int:
     import msgpack
 
     s = open_session(connect=[connect])
-    keys = ["a/a1/down", "a/a2/down", "a/a3/up", "a/a1/up", "sim/obs/a2", "sim/cmd/a4", "sim/task",
-            "ctl/epoch", "ctl/checkpoint", "ctl/stop", "metrics/epoch", "rep/agent/a1", "sim/cmd/zz"]
-    junk = [b"\x00\xff garbage", msgpack.packb({"v": 1, "kind": "cmd", "run": run_id, "src": "x",
-                                                 "epoch": 0, "step": "NaN", "delta": 1e308}),
-            msgpack.packb({"v": 99}), msgpack.packb({"v": 1, "kind": "stop", "run": run_id, "src": "x"})]
-    pubs = [s.declare_publisher(f"ks/{run_id}/{k}", congestion_control=zenoh.CongestionControl.BLOCK)
-            for k in keys]
+    keys = [
+        "a/a1/down",
+        "a/a2/down",
+        "a/a3/up",
+        "a/a1/up",
+        "sim/obs/a2",
+        "sim/cmd/a4",
+        "sim/task",
+        "ctl/epoch",
+        "ctl/checkpoint",
+        "ctl/stop",
+        "metrics/epoch",
+        "rep/agent/a1",
+        "sim/cmd/zz",
+    ]
+    junk = [
+        b"\x00\xff garbage",
+        msgpack.packb({"v": 1, "kind": "cmd", "run": run_id, "src": "x", "epoch": 0, "step": "NaN", "delta": 1e308}),
+        msgpack.packb({"v": 99}),
+        msgpack.packb({"v": 1, "kind": "stop", "run": run_id, "src": "x"}),
+    ]
+    pubs = [s.declare_publisher(f"ks/{run_id}/{k}", congestion_control=zenoh.CongestionControl.BLOCK) for k in keys]
     sent = 0
     while not stop.is_set():
         for p in pubs:
@@ -92,8 +166,9 @@ def test_malformed_messages_are_rejected_and_the_run_goes_on(tmp_path, chain4):
     # the spammer connects as soon as the supervisor listens
     t.start()
     try:
-        noisy = run(common + ["--out", str(tmp_path / "noisy"), "--listen", f"tcp/127.0.0.1:{port}",
-                              "--run-id", "noisy"])
+        noisy = run(
+            common + ["--out", str(tmp_path / "noisy"), "--listen", f"tcp/127.0.0.1:{port}", "--run-id", "noisy"]
+        )
     finally:
         stop.set()
         t.join(10)
@@ -110,9 +185,24 @@ def test_malformed_messages_are_rejected_and_the_run_goes_on(tmp_path, chain4):
 def start_long_run(topology: Path, endpoint: str, out: Path) -> subprocess.Popen:
     """`kinswarm run` as a user starts it, long enough to be stopped from outside."""
     return subprocess.Popen(
-        [sys.executable, "-m", "kinswarm.actors.cli", "run", str(topology), "--epochs", "1000", "--steps", "200",
-         "--listen", endpoint, "--out", str(out), "--no-progress"],
-        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+        [
+            sys.executable,
+            "-m",
+            "kinswarm.actors.cli",
+            "run",
+            str(topology),
+            "--epochs",
+            "1000",
+            "--steps",
+            "200",
+            "--listen",
+            endpoint,
+            "--out",
+            str(out),
+            "--no-progress",
+        ],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
     )
 
 
@@ -160,12 +250,47 @@ def test_killed_supervisor_leaves_no_orphans(tmp_path, chain4, endpoint):
 
 def test_from_checkpoint_evaluates_greedily_and_deterministically(tmp_path, chain4):
     train = tmp_path / "train"
-    run(["run", str(chain4), "--placement", "single", "--epochs", "3", "--steps", "150",
-         "--listen", f"tcp/127.0.0.1:{free_port()}", "--out", str(train)])
+    run(
+        [
+            "run",
+            str(chain4),
+            "--placement",
+            "single",
+            "--epochs",
+            "3",
+            "--steps",
+            "150",
+            "--listen",
+            f"tcp/127.0.0.1:{free_port()}",
+            "--out",
+            str(train),
+        ]
+    )
     evals = [
-        run(["run", str(chain4), "--placement", "single", "--epochs", "2", "--steps", "150", "--from", str(train),
-             "--learn", "off", "--explore", "off", "--listen", f"tcp/127.0.0.1:{free_port()}",
-             "--out", str(tmp_path / f"e{i}"), "--seed", str(i)])
+        run(
+            [
+                "run",
+                str(chain4),
+                "--placement",
+                "single",
+                "--epochs",
+                "2",
+                "--steps",
+                "150",
+                "--from",
+                str(train),
+                "--learn",
+                "off",
+                "--explore",
+                "off",
+                "--listen",
+                f"tcp/127.0.0.1:{free_port()}",
+                "--out",
+                str(tmp_path / f"e{i}"),
+                "--seed",
+                str(i),
+            ]
+        )
         for i in range(2)
     ]
     # frozen and greedy: every epoch repeats, whatever the seed (ties aside, which greedy breaks at random)
@@ -182,8 +307,22 @@ def test_bad_checkpoint_is_refused_before_start(tmp_path, chain4, capsys):
 
 
 def test_baseline_reaches_the_goal(tmp_path, chain4, endpoint):
-    s = run(["baseline", str(chain4), "--placement", "process", "--epochs", "1", "--steps", "80",
-             "--listen", endpoint, "--out", str(tmp_path / "b")])
+    s = run(
+        [
+            "baseline",
+            str(chain4),
+            "--placement",
+            "process",
+            "--epochs",
+            "1",
+            "--steps",
+            "80",
+            "--listen",
+            endpoint,
+            "--out",
+            str(tmp_path / "b"),
+        ]
+    )
     assert s["controller"] == "baseline"
     assert s["final_error"][0] < 0.01
     assert (tmp_path / "b" / "arm.png").is_file()

@@ -46,8 +46,23 @@ def test_decide_then_a_late_observe_is_step(n_visible):
 
 
 def _run(topo: Path, placement: str, out: Path, epochs: int, steps: int) -> dict:
-    args = ["run", str(topo), "--placement", placement, "--epochs", str(epochs), "--steps", str(steps),
-            "--seed", "11", "--out", str(out), "--listen", f"tcp/127.0.0.1:{free_port()}", "--no-progress"]
+    args = [
+        "run",
+        str(topo),
+        "--placement",
+        placement,
+        "--epochs",
+        str(epochs),
+        "--steps",
+        str(steps),
+        "--seed",
+        "11",
+        "--out",
+        str(out),
+        "--listen",
+        f"tcp/127.0.0.1:{free_port()}",
+        "--no-progress",
+    ]
     assert cli_main(args) == 0
     return json.loads((out / "summary.json").read_text())
 

@@ -181,9 +181,7 @@ class Learner:
                 raise ValueError(f"state dict is missing field {name!r}")
         counts = np.asarray(d["counts"])
         if counts.shape != self.counts.shape or not np.issubdtype(counts.dtype, np.floating):
-            raise ValueError(
-                f"counts must be float with shape {self.counts.shape}, got {counts.dtype} {counts.shape}"
-            )
+            raise ValueError(f"counts must be float with shape {self.counts.shape}, got {counts.dtype} {counts.shape}")
         if np.any(counts <= 0):
             raise ValueError("counts must be > 0 (Eq. 7 divides by their sum)")
         lr = np.asarray(d["lr"])

@@ -28,9 +28,7 @@ def link_end(frame: Sequence[float], link_length: float) -> Frame:
     return (x + link_length * math.cos(h), y + link_length * math.sin(h), h)
 
 
-def agent_state(
-    frame: Sequence[float], q: float, tip_xy: Sequence[float], goal_xy: Sequence[float]
-) -> np.ndarray:
+def agent_state(frame: Sequence[float], q: float, tip_xy: Sequence[float], goal_xy: Sequence[float]) -> np.ndarray:
     """S_i = <q_i, theta_i, d_i, g1, g2, g3> of the agent whose joint frame is frame.
 
     (d_i, theta_i): polar coordinates of the end effector (tip) in the agent frame (origin at the
