@@ -37,7 +37,13 @@ from kinswarm.actors.checkpoint import CheckpointError, digest, load_checkpoint,
 from kinswarm.actors.config import RunConfig
 from kinswarm.actors.learning.grasp import GraspReward, goal_along_motion, grasp_learner_settings
 from kinswarm.actors.learning.learner import Learner
-from kinswarm.actors.learning.reward import corridor_reward, next_waypoint, path_distance, reach_reward
+from kinswarm.actors.learning.reward import (
+    corridor_reward,
+    follow_leader_distance,
+    next_waypoint,
+    path_distance,
+    reach_reward,
+)
 from kinswarm.actors.learning.settings import LearnerSettings
 from kinswarm.actors.learning.state import agent_state, joint_frame, link_end
 from kinswarm.actors.runtime import Node
@@ -63,6 +69,10 @@ def learner_settings(cfg: RunConfig, topo: Topology, agent_id: str | None = None
         raise ValueError(
             f"learner settings clearance_state/collision_state need a scene with obstacles; {topo.source} has no "
             "[[obstacle]]"
+        )
+    if settings.follow_leader > 0.0 and topo.via is None:
+        raise ValueError(
+            f"learner setting follow_leader needs the scene's [task] via (the corridor's axis); {topo.source} has none"
         )
     return settings
 
@@ -122,6 +132,8 @@ class Agent:
         self.ups_early: dict[Key, dict[str, Up]] = {}
         self.D_prev: float | None = None  # root only: D_goal(t-1)
         self.waypoint = 0  # root only: the current sub-goal of the scene's [task] waypoints in this epoch
+        self.fl_prev: float | None = None  # follow_leader: my D_i(t-1)
+        self.fl_behind = _follow_leader_behind(topo, agent_id, self.learner)  # follow_leader: links below me, or None
         self.steps_done = 0
         self.down: set[str] = set()  # descendants whose liveliness token went away
         self.adopted: tuple[str, ...] = ()  # the lost agents this agent stood in for at its last step
@@ -314,6 +326,7 @@ class Agent:
             self.epoch = epoch
             self.D_prev = None
             self.waypoint = 0
+            self.fl_prev = None
             if self.learner is not None:
                 self.learner.start_epoch(self.epochs_before + epoch, t=step)
         elif self.learner is not None and key != (epoch, self.last_finished[1] + 1):
@@ -454,6 +467,8 @@ class Agent:
             reward = cur.reward
             if cur.sense[0] is not None:
                 s, reward = self._scene_state(s, reward, cur.sense)
+            if self.fl_behind is not None:
+                reward = self._follow_leader(reward, cur)
             if self.extra_state:  # named extra variables (a grasp finger's force error, contact force)
                 local = dict(self.sense_now)
                 if "g_perp" in self.extra_state:  # the goal along my joint's motion of the tip (grasp "goal")
@@ -499,6 +514,17 @@ class Agent:
         if reward is not None and collided:
             reward += st.collision_penalty
         return s, reward
+
+    def _follow_leader(self, reward: float | None, cur: _Step) -> float | None:
+        """The body-aware local term (LearnerSettings.follow_leader): + w (D_i(t-1) - D_i(t)) for my own link
+        end's distance D_i to its place on the corridor's axis (reward.follow_leader_distance)."""
+        assert self.learner is not None and self.fl_behind is not None and self.topo.via is not None
+        end = (cur.end[0], cur.end[1])
+        D_i = follow_leader_distance(end, cur.goal, self.topo.via, self.fl_behind, self.topo.via_width)
+        if reward is not None and self.fl_prev is not None:
+            reward += self.learner.settings.follow_leader * (self.fl_prev - D_i)
+        self.fl_prev = D_i
+        return reward
 
     def _grasp_down(
         self, task: Task, step: int
@@ -580,6 +606,21 @@ def _path(topo: Topology, leaf: str) -> list[str]:
         out.append(a)
         a = topo.agents[a].parent
     return out[::-1]
+
+
+def _follow_leader_behind(topo: Topology, agent: str, learner: Learner | None) -> float | None:
+    """follow_leader: the length of the links below `agent` on its path to the end effector, for one of the
+    last follow_leader_links DOF agents of a single-leaf subtree; None when the term is off for this agent."""
+    if learner is None or learner.settings.follow_leader <= 0.0 or topo.via is None:
+        return None
+    leaves = topo.subtree_leaves(agent)
+    if len(leaves) != 1:
+        return None
+    path = _path(topo, leaves[0])
+    below = path[path.index(agent) + 1 :]
+    if sum(topo.agents[a].has_dof for a in below) >= learner.settings.follow_leader_links:
+        return None
+    return sum(topo.agents[a].link_length for a in below)
 
 
 def _below(topo: Topology, agent: str) -> Iterator[str]:

@@ -128,3 +128,27 @@ def next_waypoint(
     rest = sum(math.hypot(b[0] - a[0], b[1] - a[1]) for a, b in zip(points, points[1:], strict=False))
     target = points[0]
     return k, target, math.hypot(tip[0] - target[0], tip[1] - target[1]) + rest
+
+
+def follow_leader_distance(
+    end: tuple[float, float],
+    goal: tuple[float, float],
+    via: tuple[float, float],
+    behind: float,
+    width: float,
+) -> float:
+    """Body-aware corridor distance of one link ("follow the leader"): the distance of an agent's own link end
+    to its place on the corridor's axis in the target configuration, `behind` (the length of the links below
+    it) before the goal on the line via -> goal. The end effector (behind = 0) aims at the goal itself; the
+    link above it at the point one link back, and so on: D_i = |end - g_i| measured along the approach path
+    through via (path_distance) while g_i is ahead of via, straight to g_i otherwise. Each agent's own D_i is
+    its "distance from the corridor that is locally perceived" (paper §5.4); summed over the links it is the
+    body's distance from the straight-in configuration, which the tip's D_goal does not see."""
+    ux, uy = goal[0] - via[0], goal[1] - via[1]
+    length = math.hypot(ux, uy)
+    if length == 0.0:
+        return math.hypot(end[0] - goal[0], end[1] - goal[1])
+    g = (goal[0] - behind * ux / length, goal[1] - behind * uy / length)  # g_i on the axis
+    if behind < length:  # g_i ahead of via: along the approach path
+        return path_distance(end, g, via, width)
+    return math.hypot(end[0] - g[0], end[1] - g[1])

@@ -76,6 +76,10 @@ class LearnerSettings:
             the epoch early in training and fades over the epochs.
         collision_penalty: added (it is <= 0) to the reward of an agent whose own increment was refused, on
             top of the root's global reward: a local signal for the agent that pushed into the wall.
+        follow_leader: weight w of a body-aware local term ("follow the leader", needs the scene's [task] via):
+            each of the last follow_leader_links agents (counted from the end effector) adds
+            w (D_i(t-1) - D_i(t)) to its reward, D_i its own link end's distance to its place on the corridor's
+            axis in the straight-in configuration (reward.follow_leader_distance). 0 (off) by default.
 
     Tuning (planar 4R chain, links 3, goal (4.16, 6.18), 60 epochs x 500 steps, 3 seeds): with the shaped
     reward every variant tried met the target (>= 80% of the last 20 epochs within 0.5, median <= 0.15)
@@ -109,6 +113,8 @@ class LearnerSettings:
     epsilon_decay: float = 0.0
     fine_action: float = 1.0
     collision_tabu: bool = False
+    follow_leader: float = 0.0
+    follow_leader_links: int = 4
 
     @property
     def state_names(self) -> tuple[str, ...]:
@@ -186,6 +192,10 @@ class LearnerSettings:
             raise ValueError(f"clearance_range must be finite with lo < hi, got ({lo}, {hi})")
         if not 0.0 <= self.epsilon_decay < 1.0:
             raise ValueError(f"epsilon_decay must be in [0, 1), got {self.epsilon_decay}")
+        if not (math.isfinite(self.follow_leader) and self.follow_leader >= 0.0):
+            raise ValueError(f"follow_leader must be >= 0, got {self.follow_leader}")
+        if not (isinstance(self.follow_leader_links, int) and self.follow_leader_links >= 1):
+            raise ValueError(f"follow_leader_links must be an int >= 1, got {self.follow_leader_links!r}")
         if not (math.isfinite(self.collision_penalty) and self.collision_penalty <= 0.0):
             raise ValueError(f"collision_penalty must be <= 0, got {self.collision_penalty}")
         object.__setattr__(self, "extra_state", tuple(str(n) for n in self.extra_state))
