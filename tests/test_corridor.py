@@ -371,7 +371,8 @@ def test_quick_corridor_experiment(tmp_path):
         assert f"]({fig})" in report
     res = json.loads((d / "results.json").read_text())
     assert res["experiment"] == "corridor" and res["quick"] is True and res["steps"] == 100
-    for label in ("paper", "kinswarm"):
+    assert res["configs"]["follow"]["learner"]["follow_leader"] == 40.0
+    for label in ("paper", "kinswarm", "follow"):
         per = res["configs"][label]
         seed = per["seeds"]["0"]
         assert 0.0 <= seed["success_last"] <= 1.0 and seed["frozen_collisions"] >= 0
