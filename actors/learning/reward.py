@@ -7,9 +7,7 @@ import math
 REWARD_MODES: tuple[str, ...] = ("paper", "strict", "shaped")
 
 
-def reach_reward(
-    D: float, D_prev: float, mode: str, D_min: float = 3.0, c: float = 1.0, k: float = 20.0
-) -> float:
+def reach_reward(D: float, D_prev: float, mode: str, D_min: float = 3.0, c: float = 1.0, k: float = 20.0) -> float:
     """R(t) from the goal distance D = D_goal(t) and D_prev = D_goal(t-1); Delta D = D - D_prev.
 
     paper (Eq. 10 as printed):
