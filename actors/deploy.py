@@ -43,7 +43,11 @@ def control_net(plan: Plan, host: str, topo: Topology | None) -> NetSpec:
     else:
         multi = len(plan.hosts) > 1
         spec = NetSpec(
-            connect=(plan.hosts[host].listen,), lease_ms=plan.lease_ms, must_connect=True, gossip_multihop=multi
+            connect=(plan.hosts[host].listen,),
+            lease_ms=plan.lease_ms,
+            must_connect=True,
+            gossip_multihop=multi,
+            close_blocked_ms=plan.lease_ms if multi else 0,
         )
     return plan.secure(spec, plan.identity("supervisor", "", host), topo)
 

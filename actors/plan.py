@@ -138,7 +138,7 @@ class Plan:
                 listen=(self.endpoint(h.address, 0),), connect=(h.listen,), lease_ms=self.lease_ms, must_connect=True
             )
         if len(self.hosts) > 1 and self.mode == "peer":
-            spec = spec.with_(gossip_multihop=True)
+            spec = spec.with_(gossip_multihop=True, close_blocked_ms=self.lease_ms)
         return self.secure(spec, identity, topo)
 
     def secure(self, spec: NetSpec, identity: str, topo: Topology | None) -> NetSpec:

@@ -69,6 +69,7 @@ class NetSpec:
     dictionary: str = ""
     acl: dict[str, Any] | None = None  # Zenoh's access_control section, applied to what this process receives
     gossip_multihop: bool = False  # several hosts: peers relearn each other across hosts after a cut
+    close_blocked_ms: int = 0  # several hosts: close a link a BLOCK put waited on this long (0: Zenoh's 5 s)
 
     def to_json(self) -> str:
         return json.dumps(dataclasses.asdict(self), indent=2)
@@ -97,9 +98,10 @@ def zenoh_config(spec: NetSpec) -> zenoh.Config:
     put("connect/endpoints", list(spec.connect))
     put("scouting/multicast/enabled", False)
     put("transport/link/tx/lease", spec.lease_ms)
-    # A BLOCK put towards a cut-off host waited 5 s (the default) before Zenoh closed that link, holding up
-    # its sender: a supervisor's Pause reached the sim beside it 9 s late. One lease, like the liveliness.
-    put("transport/link/tx/queue/congestion_control/block/wait_before_close", spec.lease_ms * 1000)
+    if spec.close_blocked_ms:
+        # Several hosts: a BLOCK put towards a cut-off host waits this long (Zenoh's default: 5 s) before the
+        # link is closed and its sender freed. On one host a receiver stalled by load must not lose its link.
+        put("transport/link/tx/queue/congestion_control/block/wait_before_close", spec.close_blocked_ms * 1000)
     # A handshake with a frozen (SIGSTOPped) peer never completes; the 10 s default then also held up
     # every new session's close (`kinswarm status` took 10 s during a freeze, 0.5 s with 2 s here).
     put("transport/unicast/open_timeout", HANDSHAKE_MS)
