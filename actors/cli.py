@@ -225,7 +225,7 @@ def _up(a: argparse.Namespace) -> tuple[dict, RunConfig]:
     if len(plan.hosts) > 1:  # the sim holds its steps while one of them is silent
         cfg = dataclasses.replace(cfg, hosts=list(plan.hosts), lease_ms=plan.lease_ms)
     print(f"kinswarm: host {a.host} leads run {cfg.run_id} of plan {plan.name} -> {cfg.out}", flush=True)
-    return run_swarm(cfg, topo, progress=progress, plan=plan, host=a.host), cfg
+    return run_swarm(cfg, topo, progress=progress, plan=plan, host=a.host, wait_s=a.wait), cfg
 
 
 def _deploy_tool(a: argparse.Namespace) -> int:
@@ -296,7 +296,9 @@ def _write_net(path: Path, spec: NetSpec) -> Path:
     return path
 
 
-async def _supervise(cfg: RunConfig, topo: Topology, progress: bool, plan: Plan, host: str) -> dict:
+async def _supervise(
+    cfg: RunConfig, topo: Topology, progress: bool, plan: Plan, host: str, wait_s: float = 600.0
+) -> dict:
     from kinswarm.actors.deploy import control_net
     from kinswarm.actors.report import write_plots, write_summary
     from kinswarm.actors.supervisor import ProcessPlacement, SinglePlacement, Supervisor
@@ -339,6 +341,7 @@ async def _supervise(cfg: RunConfig, topo: Topology, progress: bool, plan: Plan,
     else:
         placement = ProcessPlacement(out / "config.json", nets, out / "logs", supervisor=sup_id)
     sup = Supervisor(cfg, topo, session, placement, on_epoch=on_epoch, plan=plan, host=host)
+    sup.hosts_wait_s = wait_s
     main = asyncio.current_task()
     loop = asyncio.get_running_loop()
     assert main is not None
@@ -370,7 +373,12 @@ async def _supervise(cfg: RunConfig, topo: Topology, progress: bool, plan: Plan,
 
 
 def run_swarm(
-    cfg: RunConfig, topo: Topology, progress: bool = False, plan: Plan | None = None, host: str | None = None
+    cfg: RunConfig,
+    topo: Topology,
+    progress: bool = False,
+    plan: Plan | None = None,
+    host: str | None = None,
+    wait_s: float = 600.0,
 ) -> dict:
     """Run one swarm (or, with a deploy plan, one host's share of it) to the end and return its summary
     (used by the CLI, experiments and tests). Without a plan: the one-host plan (`kinswarm run`)."""
@@ -381,7 +389,7 @@ def run_swarm(
     cfg.write(out / "config.json")
     if host == plan.leader:
         (out / "metrics.jsonl").write_text("")
-    return asyncio.run(_supervise(cfg, topo, progress, plan, host))
+    return asyncio.run(_supervise(cfg, topo, progress, plan, host, wait_s))
 
 
 def _control(a: argparse.Namespace) -> int:

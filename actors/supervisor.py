@@ -253,6 +253,7 @@ class Supervisor:
     STATUS_EVERY = 0.5  # seconds between SwarmStatus messages
     TICK = 0.05  # seconds between checks of exits, restarts and thaws while waiting
 
+    hosts_wait_s = 600.0  # how long the leader waits for the other hosts' actors (`kinswarm up --wait`)
     HOST_GRACE_S = 120.0  # the leader stops a run missing a host this long; another host, missing the leader
 
     def __init__(
@@ -341,7 +342,7 @@ class Supervisor:
             await self.placement.start(self.local)
             await self._wait_alive(self.local, timeout=60.0)
             if self.lead:
-                await self._wait_alive(self.expected, timeout=self.cfg_wait_s, what="the other hosts' actors")
+                await self._wait_alive(self.expected, timeout=self.hosts_wait_s, what="the other hosts' actors")
                 await self._train()
             else:
                 await self._serve()
@@ -378,8 +379,6 @@ class Supervisor:
             self.result.wall_seconds = time.perf_counter() - t0
         return self.result
 
-    cfg_wait_s = 600.0  # how long the leader waits for the other hosts to come up
-
     async def _train(self) -> None:
         assert self.node is not None
         k = self.keys
@@ -400,10 +399,8 @@ class Supervisor:
         """Another host's share: keep it alive (restarts, forwarded faults, heartbeats) until the leader's Stop."""
         self.training = True
         log.info("host %s: %d actors up; serving the leader's run %s", self.host, len(self.local), self.cfg.run_id)
-        while True:
-            stop = await self._expect(Stop, lambda m: True, timeout=math.inf)
-            self._event("stop", self.host, f"the leader says: {stop.reason}")
-            return
+        stop = await self._expect(Stop, lambda m: True, timeout=math.inf)
+        self._event("stop", self.host, f"the leader says: {stop.reason}")
 
     def _serve_setup(self) -> Any:
         """The leader answers the other hosts' `kinswarm up`: the resolved run, signed with the plan's digest."""

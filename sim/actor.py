@@ -194,17 +194,19 @@ class SimActor:
         """A host is silent (checked when a step is due, and every tenth of a second while held)."""
         if not self.hosts:
             return False
-        now = time.monotonic()
-        silent = sorted(h for h in self.hosts if now - self.heard.get(h, now) > self.lease)
+        silent = self._silent()
         if silent and not self._paused:
             self._paused = True
             self._event("pause", "sim", f"no heartbeat from {', '.join(silent)} for a lease; steps held")
             asyncio.get_running_loop().call_later(0.1, self.node.mailbox.push, PAUSE_CHECK, b"")
         return self._paused
 
-    def _check_pause(self) -> None:
+    def _silent(self) -> list[str]:
         now = time.monotonic()
-        if any(now - self.heard.get(h, now) > self.lease for h in self.hosts):
+        return sorted(h for h in self.hosts if now - self.heard.get(h, now) > self.lease)
+
+    def _check_pause(self) -> None:
+        if self._silent():
             asyncio.get_running_loop().call_later(0.1, self.node.mailbox.push, PAUSE_CHECK, b"")
             return
         self._paused = False

@@ -100,22 +100,21 @@ class Hosts:
     def mend(self, name: str) -> None:
         _ip("-n", self.ns(name), "link", "set", "eth0", "up")
 
-    def __exit__(self, *exc: object) -> None:
+    def _signal_running(self, sig: signal.Signals) -> None:
         for p in self.procs:
             if p.poll() is None:
                 try:
-                    os.killpg(p.pid, signal.SIGTERM)
+                    os.killpg(p.pid, sig)
                 except ProcessLookupError:
                     pass
+
+    def __exit__(self, *exc: object) -> None:
+        self._signal_running(signal.SIGTERM)
         deadline = time.monotonic() + 5
         while time.monotonic() < deadline and any(p.poll() is None for p in self.procs):
             time.sleep(0.1)
+        self._signal_running(signal.SIGKILL)
         for p in self.procs:
-            if p.poll() is None:
-                try:
-                    os.killpg(p.pid, signal.SIGKILL)
-                except ProcessLookupError:
-                    pass
             p.wait()
         for ns in reversed(self.made):  # whatever still runs in them goes too
             pids = _ip("netns", "pids", ns, check=False).stdout.split()
