@@ -40,24 +40,19 @@ def control_net(plan: Plan, host: str, topo: Topology | None) -> NetSpec:
     identity, connecting to its endpoint (or the routers), listening on nothing."""
     if plan.mode == "client":
         spec = NetSpec(mode="client", connect=plan.routers, lease_ms=plan.lease_ms, must_connect=True)
-    else:
-        multi = len(plan.hosts) > 1
-        spec = NetSpec(
-            connect=(plan.hosts[host].listen,),
-            lease_ms=plan.lease_ms,
-            must_connect=True,
-            gossip_multihop=multi,
-            close_blocked_ms=plan.lease_ms if multi else 0,
-        )
+    else:  # several hosts: a client of the host's router (its supervisor); one host: a peer
+        mode = "client" if len(plan.hosts) > 1 else "peer"
+        spec = NetSpec(mode=mode, connect=(plan.hosts[host].listen,), lease_ms=plan.lease_ms, must_connect=True)
     return plan.secure(spec, plan.identity("supervisor", "", host), topo)
 
 
 def fetch_setup(plan: Plan, host: str, wait_s: float) -> tuple[str, Setup]:
     """Ask the leader for its run (polling until it answers or `wait_s` passes): (run id, Setup)."""
     leader = plan.hosts[plan.leader]
-    spec = control_net(plan, host, None).with_(
-        connect=(leader.listen,) if plan.mode == "peer" else plan.routers, must_connect=False
-    )
+    if plan.mode == "peer":  # a peer retries the leader's endpoint in the background, where a client gives up
+        spec = control_net(plan, host, None).with_(mode="peer", connect=(leader.listen,), must_connect=False)
+    else:
+        spec = control_net(plan, host, None).with_(must_connect=False)
     session = open_session(spec)
     deadline = time.monotonic() + wait_s
     told = False

@@ -147,9 +147,16 @@ def main(argv: list[str] | None = None) -> int:
         net = NetSpec.from_json(a.net.read_text())
         asyncio.run(_serve(a.role, a.ident, cfg, net, parent, a.restore, a.supervisor))
     except Exception as e:  # a clear last word in the actor's log; the supervisor reports it
-        logging.getLogger(f"kinswarm.{a.role}.{a.ident}").error("failed: %s: %s", type(e).__name__, e)
+        logging.getLogger(f"kinswarm.{a.role}.{a.ident}").error("failed: %s", _cause(e))
         return 2
     return 0
+
+
+def _cause(e: BaseException) -> str:
+    """`Type: message` of the errors that ended the actor (a TaskGroup's group unwrapped to its leaves)."""
+    if isinstance(e, BaseExceptionGroup):
+        return "; ".join(_cause(x) for x in e.exceptions)
+    return f"{type(e).__name__}: {e}"
 
 
 if __name__ == "__main__":

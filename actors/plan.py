@@ -3,10 +3,12 @@ they prove who they are. `kinswarm up PLAN --host NAME` runs one host's share; `
 one-host plan built in code (`local_plan`), the same machinery.
 
 A plan names hosts, each with an address the others reach it at and the actors it runs ("sim", "agents" for
-every agent no other host claims, or agent ids); one host leads (it trains, the others serve). Peers by
-default: every process listens on its host's address and connects to its host's supervisor; Zenoh's
-gossip then connects every pair. `mode = "client"` makes every process a client of the plan's routers
-(`kinswarm router`), for sites where hosts cannot reach each other directly.
+every agent no other host claims, or agent ids); one host leads (it trains, the others serve). No router
+host by default (`mode = "peer"`): on one host the actors are peers that gossip connects directly; on
+several, each host's supervisor is its host's Zenoh router, its actors are clients of it, and the other
+supervisors connect to the leader's, so the one link between hosts is a configured one that comes back
+after a cut. `mode = "client"` makes every process a client of the plan's routers (`kinswarm router`),
+for sites where hosts cannot reach each other directly.
 
 Security, for anything beyond one machine: `tls` turns every endpoint into `tls/...` with the plan's
 certificates (`kinswarm certs PLAN --out DIR` writes throwaway ones); `mtls` makes both ends present one,
@@ -129,16 +131,24 @@ class Plan:
         h = self.hosts[host]
         if self.mode == "client":
             spec = NetSpec(mode="client", connect=self.routers, lease_ms=self.lease_ms, must_connect=True)
-        elif supervisor:  # the others connect to the leader; gossip does the rest. (Each connecting to each
-            # other, both retrying at once after a cut, left them apart for good in 1 of 3 trials.)
-            leader = () if host == self.leader else (self.hosts[self.leader].listen,)
-            spec = NetSpec(listen=(h.listen,), connect=leader, lease_ms=self.lease_ms)
-        else:
+        elif len(self.hosts) > 1:
+            # Several hosts: each host's supervisor is its host's Zenoh router and its actors are clients of it;
+            # the other supervisors connect to the leader's. Routers forward and reconnect to a configured
+            # endpoint after a cut; peers learned by gossip did not (1 cut in ~8 never healed).
+            if supervisor:
+                leader = () if host == self.leader else (self.hosts[self.leader].listen,)
+                spec = NetSpec(
+                    mode="router", listen=(h.listen,), connect=leader, lease_ms=self.lease_ms,
+                    close_blocked_ms=self.lease_ms,
+                )  # fmt: skip
+            else:
+                spec = NetSpec(mode="client", connect=(h.listen,), lease_ms=self.lease_ms, must_connect=True)
+        elif supervisor:
+            spec = NetSpec(listen=(h.listen,), lease_ms=self.lease_ms)
+        else:  # one host: peers, which gossip connects to each other directly (one hop, no relay)
             spec = NetSpec(
                 listen=(self.endpoint(h.address, 0),), connect=(h.listen,), lease_ms=self.lease_ms, must_connect=True
             )
-        if len(self.hosts) > 1 and self.mode == "peer":
-            spec = spec.with_(gossip_multihop=True, close_blocked_ms=self.lease_ms)
         return self.secure(spec, identity, topo)
 
     def secure(self, spec: NetSpec, identity: str, topo: Topology | None) -> NetSpec:

@@ -68,7 +68,6 @@ class NetSpec:
     password: str = field(default="", repr=False)
     dictionary: str = ""
     acl: dict[str, Any] | None = None  # Zenoh's access_control section, applied to what this process receives
-    gossip_multihop: bool = False  # several hosts: peers relearn each other across hosts after a cut
     close_blocked_ms: int = 0  # several hosts: close a link a BLOCK put waited on this long (0: Zenoh's 5 s)
 
     def to_json(self) -> str:
@@ -98,6 +97,10 @@ def zenoh_config(spec: NetSpec) -> zenoh.Config:
     put("connect/endpoints", list(spec.connect))
     put("scouting/multicast/enabled", False)
     put("transport/link/tx/lease", spec.lease_ms)
+    # Re-dial a lost configured endpoint at least once a lease (Zenoh's default backs off to 4 s): a host
+    # back from a cut rejoined 2.1-2.5 s after its link returned with the default, 0.9-1.1 s with this.
+    retry = {"period_init_ms": max(spec.lease_ms // 4, 50), "period_max_ms": spec.lease_ms, "period_increase_factor": 2}
+    put("connect/retry", retry)
     if spec.close_blocked_ms:
         # Several hosts: a BLOCK put towards a cut-off host waits this long (Zenoh's default: 5 s) before the
         # link is closed and its sender freed. On one host a receiver stalled by load must not lose its link.
@@ -123,8 +126,6 @@ def zenoh_config(spec: NetSpec) -> zenoh.Config:
         put("transport/auth/usrpwd/password", spec.password)
     if spec.dictionary:
         put("transport/auth/usrpwd/dictionary_file", spec.dictionary)
-    if spec.gossip_multihop:
-        put("scouting/gossip/multihop", True)
     if spec.acl is not None:
         put("access_control", spec.acl)
     return c
