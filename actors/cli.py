@@ -99,6 +99,9 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--learn", type=_on_off, default=True, metavar="on|off")
     run.add_argument("--explore", type=_on_off, default=True, metavar="on|off")
     run.add_argument(
+        "--successive", action="store_true", help="start each epoch where the last ended (default: initial angles)"
+    )
+    run.add_argument(
         "--checkpoint-every", type=int, default=1, help="epochs between checkpoints (0: last only; default 1)"
     )
     run.add_argument("--max-restarts", type=int, default=5, help="restarts of one agent within 60 s before giving up")
@@ -267,6 +270,7 @@ def _resolve(a: argparse.Namespace, controller: str) -> tuple[RunConfig, Topolog
         from_dir=str(from_dir.resolve()) if from_dir else None,
         learn=getattr(a, "learn", False),
         explore=getattr(a, "explore", False),
+        successive=getattr(a, "successive", False),
         deadline_ms=a.deadline_ms,
         checkpoint_every=getattr(a, "checkpoint_every", 0),
         controller=controller,

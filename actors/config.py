@@ -39,6 +39,9 @@ class RunConfig:
     from_dir: str | None = None
     learn: bool = True
     explore: bool = True
+    # Every epoch after the first starts where the last one ended, not at the initial angles: the paper's
+    # "successive on-line requests" of its test goals (§5.2).
+    successive: bool = False
     deadline_ms: int = 500
     action_deg: float = 1.0
     checkpoint_every: int = 1  # every epoch: a restarted agent loses at most one epoch of learning (~3 ms a save)

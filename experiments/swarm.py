@@ -60,6 +60,7 @@ class Spec:
     from_dir: str | None = None
     learn: bool = True
     explore: bool = True
+    successive: bool = False  # each epoch starts where the last ended (RunConfig.successive)
     scenario: str | None = None
     controller: str = "agents"
     observe: bool = False
@@ -71,6 +72,8 @@ class Spec:
         d = dataclasses.asdict(self)
         d.pop("name")
         d.pop("checkpoint")
+        if not d["successive"]:  # added later: the runs cached before it keep their identity
+            d.pop("successive")
         if not with_epochs:
             d.pop("epochs")
         return hashlib.sha256(json.dumps(d, sort_keys=True, default=list).encode()).hexdigest()[:16]
@@ -91,6 +94,7 @@ class Spec:
             from_dir=self.from_dir,
             learn=self.learn,
             explore=self.explore,
+            successive=self.successive,
             deadline_ms=DEADLINE_MS,
             checkpoint_every=0,  # the last epoch only: what --from needs
             controller=self.controller,

@@ -229,7 +229,8 @@ class SimActor:
             return
         self.epoch = e
         self.last_epoch = e.epoch
-        self.world.reset()  # faults persist, angles do not: a locked joint is locked at its initial angle
+        if not (self.cfg.successive and e.epoch > 0):
+            self.world.reset()  # faults persist, angles do not: a locked joint is locked at its initial angle
         self.tips = self.world.tip_poses()
         if self.scene is not None:
             self.clearance, self.refused = self.scene.clearances(), ()

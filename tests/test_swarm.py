@@ -344,3 +344,14 @@ def test_config_round_trip(tmp_path):
     assert load_run_config(tmp_path / "c.json") == cfg
     with pytest.raises(ConfigError, match="reward"):
         RunConfig(run_id="x", topology="/t", out="/o", reward="bogus")
+
+
+def test_successive_epochs_start_where_the_last_ended(tmp_path, chain4, endpoint):
+    out = tmp_path / "s"
+    args = ["run", str(chain4), "--placement", "single", "--epochs", "2", "--steps", "100", "--seed", "1"]
+    run([*args, "--successive", "--listen", endpoint, "--out", str(out)])
+    assert json.loads((out / "config.json").read_text())["successive"] is True
+    e0, e1 = [json.loads(line) for line in (out / "metrics.jsonl").read_text().splitlines()]
+    assert e0["final_error"] < e0["errors"][0] - 1  # the first epoch moved: a reset would be told apart
+    # one step moves the tip at most (12 + 9 + 6 + 3) x 1 deg = 0.52 from where epoch 0 left it
+    assert abs(e1["errors"][0] - e0["final_error"]) <= 0.53
