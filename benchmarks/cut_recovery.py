@@ -24,9 +24,9 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT / "tests"))
+sys.path.insert(0, str(ROOT / "benchmarks"))
+from deploy_rate import start_split  # noqa: E402
 from netns import Hosts  # noqa: E402
-
-KINSWARM = [sys.executable, "-m", "kinswarm.actors.cli"]
 
 
 @dataclass
@@ -52,19 +52,8 @@ def trial(cut_s: float, epochs: int, steps: int, seed: int) -> Trial:
     nan = float("nan")
     with tempfile.TemporaryDirectory() as d, Hosts(["brain", "limbs"]) as h:
         tmp = Path(d)
-        plan = tmp / "plan.toml"
-        plan.write_text(
-            f'[plan]\nname = "cut"\nleader = "brain"\n[run]\ntopology = "{ROOT / "examples" / "chain4.toml"}"\n'
-            f"epochs = {epochs}\nsteps = {steps}\nseed = {seed}\n"
-            f'[[host]]\nname = "brain"\naddress = "{h.address("brain")}"\nactors = ["sim", "a1"]\n'
-            f'[[host]]\nname = "limbs"\naddress = "{h.address("limbs")}"\nactors = ["agents"]\n'
-        )
-        h.spawn("limbs", [*KINSWARM, "up", str(plan), "--host", "limbs", "--out", str(tmp / "limbs")], tmp / "l.log")
         t0 = time.monotonic()
-        leader = h.spawn(
-            "brain", [*KINSWARM, "up", str(plan), "--host", "brain", "--out", str(tmp / "brain"), "--no-progress"],
-            tmp / "b.log",
-        )  # fmt: skip
+        leader = start_split(h, tmp, epochs, steps, seed)
         metrics = tmp / "brain" / "metrics.jsonl"
         while not (metrics.exists() and metrics.read_text().strip()):  # training has begun
             if leader.poll() is not None or time.monotonic() - t0 > 120:

@@ -33,21 +33,27 @@ def rate(metrics: Path) -> float:
     return sum(r["steps"] for r in rows) / sum(r["seconds"] for r in rows)
 
 
+def start_split(h: Hosts, tmp: Path, epochs: int, steps: int, seed: int) -> subprocess.Popen:
+    """`kinswarm up` on both hosts (the sim and a1 on brain, a2-a4 on limbs), run dirs under `tmp`; returns
+    the leader's process (log: tmp/b.log)."""
+    plan = tmp / "plan.toml"
+    plan.write_text(
+        f'[plan]\nname = "bench"\nleader = "brain"\n[run]\ntopology = "{ROOT / "examples" / "chain4.toml"}"\n'
+        f"epochs = {epochs}\nsteps = {steps}\nseed = {seed}\n"
+        f'[[host]]\nname = "brain"\naddress = "{h.address("brain")}"\nactors = ["sim", "a1"]\n'
+        f'[[host]]\nname = "limbs"\naddress = "{h.address("limbs")}"\nactors = ["agents"]\n'
+    )
+    h.spawn("limbs", [*KINSWARM, "up", str(plan), "--host", "limbs", "--out", str(tmp / "limbs")], tmp / "l.log")
+    return h.spawn(
+        "brain", [*KINSWARM, "up", str(plan), "--host", "brain", "--out", str(tmp / "brain"), "--no-progress"],
+        tmp / "b.log",
+    )  # fmt: skip
+
+
 def two_hosts_rate(epochs: int, steps: int, seed: int) -> float:
     with tempfile.TemporaryDirectory() as d, Hosts(["brain", "limbs"]) as h:
         tmp = Path(d)
-        plan = tmp / "plan.toml"
-        plan.write_text(
-            f'[plan]\nname = "bench"\nleader = "brain"\n[run]\ntopology = "{ROOT / "examples" / "chain4.toml"}"\n'
-            f"epochs = {epochs}\nsteps = {steps}\nseed = {seed}\n"
-            f'[[host]]\nname = "brain"\naddress = "{h.address("brain")}"\nactors = ["sim", "a1"]\n'
-            f'[[host]]\nname = "limbs"\naddress = "{h.address("limbs")}"\nactors = ["agents"]\n'
-        )
-        h.spawn("limbs", [*KINSWARM, "up", str(plan), "--host", "limbs", "--out", str(tmp / "limbs")], tmp / "l.log")
-        leader = h.spawn(
-            "brain", [*KINSWARM, "up", str(plan), "--host", "brain", "--out", str(tmp / "brain"), "--no-progress"],
-            tmp / "b.log",
-        )  # fmt: skip
+        leader = start_split(h, tmp, epochs, steps, seed)
         try:
             code = leader.wait(timeout=60 + epochs * steps / 20)
         except subprocess.TimeoutExpired:
