@@ -48,8 +48,10 @@ class LearnerSettings:
         n_actions: own actions (0 decrease, 1 keep, 2 increase).
         extra_state, extra_sets, extra_ranges: named state variables appended to S_i (after the scene
             variables below), read from the agent's `sense` (its own Obs.sense and the Down.sense from its
-            parent), with their membership sets and ranges. Empty for reaching; set per agent from
-            `grasp_state` in a grasp scene (actors/learning/grasp.py, grasp_learner_settings).
+            parent), with their membership sets and ranges; "g_perp" is computed by the agent itself (the goal's
+            component along the direction its own joint moves the tip). Empty by default; set per agent from
+            `grasp_state` in a grasp scene (actors/learning/grasp.py, grasp_learner_settings); the generalisation
+            experiment's learner adds g_perp for reaching (experiments/generalisation.py).
         grasp_state: the finger agents' state in a grasp scene (paper §5.5): "reach" = the paper's S_i
             (6 variables, goal = the finger's grasp point); "force" (round 1's default) = S_i + force_error, the
             grasp agent's (fn_i - fn_i*) / f_grip for the finger, sent down the finger; "contact" = "force"
