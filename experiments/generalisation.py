@@ -3,7 +3,7 @@
 Level-L trains one swarm on the 4^L centres of a quad-tree over the task space (goals.py), one goal per
 epoch, every goal REPS times in a seeded order (Level-4: once each), then evaluates it frozen (`--from T
 --learn off --explore off`: no learning, greedy actions) on 100 test goals — block K of the Halton
-sequence in bases 2 and 3 (`--test-set K`; Level-3 is also tested on block K+1, a second unseen set).
+sequence in bases 2 and 3 (`--test-set K`; Levels 3 and 4 are also tested on block K+1, a second unseen set).
 Higher levels also train for more epochs; a control trains Level-1's 4 goals for Level-2's epoch budget,
 which separates the number of goals from the amount of training. Also reported, labelled as what it is:
 an untrained swarm *learning* within one episode per test goal (not a generalisation test).
