@@ -65,7 +65,8 @@ def test_single_run_leaves_its_files(tmp_path, chain4, endpoint):
 
 
 def test_process_and_single_give_the_same_run(tmp_path, chain4):
-    common = ["--epochs", "3", "--steps", "120", "--seed", "11"]
+    # a starved machine must not turn a late command into a hold (the sim's deadline): this compares learning
+    common = ["--epochs", "3", "--steps", "120", "--seed", "11", "--deadline-ms", "30000"]
     a = run(
         [
             "run",

@@ -61,6 +61,8 @@ def _run(topo: Path, placement: str, out: Path, epochs: int, steps: int) -> dict
         str(out),
         "--listen",
         f"tcp/127.0.0.1:{free_port()}",
+        "--deadline-ms",  # a starved machine must not turn a late command into a hold: this compares learning
+        "30000",
         "--no-progress",
     ]
     assert cli_main(args) == 0
@@ -74,6 +76,7 @@ def test_a_tree_counts_every_action_in_both_placements(tmp_path, tree5):
     placements learn the same."""
     epochs, steps = 3, 80
     runs = {p: _run(tree5, p, tmp_path / p, epochs, steps) for p in ("single", "process")}
+    assert runs["process"]["missed_cmds"] == 0
     assert runs["single"]["final_error"] == runs["process"]["final_error"]
     for agent in ("base", "l1", "r1", "l2", "r2"):
         a, b = (np.load(tmp_path / p / "agents" / f"{agent}.npz") for p in ("single", "process"))
