@@ -487,7 +487,7 @@ class Agent:
                     self.closing = {k: v for k, v in self.closing.items() if k >= cur.key}
                     self._try_close()
             else:
-                self.learner.observe([])
+                self.learner.observe([], learn=self.cfg.learn)
             if step == self.cfg.steps - 1 and not self.is_root:  # the closing `up`, before the epoch can end
                 self.node.send(
                     self.keys.up(self.spec.parent),  # type: ignore[arg-type]
@@ -554,7 +554,7 @@ class Agent:
     def _observed(self, acts: list[int], step: int) -> None:
         assert self.learner is not None
         if all(0 <= a < self.learner.n_actions for a in acts):
-            self.learner.observe(acts)
+            self.learner.observe(acts, learn=self.cfg.learn)
         else:
             self.learner.resync(step)
 

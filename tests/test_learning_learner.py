@@ -75,6 +75,18 @@ def _trained(seed=0, n=300):
     return ln
 
 
+def test_learn_off_changes_nothing_learned():
+    """A frozen learner (learn=False) keeps phi, the fictitious-play counts and lr as trained: its choices are a
+    fixed function of the state, whatever it met before (a test goal's result does not depend on the others)."""
+    ln = _trained()
+    before = ln.state_dict()
+    rng = np.random.default_rng(3)
+    for _ in range(200):
+        ln.step(S0 + rng.normal(size=6) * 0.3, float(rng.normal()), [int(rng.integers(3))], learn=False, explore=False)
+    for name, value in ln.state_dict().items():
+        np.testing.assert_array_equal(value, before[name], err_msg=name)
+
+
 def test_state_dict_round_trip_and_validation():
     ln = _trained()
     d = ln.state_dict()

@@ -88,7 +88,7 @@ class Learner:
         """Learn from the previous transition, choose this agent's action a(t) (0 dec, 1 keep, 2 inc)."""
         self._check_visible(visible_actions)  # validate before any state changes
         a = self.decide(state, reward, learn=learn, explore=explore)
-        self.observe(visible_actions)
+        self.observe(visible_actions, learn=learn)
         return a
 
     def _check_visible(self, visible_actions: Sequence[int]) -> None:
@@ -143,12 +143,15 @@ class Learner:
         self.t += 1
         return a
 
-    def observe(self, visible_actions: Sequence[int]) -> None:
-        """(c)-(d) of step(): what the visible agents did at the step just decided."""
+    def observe(self, visible_actions: Sequence[int], learn: bool = True) -> None:
+        """(c)-(d) of step(): what the visible agents did at the step just decided. With learn=False the
+        fictitious-play counts stay as trained: a frozen swarm's beliefs about its neighbours are learned state
+        too (counting on during a test made each test goal's outcome depend on the goals and steps before it)."""
         self._check_visible(visible_actions)
         # (c) fictitious play: count what the visible agents did (Eq. 7 next time).
-        for j, b in enumerate(visible_actions):
-            self.counts[j, b] += 1.0
+        if learn:
+            for j, b in enumerate(visible_actions):
+                self.counts[j, b] += 1.0
         # (d) the joint action(t) of the pending (s(t), joint action(t)).
         if self._pending is not None:
             p_rules, p_rows, p_w, _ = self._pending
