@@ -76,6 +76,8 @@ class Spec:
             d.pop("successive")
         if not with_epochs:
             d.pop("epochs")
+        if not d["learn"]:  # frozen runs since 6de7b7e keep the fictitious-play counts too: not the earlier ones
+            d["frozen_counts"] = True
         return hashlib.sha256(json.dumps(d, sort_keys=True, default=list).encode()).hexdigest()[:16]
 
     def config(self, out: Path) -> RunConfig:

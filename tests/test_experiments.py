@@ -119,3 +119,12 @@ def test_all_experiments_full(tmp_path):
     assert kinswarm(["experiment", "all", "--seeds", "3", "--jobs", "2", "--out", str(tmp_path)]) == 0
     gen = json.loads((tmp_path / "generalisation" / "results.json").read_text())
     assert gen["per_level"]["Level-3"]["test_set_0"]["frac_within_0_5"] > 0.5
+
+
+def test_frozen_runs_are_not_reused_from_before_the_counts_were_frozen():
+    """A cached run is reused by its spec's identity. Frozen evaluations changed meaning in 6de7b7e (the
+    fictitious-play counts stay as trained), so their identity changed; training runs' did not."""
+    from kinswarm.experiments.swarm import Spec
+
+    assert Spec("t", seed=0, epochs=2, steps=10).identity() == "bffea5f77abf37cf"  # as before 6de7b7e
+    assert Spec("t", seed=0, epochs=2, steps=10, learn=False, explore=False).identity() != "ff08ed691d999b3d"
