@@ -71,8 +71,9 @@ class ReferenceLearner(Learner):
         T = jasm.temperature(self.t, st.T_max, st.s)
         pi = jasm.boltzmann(E, T)
         a = jasm.select_action(pi, jasm.explore_probability(T, st.T_max, st.epsilon), self.rng, explore)
-        for j, b in enumerate(visible_actions):
-            self.counts[j, b] += 1.0
+        if learn:  # a frozen learner's fictitious-play counts stay as trained
+            for j, b in enumerate(visible_actions):
+                self.counts[j, b] += 1.0
         self._pending = (rules, rows, w, self.joint_index(a, visible_actions))
         self.t += 1
         return a

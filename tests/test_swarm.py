@@ -158,7 +158,10 @@ def _spam(run_id: str, connect: str, stop: threading.Event) -> int:
 
 
 def test_malformed_messages_are_rejected_and_the_run_goes_on(tmp_path, chain4):
+    # a 30 s step deadline: under the spam on a starved CI machine a command can miss the 500 ms default, its joint
+    # holds and the runs part for a reason that is not the garbage (seen once in CI)
     common = ["run", str(chain4), "--placement", "process", "--epochs", "3", "--steps", "100", "--seed", "5"]
+    common += ["--deadline-ms", "30000"]
     clean = run(common + ["--out", str(tmp_path / "clean"), "--listen", f"tcp/127.0.0.1:{free_port()}"])
     port = free_port()
     stop = threading.Event()
@@ -175,6 +178,7 @@ def test_malformed_messages_are_rejected_and_the_run_goes_on(tmp_path, chain4):
         t.join(10)
     assert sent and sent[0] > 100
     # garbage never touched learned state: the same seed gives the same run as without it
+    assert clean["missed_cmds"] == 0 and noisy["missed_cmds"] == 0
     assert noisy["final_error"] == clean["final_error"]
     logs = "".join(p.read_text() for p in (tmp_path / "noisy" / "logs").glob("*.log"))
     assert "rejected message on ks/noisy/a/a2/down" in logs
