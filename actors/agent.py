@@ -463,7 +463,7 @@ class Agent:
         if self.learner is not None:
             self._observe(cur)
             tip = _centroid([tips[leaf] for leaf in self.leaves])
-            s = agent_state(cur.frame, cur.q, tip, cur.goal)
+            s = agent_state(cur.frame, cur.q, tip, cur.goal, self.learner.settings.g3 == "unsigned")
             reward = cur.reward
             if cur.sense[0] is not None:
                 s, reward = self._scene_state(s, reward, cur.sense)

@@ -30,3 +30,27 @@ def test_agent_state_sideways_tip_and_degenerate():
     assert s[1] == pytest.approx(-math.pi / 2) and s[2] == pytest.approx(3.0)
     assert s[5] == 0.0 and s[3] == 0.0 and s[4] == 0.0  # tip on the goal: g3 degenerate -> 0
     assert isinstance(s, np.ndarray) and s.shape == (6,)
+
+
+def test_g3_unsigned_is_the_size_of_the_bearing():
+    # joint at the origin heading +x, tip at (2, 0); goals to the right of, left of and straight behind the tip
+    for goal, signed in (((2.0, -1.0), -math.pi / 2), ((2.0, 1.0), math.pi / 2), ((1.0, 0.0), math.pi)):
+        s = agent_state((0.0, 0.0, 0.0), 0.0, (2.0, 0.0), goal)
+        u = agent_state((0.0, 0.0, 0.0), 0.0, (2.0, 0.0), goal, g3_unsigned=True)
+        assert s[5] == pytest.approx(signed) and u[5] == pytest.approx(abs(signed))
+        assert np.array_equal(s[:5], u[:5])  # only g3 changes
+    # a goal just behind the tip, either side: far apart signed (+-pi), together unsigned
+    left = agent_state((0.0, 0.0, 0.0), 0.0, (2.0, 0.0), (1.0, 1e-6), g3_unsigned=True)[5]
+    right = agent_state((0.0, 0.0, 0.0), 0.0, (2.0, 0.0), (1.0, -1e-6), g3_unsigned=True)[5]
+    assert left == pytest.approx(right) == pytest.approx(math.pi)
+
+
+def test_g3_unsigned_needs_a_range_from_zero():
+    from kinswarm.actors.learning.settings import LearnerSettings
+
+    with pytest.raises(ValueError, match="g3 'unsigned' lies in"):
+        LearnerSettings(g3="unsigned")  # default ranges: g3 over (-pi, pi)
+    with pytest.raises(ValueError, match="g3 must be one of"):
+        LearnerSettings(g3="both")
+    r = LearnerSettings().ranges
+    assert LearnerSettings(g3="unsigned", ranges=(*r[:5], (0.0, math.pi))).g3 == "unsigned"

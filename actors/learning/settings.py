@@ -8,6 +8,8 @@ from dataclasses import dataclass, replace
 #: Names of the six state variables S_i = <q_i, theta_i, d_i, g1, g2, g3> (paper §3.3).
 STATE_NAMES: tuple[str, ...] = ("q", "theta", "d", "g1", "g2", "g3")
 BOOTSTRAPS: tuple[str, ...] = ("joint_max", "expected")
+#: g3 as the bearing of the goal from the end effector (signed, the default) or its size only (unsigned).
+G3_MODES: tuple[str, ...] = ("signed", "unsigned")
 #: State of a grasp scene's finger agents (paper §5.5), see `grasp_state` below.
 GRASP_STATES: tuple[str, ...] = ("reach", "force", "contact", "goal")
 
@@ -78,6 +80,10 @@ class LearnerSettings:
             the epoch early in training and fades over the epochs.
         collision_penalty: added (it is <= 0) to the reward of an agent whose own increment was refused, on
             top of the root's global reward: a local signal for the agent that pushed into the wall.
+        g3: "signed" (default): g3 = the bearing of the goal from the end effector relative to the joint -> end
+            effector direction, in (-pi, pi]; "unsigned": its size |g3| in [0, pi] (0: the goal lies straight on,
+            pi: straight back towards the joint), so a goal behind the tip no longer falls on both ends of the range
+            (+pi and -pi share no set). The side is left to g1, g2 and g_perp. Its range must then start at >= 0.
         follow_leader: weight w of a body-aware local term ("follow the leader", needs the scene's [task] via):
             each of the last follow_leader_links agents (counted from the end effector) adds
             w (D_i(t-1) - D_i(t)) to its reward, D_i its own link end's distance to its place on the corridor's
@@ -117,6 +123,7 @@ class LearnerSettings:
     collision_tabu: bool = False
     follow_leader: float = 0.0
     follow_leader_links: int = 4
+    g3: str = "signed"
 
     @property
     def state_names(self) -> tuple[str, ...]:
@@ -210,6 +217,13 @@ class LearnerSettings:
                 raise ValueError(
                     f"extra variable {name!r}: needs >= 1 sets and a finite lo < hi, got {m}, ({lo}, {hi})"
                 )
+        if self.g3 not in G3_MODES:
+            raise ValueError(f"g3 must be one of {G3_MODES}, got {self.g3!r}")
+        if self.g3 == "unsigned" and self.ranges[5][0] < 0.0:
+            raise ValueError(
+                f"g3 'unsigned' lies in [0, pi], but ranges[g3] starts at {self.ranges[5][0]:g}: "
+                "the sets below 0 would never fire (use e.g. (0, pi))"
+            )
         if self.grasp_state not in GRASP_STATES:
             raise ValueError(f"grasp_state must be one of {GRASP_STATES}, got {self.grasp_state!r}")
         if not (isinstance(self.fine_action, (int, float)) and 0.0 < self.fine_action <= 1.0):

@@ -28,14 +28,16 @@ def link_end(frame: Sequence[float], link_length: float) -> Frame:
     return (x + link_length * math.cos(h), y + link_length * math.sin(h), h)
 
 
-def agent_state(frame: Sequence[float], q: float, tip_xy: Sequence[float], goal_xy: Sequence[float]) -> np.ndarray:
+def agent_state(
+    frame: Sequence[float], q: float, tip_xy: Sequence[float], goal_xy: Sequence[float], g3_unsigned: bool = False
+) -> np.ndarray:
     """S_i = <q_i, theta_i, d_i, g1, g2, g3> of the agent whose joint frame is frame.
 
     (d_i, theta_i): polar coordinates of the end effector (tip) in the agent frame (origin at the
     joint, x along its heading). (g1, g2): goal - tip in the agent frame. g3: bearing of the goal seen
     from the end effector, relative to the joint -> end effector direction (atan2(cross, dot); 0 when
-    either vector is degenerate). When several end effectors lie below the agent, pass their centroid
-    as tip_xy.
+    either vector is degenerate); with g3_unsigned its size |g3| (LearnerSettings.g3). When several end
+    effectors lie below the agent, pass their centroid as tip_xy.
     """
     x, y, h = frame
     c, s = math.cos(h), math.sin(h)
@@ -47,4 +49,6 @@ def agent_state(frame: Sequence[float], q: float, tip_xy: Sequence[float], goal_
     g1, g2 = c * wx + s * wy, -s * wx + c * wy
     cross, dot = rx * wy - ry * wx, rx * wx + ry * wy
     g3 = math.atan2(cross, dot) if (rx or ry) and (wx or wy) else 0.0
+    if g3_unsigned:
+        g3 = abs(g3)
     return np.array([q, theta, d, g1, g2, g3])
