@@ -4,6 +4,7 @@ Level-L trains one swarm on the 4^L centres of a quad-tree over the task space (
 epoch, every goal REPS times in a seeded order (Level-4: once each), then evaluates it frozen (`--from T
 --learn off --explore off`: no learning, greedy actions) on 100 test goals — block K of the Halton
 sequence in bases 2 and 3 (`--test-set K`; Levels 3 and 4 are also tested on block K+1, a second unseen set).
+Level-3 carries the paper's number and the issue's bar: its rows run on at least L3_SEEDS seeds.
 Higher levels also train for more epochs; a control trains Level-1's 4 goals for Level-2's epoch budget,
 which separates the number of goals from the amount of training. Also reported, labelled as what it is:
 an untrained swarm *learning* within one episode per test goal (not a generalisation test).
@@ -30,7 +31,11 @@ REPS = 2  # epochs per training goal (Level-4: 1, its 256 goals are already 256 
 EVAL_STEPS = 200
 SCRATCH_GOALS = 10  # test goals per seed for the learning-on (from scratch) episodes
 LEVELS = (1, 2, 3, 4)  # Level-4 alone is 3 x 256 epochs, a third of this experiment's time
-MORE_EPOCHS = (2,)  # Level-3 also trained 2x as long (4 epochs per goal)
+# Level-3's rows run on at least this many seeds. Measured with the signed-g3 learner (seeds 0-5, set 0): 0.249,
+# 0.264, 0.186, 0.428, 0.336, 0.771 - a mean of 0.233 over seeds 0-2 but 0.372 over all six. Three seeds decided the
+# verdict by which three they were. (These seeds replace a "Level-3, 4x per goal" row, 0.312 +- 0.139 over 3 seeds
+# on 2026-11-21: more epochs on the same goals did not help; the experiments stay within their hour.)
+L3_SEEDS = 6
 # The level sweep's learner: a coarser grid and q_i out of the state. q_i cannot be removed by a setting, so
 # it gets 2 sets over +-1000 rad: its memberships are 0.5 +- 0.002 for every angle, i.e. the learner cannot tell
 # angles apart. Measured on Level-3, seed 0 (2 epochs per goal, 100 test goals): default grid mean 0.94 / 67 %
@@ -43,12 +48,20 @@ COARSE_TEXT = "n_sets (2, 8, 6, 5, 5, 5) with q over ±1000 rad (q out of the st
 # tip 0.6 from the goal from one at the goal, so frozen swarms stopped short or overshot. Measured on Level-3 (2
 # epochs per goal, seeds 0-2, 100 test goals): mean 0.446 -> 0.243, within 0.5 85 % -> 92 %.
 G_PERP = {"extra_state": ("g_perp",), "extra_sets": (7,), "extra_ranges": ((-1.5, 1.5),)}
-LEARNER = settings(**COARSE, **G_PERP)
-LEARNER_TEXT = f"{COARSE_TEXT}, plus g_perp (7 sets over ±1.5) as a 7th state variable; other settings default"
-NO_G_PERP = settings(**COARSE)  # the sweep's learner before g_perp
+G_PERP_TEXT = f"{COARSE_TEXT}, plus g_perp (7 sets over ±1.5) as a 7th state variable"
+# And g3 unsigned (LearnerSettings.g3): a goal straight behind the tip - an arm too long for a goal near it - fell
+# on both ends of g3's range (+pi, -pi), which share no set; frozen swarms stopped there, error 3.5-4.4 (seed 0,
+# test set 1, goals 22, 26, 58). Measured on Level-3, seeds 0-5: see the report's rows "Level-3" and
+# "Level-3, signed g3".
+G3_UNSIGNED = {"g3": "unsigned", "ranges": (*COARSE["ranges"][:5], (0.0, math.pi))}
+LEARNER = settings(**{**COARSE, **G3_UNSIGNED}, **G_PERP)
+LEARNER_TEXT = f"{G_PERP_TEXT}, and g3 unsigned (|g3|, 5 sets over [0, π]); other settings default"
+SIGNED_G3 = settings(**COARSE, **G_PERP)  # the sweep's learner before g3 unsigned
+NO_G_PERP = settings(**COARSE)  # ... and before g_perp
 DEFAULT_LEARNER = settings()
-LEARNER_NAMES = {LEARNER: "sweep", NO_G_PERP: "no g_perp", DEFAULT_LEARNER: "default"}
-RUN_SUFFIX = {LEARNER: "-gperp", NO_G_PERP: "", DEFAULT_LEARNER: "-default"}  # run names; "" keeps older caches
+LEARNER_NAMES = {LEARNER: "sweep", SIGNED_G3: "signed g3", NO_G_PERP: "no g_perp", DEFAULT_LEARNER: "default"}
+# run names; "" keeps older caches
+RUN_SUFFIX = {LEARNER: "-g3u", SIGNED_G3: "-gperp", NO_G_PERP: "", DEFAULT_LEARNER: "-default"}
 
 
 @dataclass(frozen=True)
@@ -59,6 +72,7 @@ class Training:
     learner: tuple
     main: bool = True  # part of the level sweep (else a comparison)
     successive: bool = False  # tested the paper's way: each test goal from where the last one ended (same training)
+    min_seeds: int = 0  # at least this many seeds (the full run only)
 
 
 def reps_for(level: int) -> int:
@@ -86,24 +100,28 @@ def run(ctx: Context) -> dict[str, Any]:
     second_level = 1 if q else 3
     control_epochs = None if q else REPS * 4**2  # Level-1's goals for Level-2's epochs
 
-    trainings = [Training(f"Level-{L}", L, reps_for(L) * 4**L, LEARNER) for L in levels]
+    trainings = [
+        Training(f"Level-{L}", L, reps_for(L) * 4**L, LEARNER, min_seeds=L3_SEEDS if L == 3 else 0) for L in levels
+    ]
     if control_epochs:
         trainings.append(Training(f"Level-1, {control_epochs} epochs (control)", 1, control_epochs, LEARNER, False))
+        trainings.append(Training("Level-3, signed g3", 3, REPS * 4**3, SIGNED_G3, False, min_seeds=L3_SEEDS))
         trainings.append(Training("Level-3, without g_perp", 3, REPS * 4**3, NO_G_PERP, False))
         trainings.append(Training("Level-3, default learner", 3, REPS * 4**3, DEFAULT_LEARNER, False))
-        # more training on the same goals: does Level-3 improve with more epochs?
-        for more in MORE_EPOCHS:
-            trainings.append(Training(f"Level-3, {more * REPS}x per goal", 3, more * REPS * 4**3, LEARNER, False))
         # §5.2 "successive on-line requests": the Level-3 swarm, each test goal from where the last one ended
         trainings.append(Training("Level-3, successive test goals", 3, REPS * 4**3, LEARNER, False, True))
     if q:
         trainings = [Training("Level-1", 1, 4, LEARNER)]
+
+    def seeds_of(t: Training) -> list[int]:
+        return ctx.seed_list if q else list(range(max(ctx.seeds, t.min_seeds)))
+
     train_specs = {}
     for t in trainings:
         label, level, epochs = t.label, t.level, t.epochs
         if t.successive:  # the same training as the level's own row (added below)
             continue
-        for seed in ctx.seed_list:
+        for seed in seeds_of(t):
             goals = training_order(quadtree(level), math.ceil(epochs / 4**level), seed)[:epochs]
             train_specs[(label, seed)] = Spec(
                 f"gen-train-L{level}-e{epochs}{RUN_SUFFIX[t.learner]}",
@@ -117,7 +135,7 @@ def run(ctx: Context) -> dict[str, Any]:
     trained = dict(zip(train_specs, run_specs(ctx, [*train_specs.values()], "train"), strict=True))
     for t in trainings:
         if t.successive:
-            for seed in ctx.seed_list:
+            for seed in seeds_of(t):
                 trained[(t.label, seed)] = trained[(f"Level-{t.level}", seed)]
 
     eval_specs: dict[tuple[str, int, int], Spec] = {}
@@ -125,7 +143,7 @@ def run(ctx: Context) -> dict[str, Any]:
         label, level = t.label, t.level
         sets = [k, k + 1] if level >= second_level and t.main else [k]
         for block in sets:
-            for seed in ctx.seed_list:
+            for seed in seeds_of(t):
                 eval_specs[(label, block, seed)] = Spec(
                     f"gen-test{block}-L{level}{RUN_SUFFIX[t.learner]}",
                     seed=seed,
@@ -170,9 +188,8 @@ def run(ctx: Context) -> dict[str, Any]:
                 entry[f"{key}_std_over_seeds"] = s
             entry["pooled"] = stats([e for errs in entry["errors"] for e in errs])
     scratch_err = [r.final_errors[-1] for r in scratch.values()]
-    seeds = ctx.seed_list
     train_err = {
-        t.label: [float(np.mean(trained[(t.label, s)].final_errors[-min(4**t.level, t.epochs) :])) for s in seeds]
+        t.label: [float(np.mean(trained[(t.label, s)].final_errors[-min(4**t.level, t.epochs) :])) for s in seeds_of(t)]
         for t in trainings
     }
 
@@ -180,7 +197,13 @@ def run(ctx: Context) -> dict[str, Any]:
     rep.results.update(
         {
             "levels": {
-                t.label: {"level": t.level, "training_epochs": t.epochs, "learner": dict(t.learner), "sweep": t.main}
+                t.label: {
+                    "level": t.level,
+                    "training_epochs": t.epochs,
+                    "learner": dict(t.learner),
+                    "sweep": t.main,
+                    "seeds": seeds_of(t),
+                }
                 for t in trainings
             },
             "task_space": [[-HALF, HALF], [-HALF, HALF]],
@@ -209,6 +232,7 @@ def run(ctx: Context) -> dict[str, Any]:
         "training",
         "learner",
         "epochs",
+        "seeds",
         "test set",
         "paper mean / STD",
         "mean",
@@ -226,6 +250,7 @@ def run(ctx: Context) -> dict[str, Any]:
                     t.label,
                     LEARNER_NAMES[t.learner],
                     t.epochs,
+                    len(seeds_of(t)),
                     block.rsplit("_", 1)[-1],
                     f"{paper[0]} / {paper[1]}" if paper else "—",
                     f"{entry['mean']:.3f} ± {entry['mean_std_over_seeds']:.3f}",
@@ -238,11 +263,15 @@ def run(ctx: Context) -> dict[str, Any]:
     rep.table(header, rows)
     rep.text(
         f"Learners: 'sweep' = {LEARNER_TEXT} (the configuration the README recommends for generalisation); "
-        f"'no g_perp' = the sweep's learner without g_perp ({COARSE_TEXT}); 'default' = the README's defaults "
+        f"'signed g3' = the sweep's learner with g3 signed ({G_PERP_TEXT}); 'no g_perp' = that without g_perp "
+        f"({COARSE_TEXT}); 'default' = the README's defaults "
         "(n_sets 20/20/13/7/7/7, q in the state, no g_perp). All use the shaped reward. g_perp is the component "
         "of goal − tip along the direction the agent's own joint moves the tip: a function of S_i (g1, g2, theta, "
         "d), not new information, but with fine sets near 0 — g1 and g2's 5 sets over ±24 do not tell a tip 0.6 "
-        "from the goal from one at the goal. 'Successive test goals' tests the Level-3 swarms of the sweep the "
+        "from the goal from one at the goal. Unsigned g3 is |g3|: signed, a goal straight behind the tip (an arm "
+        "too long for a goal near it) falls on both ends of g3's range, +π and −π, which share no set. "
+        f"Level-3's rows run on at least {L3_SEEDS} seeds: with the signed-g3 learner, seeds 0-2 gave a mean of "
+        "0.233 and seeds 0-5 0.372. 'Successive test goals' tests the Level-3 swarms of the sweep the "
         'paper\'s way (§5.2: "successive on-line requests"): each test goal from where the last one ended, not '
         "from the start configuration."
     )
@@ -258,7 +287,12 @@ def run(ctx: Context) -> dict[str, Any]:
         {
             "topology": "examples/chain4.toml",
             "reward": "shaped (default)",
-            "learner": {"sweep": LEARNER_TEXT, "no g_perp": COARSE_TEXT, "default": "defaults"},
+            "learner": {
+                "sweep": LEARNER_TEXT,
+                "signed g3": G_PERP_TEXT,
+                "no g_perp": COARSE_TEXT,
+                "default": "defaults",
+            },
             "reps_per_goal": REPS,
             "train_steps": train_steps,
             "eval_steps": eval_steps,
@@ -280,7 +314,8 @@ def _verdict(rep: Report, per: dict, trainings: list, k: int, quick: bool) -> No
         pm_, ps_ = PAPER[level]
         ok = e["mean"] <= pm_
         lines.append(
-            f"- {label}: paper mean {pm_} (STD {ps_}); kinswarm {e['mean']:.3f} ± {e['mean_std_over_seeds']:.3f} "
+            f"- {label} ({len(e['per_seed'])} seeds): paper mean {pm_} (STD {ps_}); kinswarm {e['mean']:.3f} ± "
+            f"{e['mean_std_over_seeds']:.3f} "
             f"(STD {e['std']:.3f}), {100 * e['frac_within_0_5']:.0f} % within 0.5 — "
             + ("**as good or better**" if ok else "**worse than the paper**")
         )
@@ -288,8 +323,8 @@ def _verdict(rep: Report, per: dict, trainings: list, k: int, quick: bool) -> No
         if f"test_set_{k + 1}" in entry:
             e2 = entry[f"test_set_{k + 1}"]
             lines.append(
-                f"- {label} on the second test set (block {k + 1}): mean {e2['mean']:.3f} ± "
-                f"{e2['mean_std_over_seeds']:.3f}, {100 * e2['frac_within_0_5']:.0f} % within 0.5."
+                f"- {label} on the second test set (block {k + 1}, {len(e2['per_seed'])} seeds): mean "
+                f"{e2['mean']:.3f} ± {e2['mean_std_over_seeds']:.3f}, {100 * e2['frac_within_0_5']:.0f} % within 0.5."
             )
     ctl = [t for t in trainings if "control" in t.label]
     if ctl:
