@@ -34,7 +34,8 @@ LEVELS = (1, 2, 3, 4)  # Level-4 alone is 3 x 256 epochs, a third of this experi
 # Level-3's rows run on at least this many seeds. Measured with the signed-g3 learner (seeds 0-5, set 0): 0.249,
 # 0.264, 0.186, 0.428, 0.336, 0.771 - a mean of 0.233 over seeds 0-2 but 0.372 over all six. Three seeds decided the
 # verdict by which three they were. (These seeds replace a "Level-3, 4x per goal" row, 0.312 +- 0.139 over 3 seeds
-# on 2026-11-21: more epochs on the same goals did not help; the experiments stay within their hour.)
+# on 2026-11-21: more epochs on the same goals did not help. Even so `all` grew by ~1.175x in steps here, to an
+# estimated ~60 min: at the hour, not re-timed; docs/results/README.md "Time".)
 L3_SEEDS = 6
 # The level sweep's learner: a coarser grid and q_i out of the state. q_i cannot be removed by a setting, so
 # it gets 2 sets over +-1000 rad: its memberships are 0.5 +- 0.002 for every angle, i.e. the learner cannot tell
