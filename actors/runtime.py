@@ -44,6 +44,9 @@ from kinswarm.protocol.messages import Fault
 DEFAULT_LISTEN = "tcp/127.0.0.1:7447"
 LEASE_MS = 1000
 HANDSHAKE_MS = 2000
+#: a node logs the first rejected message on each of up to this many keys, then every 1000th: a flood on one key
+#: cannot hide a bad message on another, and the log stays bounded
+LOGGED_KEYS = 100
 M = TypeVar("M")
 
 
@@ -247,6 +250,7 @@ class Node:
         self._token: Any = None
         self._closed = False
         self.rejected = 0
+        self._rejected_keys: set[str] = set()  # keys whose first rejection was logged (at most LOGGED_KEYS)
         # link faults: empty on the fast path (the one check); touched only on the loop
         self._link_faults: dict[str, LinkFault] = {}
         self._step_prefixes = (f"{keys.root}/sim/", f"{keys.root}/a/")
@@ -349,7 +353,11 @@ class Node:
             return codec.decode(payload, expect, self.keys.run, self.key)
         except codec.DecodeError as e:
             self.rejected += 1
-            if self.rejected <= 20 or self.rejected % 1000 == 0:
+            # the first rejection on each key is logged, so a flood on one key cannot hide another's; then a sample
+            first_on_key = key not in self._rejected_keys and len(self._rejected_keys) < LOGGED_KEYS
+            if first_on_key:
+                self._rejected_keys.add(key)
+            if first_on_key or self.rejected <= 20 or self.rejected % 1000 == 0:
                 self.log.warning(
                     "rejected message on %s from %s: %s (rejected so far: %d)",
                     key,

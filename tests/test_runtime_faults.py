@@ -289,3 +289,23 @@ def test_targeting(sessions):
                 n.close()
 
     asyncio.run(body())
+
+
+def test_a_flood_on_one_key_does_not_hide_a_bad_message_on_another(sessions, caplog):
+    """The rejection log samples a flood (the first 20, then every 1000th) but always shows each key's first."""
+
+    async def body() -> None:
+        rx = Node(sessions[1], KEYS, "agent", "a1", KEY)
+        try:
+            with caplog.at_level("WARNING", logger="kinswarm.agent.a1"):
+                for _ in range(50):
+                    assert rx.decode(STEP, b"\x00\xff garbage", Cmd) is None
+                assert rx.decode(CTL, b"\x00\xff garbage", EpochStart) is None
+            assert rx.rejected == 51
+            logged = [r.getMessage() for r in caplog.records]
+            assert sum(f"on {STEP} " in m for m in logged) == 20  # the flood, sampled
+            assert sum(f"on {CTL} " in m for m in logged) == 1  # past the sample, still shown
+        finally:
+            rx.close()
+
+    asyncio.run(body())
