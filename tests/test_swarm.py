@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 import zenoh
-from conftest import free_port, swarm_pids
+from conftest import EQUAL_RUN_DEADLINE_MS, free_port, swarm_pids
 from kinswarm.actors.cli import main as cli_main
 from kinswarm.actors.config import RunConfig
 from kinswarm.actors.runtime import open_session
@@ -65,8 +65,7 @@ def test_single_run_leaves_its_files(tmp_path, chain4, endpoint):
 
 
 def test_process_and_single_give_the_same_run(tmp_path, chain4):
-    # a starved machine must not turn a late command into a hold (the sim's deadline): this compares learning
-    common = ["--epochs", "3", "--steps", "120", "--seed", "11", "--deadline-ms", "30000"]
+    common = ["--epochs", "3", "--steps", "120", "--seed", "11", "--deadline-ms", str(EQUAL_RUN_DEADLINE_MS)]
     a = run(
         [
             "run",
@@ -158,10 +157,8 @@ def _spam(run_id: str, connect: str, stop: threading.Event) -> int:
 
 
 def test_malformed_messages_are_rejected_and_the_run_goes_on(tmp_path, chain4):
-    # a 30 s step deadline: under the spam on a starved CI machine a command can miss the 500 ms default, its joint
-    # holds and the runs part for a reason that is not the garbage (seen once in CI)
     common = ["run", str(chain4), "--placement", "process", "--epochs", "3", "--steps", "100", "--seed", "5"]
-    common += ["--deadline-ms", "30000"]
+    common += ["--deadline-ms", str(EQUAL_RUN_DEADLINE_MS)]
     clean = run(common + ["--out", str(tmp_path / "clean"), "--listen", f"tcp/127.0.0.1:{free_port()}"])
     port = free_port()
     stop = threading.Event()

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import free_port
+from conftest import EQUAL_RUN_DEADLINE_MS, free_port
 from kinswarm.actors.cli import main as cli_main
 from kinswarm.actors.learning.learner import Learner
 from kinswarm.actors.learning.settings import LearnerSettings
@@ -61,8 +61,8 @@ def _run(topo: Path, placement: str, out: Path, epochs: int, steps: int) -> dict
         str(out),
         "--listen",
         f"tcp/127.0.0.1:{free_port()}",
-        "--deadline-ms",  # a starved machine must not turn a late command into a hold: this compares learning
-        "30000",
+        "--deadline-ms",
+        str(EQUAL_RUN_DEADLINE_MS),
         "--no-progress",
     ]
     assert cli_main(args) == 0
