@@ -7,7 +7,6 @@ inject faults; nobody else on the network can.
 
 from __future__ import annotations
 
-import asyncio
 import math
 import os
 import re
@@ -87,7 +86,7 @@ class Client:
         deadline = time.monotonic() + timeout
         while (remaining := deadline - time.monotonic()) > 0:
             try:
-                key, payload = await asyncio.wait_for(self.node.recv(), remaining)
+                key, payload = await self.node.recv(timeout=remaining)
             except TimeoutError:
                 break
             reply = self.node.decode(key, payload, FaultReply)
@@ -102,7 +101,7 @@ class Client:
         joints: JointStatus | None = None
         while True:
             try:
-                key, payload = await asyncio.wait_for(self.node.recv(), timeout)
+                key, payload = await self.node.recv(timeout=timeout)
             except TimeoutError:
                 raise ControlError(f"no status from run {k.run} at {self.connect} within {timeout:g} s") from None
             if key.endswith("/metrics/joints"):

@@ -344,8 +344,14 @@ class Node:
         if not self._closed:
             self.mailbox.push(key, payload)
 
-    async def recv(self) -> tuple[str, bytes]:
-        return await self.mailbox.get()
+    async def recv(self, timeout: float | None = None) -> tuple[str, bytes]:
+        """The next message; TimeoutError after `timeout` seconds (None: wait for ever).
+
+        Not asyncio.wait_for: on Python 3.11 it swallows a cancellation that lands while the message
+        is already in hand, so a Ctrl-C between two messages was lost and the supervisor trained on.
+        asyncio.timeout counts cancellations and lets the caller's through."""
+        async with asyncio.timeout(timeout):
+            return await self.mailbox.get()
 
     def decode(self, key: str, payload: bytes, expect: type[M]) -> M | None:
         """Decode or log why not and return None: a bad message never crashes an actor."""

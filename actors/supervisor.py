@@ -699,7 +699,7 @@ class Supervisor:
             if remaining <= 0:
                 raise _NoMessage(f"no {kind.__name__} within {timeout:.0f} s")
             try:
-                key, payload = await asyncio.wait_for(self.node.recv(), timeout=min(remaining, self.TICK))
+                key, payload = await self.node.recv(timeout=min(remaining, self.TICK))
             except TimeoutError:
                 continue
             m = self._route(key, payload)
@@ -714,7 +714,7 @@ class Supervisor:
         deadline = time.monotonic() + timeout
         while not want <= set(self.byes) and time.monotonic() < deadline:
             try:
-                key, payload = await asyncio.wait_for(self.node.recv(), timeout=deadline - time.monotonic())
+                key, payload = await self.node.recv(timeout=deadline - time.monotonic())
             except TimeoutError:
                 break
             self._route(key, payload)

@@ -41,7 +41,7 @@ async def try_fault(spec: NetSpec, run_dir: Path, fid: str) -> str:
         deadline = time.monotonic() + 4.0
         while (left := deadline - time.monotonic()) > 0:
             try:
-                key, payload = await asyncio.wait_for(node.recv(), left)
+                key, payload = await node.recv(timeout=left)
             except TimeoutError:
                 break
             reply = node.decode(key, payload, FaultReply)

@@ -57,7 +57,7 @@ async def collect(node: Node, quiet: float = 0.4) -> list[tuple[str, bytes, floa
     got = []
     while True:
         try:
-            key, payload = await asyncio.wait_for(node.recv(), timeout=quiet)
+            key, payload = await node.recv(timeout=quiet)
         except TimeoutError:
             return got
         got.append((key, payload, time.monotonic()))

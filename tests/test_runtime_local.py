@@ -21,7 +21,7 @@ async def drain(node: Node, quiet: float = 0.3) -> list[tuple[str, bytes]]:
     got = []
     while True:
         try:
-            got.append(await asyncio.wait_for(node.recv(), timeout=quiet))
+            got.append(await node.recv(timeout=quiet))
         except TimeoutError:
             return got
 
@@ -88,11 +88,41 @@ def test_local_delivery_is_faulted(endpoint, side):
             assert faulted.apply_fault(dup)
             t0 = time.monotonic()
             tx.send(STEP, Cmd(epoch=0, step=3, delta=0.0))
-            first = await asyncio.wait_for(rx.recv(), timeout=5)
+            first = await rx.recv(timeout=5)
             assert time.monotonic() - t0 >= 0.18
             assert steps(rx, [first, *await drain(rx)]) == [3, 3]
             assert faulted.link_counts["duplicated"] == 1
         finally:
             a.close()
+
+    asyncio.run(body())
+
+
+@pytest.mark.timeout(60)
+def test_a_cancel_landing_while_a_message_is_in_hand_is_not_lost(endpoint):
+    """Ctrl-C cancels the supervisor's task. On Python 3.11 asyncio.wait_for swallowed a cancel that came
+    after the message arrived but before the waiter resumed, and the run trained on (a CI failure of
+    test_ctrl_c_stops_everything). This lands the cancel exactly there, twenty times."""
+
+    async def body() -> None:
+        s = open_session(listen=[endpoint])
+        node = Node(s, KEYS, "supervisor", "main", KEY)
+        try:
+            for _ in range(20):
+
+                async def serve() -> None:
+                    while True:
+                        await node.recv(timeout=5.0)
+
+                task = asyncio.create_task(serve())
+                await asyncio.sleep(0)  # serve() waits on the mailbox
+                node.mailbox.push(STEP, b"x")  # the message arrives...
+                await asyncio.sleep(0)  # ...the mailbox hands it over...
+                task.cancel()  # ...and the cancel lands before serve() resumes
+                done, _ = await asyncio.wait([task], timeout=1.0)
+                assert task in done and task.cancelled()
+        finally:
+            node.close()
+            s.close()
 
     asyncio.run(body())

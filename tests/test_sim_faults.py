@@ -325,7 +325,7 @@ class TestController:
         }
         deadline = time.monotonic() + timeout
         while not any(pred(m) for m in self.got.get(kind, [])):
-            key, payload = await asyncio.wait_for(self.node.recv(), deadline - time.monotonic())
+            key, payload = await self.node.recv(timeout=deadline - time.monotonic())
             if key in kinds and (m := self.node.decode(key, payload, kinds[key])) is not None:
                 self.got.setdefault(kinds[key], []).append(m)
                 if isinstance(m, Task) and self.on_task is not None:
