@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import contextlib
 import dataclasses
 import json
 import logging
@@ -13,6 +14,7 @@ import secrets
 import signal
 import sys
 import time
+from collections.abc import Iterator
 from pathlib import Path
 
 from kinswarm.actors.checkpoint import CheckpointError, load_checkpoint
@@ -300,6 +302,32 @@ def _write_net(path: Path, spec: NetSpec) -> Path:
     return path
 
 
+@contextlib.contextmanager
+def _signals_stop_once() -> Iterator[None]:
+    """Ctrl-C or SIGTERM cancels the running task once; the supervisor then stops the swarm and the
+    summary is written. More signals until then only say so: a second Ctrl-C cancelling the shutdown
+    would leave the actors without their Stop and the run without its summary."""
+    task, loop = asyncio.current_task(), asyncio.get_running_loop()
+    assert task is not None
+    signals = 0
+
+    def on_signal() -> None:
+        nonlocal signals
+        signals += 1
+        if signals == 1:
+            task.cancel()
+        elif signals == 2:
+            print("kinswarm: stopping the swarm and writing its summary, please wait", file=sys.stderr)
+
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        loop.add_signal_handler(sig, on_signal)
+    try:
+        yield
+    finally:
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            loop.remove_signal_handler(sig)
+
+
 async def _supervise(
     cfg: RunConfig, topo: Topology, progress: bool, plan: Plan, host: str, wait_s: float = 600.0
 ) -> dict:
@@ -346,33 +374,27 @@ async def _supervise(
         placement = ProcessPlacement(out / "config.json", nets, out / "logs", supervisor=sup_id)
     sup = Supervisor(cfg, topo, session, placement, on_epoch=on_epoch, plan=plan, host=host)
     sup.hosts_wait_s = wait_s
-    main = asyncio.current_task()
-    loop = asyncio.get_running_loop()
-    assert main is not None
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        loop.add_signal_handler(sig, main.cancel)
-    try:
-        result = await sup.run()
-    finally:
-        for sig in (signal.SIGINT, signal.SIGTERM):
-            loop.remove_signal_handler(sig)
-        if bar is not None:
-            bar.close()
-        session.close()
-    if not lead:
-        return {"host": host, "error": result.error, "interrupted": result.interrupted, "restarts": result.restarts}
-    summary = write_summary(
-        out,
-        {
-            "wall_seconds": result.wall_seconds,
-            "interrupted": result.interrupted,
-            "error": result.error,
-            "rejected_messages": result.rejected,
-            "rejected_by_actor": result.rejected_by,
-            "restarts": result.restarts,
-        },
-    )
-    write_plots(out)
+    with _signals_stop_once():
+        try:
+            result = await sup.run()
+        finally:
+            if bar is not None:
+                bar.close()
+            session.close()
+        if not lead:
+            return {"host": host, "error": result.error, "interrupted": result.interrupted, "restarts": result.restarts}
+        summary = write_summary(
+            out,
+            {
+                "wall_seconds": result.wall_seconds,
+                "interrupted": result.interrupted,
+                "error": result.error,
+                "rejected_messages": result.rejected,
+                "rejected_by_actor": result.rejected_by,
+                "restarts": result.restarts,
+            },
+        )
+        write_plots(out)
     return summary
 
 

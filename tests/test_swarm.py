@@ -220,6 +220,8 @@ def test_ctrl_c_stops_everything(tmp_path, chain4, endpoint):
             time.sleep(0.1)
         assert len(swarm_pids(str(out))) == 6  # supervisor + sim + 4 agents
         p.send_signal(signal.SIGINT)
+        time.sleep(0.3)  # into the shutdown (it waits up to 3 s for the actors' byes)
+        p.send_signal(signal.SIGINT)  # an impatient second Ctrl-C does not cut it short
         p.wait(timeout=30)
     finally:
         if p.poll() is None:
@@ -229,6 +231,7 @@ def test_ctrl_c_stops_everything(tmp_path, chain4, endpoint):
     assert swarm_pids(str(out)) == []
     s = json.loads((out / "summary.json").read_text())
     assert s["interrupted"] is True and s["epochs"] >= 1
+    assert (out / "learning_curve.png").exists() and (out / "arm.png").exists()
 
 
 def test_killed_supervisor_leaves_no_orphans(tmp_path, chain4, endpoint):
