@@ -115,8 +115,15 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="NAME=VALUE",
         help="a LearnerSettings override, repeatable (e.g. --learner clearance_state=true)",
     )
-    base = sub.add_parser("baseline", help="drive the same simulator with the pseudo-inverse controller")
+    base = sub.add_parser("baseline", help="drive the same simulator with a model-based controller")
     _add_common(base)
+    base.add_argument(
+        "--law",
+        choices=("pinv", "greedy"),
+        default="pinv",
+        help="pinv: the Jacobian pseudo-inverse (default); greedy: each joint alone takes the 1-step move that "
+        "brings the tip nearest (a reference for what per-joint greedy control can do)",
+    )
     rep = sub.add_parser("report", help="rebuild a run's summary plots")
     rep.add_argument("run_dir", type=Path)
     fault = sub.add_parser(
@@ -489,7 +496,8 @@ def main(argv: list[str] | None = None) -> int:
                 print(f"kinswarm: host {summary['host']} done ({cfg.run_id})")
                 return 130 if summary.get("interrupted") else 0
         else:
-            cfg, topo = _resolve(a, "agents" if a.command == "run" else "baseline")
+            controller = "agents" if a.command == "run" else {"pinv": "baseline", "greedy": "greedy"}[a.law]
+            cfg, topo = _resolve(a, controller)
             summary = run_swarm(cfg, topo, progress=not a.no_progress and sys.stderr.isatty())
     except (TopologyError, ConfigError, CheckpointError, ScenarioError, ControlError, ValueError, DeployError) as e:
         print(f"kinswarm: error: {e}", file=sys.stderr)

@@ -17,7 +17,7 @@ from kinswarm.protocol.topology import Topology, load_topology
 
 REWARDS = ("paper", "strict", "shaped", "contact", "global", "force")  # contact, global, force: grasp scenes only
 PLACEMENTS = ("process", "single")
-CONTROLLERS = ("agents", "baseline")
+CONTROLLERS = ("agents", "baseline", "greedy")  # the learning agents, or a model-based law (sim/controller.py)
 
 
 class ConfigError(ValueError):

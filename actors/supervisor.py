@@ -78,8 +78,8 @@ class _Down(Exception):
 
 
 def actors_of(cfg: RunConfig, topo: Topology) -> list[ActorId]:
-    if cfg.controller == "baseline":
-        return [("sim", "sim"), ("controller", "baseline")]
+    if cfg.controller != "agents":
+        return [("sim", "sim"), ("controller", cfg.controller)]
     return [("sim", "sim"), *(("agent", a) for a in topo.order)]
 
 

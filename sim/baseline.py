@@ -46,6 +46,41 @@ def pinv_increments(
     return {a: float(v) for a, v in zip(topo.dof_agents, dq, strict=True)}
 
 
+def greedy_increments(
+    topo: Topology,
+    angles: Mapping[str, float],
+    goal_xy: tuple[float, float],
+    *,
+    max_step: float = math.radians(1),
+) -> dict[str, float]:
+    """The best a joint can do on its own: each DOF agent takes the one of -max_step, 0, +max_step that, with
+    every other joint held, leaves the squared distance of its tips to the goal smallest (hold unless a move
+    is strictly better; limits respected); then all move at once.
+
+    A reference, not a learner: it knows the model, but like an agent it decides from its own effect on the
+    tip alone, greedily in the distance (what the shaped reward pays for). It can fold into a configuration
+    where no single joint's move helps (a local minimum of the distance); the pseudo-inverse cannot.
+    """
+    if max_step <= 0:
+        raise ValueError(f"max_step must be > 0, got {max_step}")
+    gx, gy = goal_xy
+
+    def cost(q: Mapping[str, float]) -> float:
+        return sum((gx - x) ** 2 + (gy - y) ** 2 for x, y, _ in kinematics.tips(topo, q).values())
+
+    now = cost(angles)
+    out = {}
+    for a in topo.dof_agents:
+        lo, hi = topo.agents[a].limits
+        best, move = now, 0.0
+        for d in (-max_step, max_step):
+            qa = min(max(angles[a] + d, lo), hi)
+            if qa != angles[a] and (c := cost({**angles, a: qa})) < best:
+                best, move = c, qa - angles[a]
+        out[a] = move
+    return out
+
+
 def run_baseline(
     topo: Topology,
     goal_xy: tuple[float, float],

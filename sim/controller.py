@@ -1,6 +1,7 @@
-"""The model-based baseline as an actor: it takes the place of the agents on the same wire — reads the
+"""The model-based baselines as an actor: one takes the place of the agents on the same wire — reads the
 same encoder readings and task observation, and sends one `cmd` per joint — so learned and
-model-based runs go through the same simulator, deadlines and metrics."""
+model-based runs go through the same simulator, deadlines and metrics. Its control law is the run's
+`controller`: "baseline" (the pseudo-inverse) or "greedy" (each joint alone, greedy in the distance)."""
 
 from __future__ import annotations
 
@@ -8,13 +9,16 @@ from kinswarm.actors.config import RunConfig
 from kinswarm.actors.runtime import Node
 from kinswarm.protocol.messages import Cmd, Obs, Stop, Task
 from kinswarm.protocol.topology import Topology
-from kinswarm.sim.baseline import pinv_increments
+from kinswarm.sim.baseline import greedy_increments, pinv_increments
+
+LAWS = {"baseline": pinv_increments, "greedy": greedy_increments}
 
 
 class BaselineController:
     def __init__(self, cfg: RunConfig, topo: Topology, node: Node) -> None:
         self.cfg, self.topo, self.node, self.keys = cfg, topo, node, node.keys
         self.dof = topo.dof_agents
+        self.law = LAWS[cfg.controller]
         self.q: dict[tuple[int, int], dict[str, float]] = {}
         self.task: dict[tuple[int, int], Task] = {}
 
@@ -49,6 +53,6 @@ class BaselineController:
             return
         self.q = {s: v for s, v in self.q.items() if s > step}
         self.task = {s: v for s, v in self.task.items() if s > step}
-        dq = pinv_increments(self.topo, q, task.goal, max_step=self.cfg.action_rad)
+        dq = self.law(self.topo, q, task.goal, max_step=self.cfg.action_rad)
         for a in self.dof:
             self.node.send(self.keys.cmd(a), Cmd(epoch=step[0], step=step[1], delta=dq[a]))

@@ -1,4 +1,5 @@
-"""The pseudo-inverse baseline: 1-degree steps, convergence on the paper's chain4 reaching task."""
+"""The model-based baselines: the pseudo-inverse (1-degree steps, convergence on the paper's chain4 reaching task)
+and the greedy per-joint reference."""
 
 from __future__ import annotations
 
@@ -8,7 +9,7 @@ from pathlib import Path
 import pytest
 from kinswarm.protocol.topology import load_topology
 from kinswarm.sim import kinematics
-from kinswarm.sim.baseline import pinv_increments, run_baseline
+from kinswarm.sim.baseline import greedy_increments, pinv_increments, run_baseline
 from kinswarm.sim.world import World
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
@@ -51,3 +52,48 @@ def test_tree5_both_leaves_reach_shared_goal() -> None:
     assert steps is not None
     for x, y, _ in kinematics.tips(topo, q).values():
         assert math.dist((x, y), topo.goal) <= 0.01
+
+
+def test_greedy_moves_each_joint_alone_to_its_best_and_holds_otherwise() -> None:
+    topo = load_topology(EXAMPLES / "chain4.toml")
+    q = topo.initial_angles()
+    step = math.radians(1)
+
+    def dist(angles: dict[str, float]) -> float:
+        ((x, y, _),) = kinematics.tips(topo, angles).values()
+        return math.dist((x, y), topo.goal)
+
+    dq = greedy_increments(topo, q, topo.goal)
+    assert set(dq) == set(topo.dof_agents)
+    for a in topo.dof_agents:  # by brute force: the best of -1, 0, +1 degree for this joint, the others held
+        best = min((-step, 0.0, step), key=lambda d, a=a: (dist({**q, a: q[a] + d}), d != 0.0))
+        assert dq[a] == pytest.approx(best)
+    assert any(dq.values())
+    # at the goal nobody moves (any move takes the tip away); at a joint's limit it does not push past it
+    (tip,) = kinematics.tips(topo, q).values()
+    assert greedy_increments(topo, q, tip[:2]) == dict.fromkeys(topo.dof_agents, 0.0)
+    lo, hi = topo.agents["a1"].limits
+    at_limit = {**q, "a1": hi}
+    for goal in ((-5.0, 5.0), (5.0, -5.0)):
+        d = greedy_increments(topo, at_limit, goal)["a1"]
+        assert hi + d <= hi
+    with pytest.raises(ValueError, match="max_step"):
+        greedy_increments(topo, q, topo.goal, max_step=0.0)
+
+
+def test_greedy_can_fold_into_a_local_minimum() -> None:
+    """Why it is a reference and not the answer: for a goal far behind the start tip (Halton test goal 71 of
+    set 0; the start tip is at (10.05, 4.62)) the greedy joints curl round into a joint limit and stop, far
+    from the goal, in a configuration where no single joint's move brings the tip nearer."""
+    topo = load_topology(EXAMPLES / "chain4.toml")
+    goal = (-6.875, -6.419753)
+    q = topo.initial_angles()
+    for _ in range(400):
+        dq = greedy_increments(topo, q, goal)
+        if not any(dq.values()):
+            break
+        q = {a: q[a] + dq[a] for a in q}
+    assert not any(greedy_increments(topo, q, goal).values())  # stuck
+    ((x, y, _),) = kinematics.tips(topo, q).values()
+    assert math.dist((x, y), goal) > 3.0
+    assert any(q[a] == pytest.approx(topo.agents[a].limits[1]) for a in q)  # folded into a limit

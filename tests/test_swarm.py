@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 import os
 import signal
 import subprocess
@@ -17,6 +18,9 @@ from conftest import EQUAL_RUN_DEADLINE_MS, free_port, swarm_pids
 from kinswarm.actors.cli import main as cli_main
 from kinswarm.actors.config import RunConfig
 from kinswarm.actors.runtime import open_session
+from kinswarm.protocol.topology import load_topology
+from kinswarm.sim import kinematics
+from kinswarm.sim.baseline import greedy_increments
 
 pytestmark = pytest.mark.timeout(180)
 
@@ -331,6 +335,21 @@ def test_baseline_reaches_the_goal(tmp_path, chain4, endpoint):
     assert s["controller"] == "baseline"
     assert s["final_error"][0] < 0.01
     assert (tmp_path / "b" / "arm.png").is_file()
+
+
+def test_greedy_reference_drives_the_world_as_the_model_says(tmp_path, chain4, endpoint):
+    """`kinswarm baseline --law greedy` over the wire ends where the model's replay of its law ends."""
+    args = ["baseline", str(chain4), "--law", "greedy", "--placement", "single", "--epochs", "1"]
+    s = run([*args, "--steps", "150", "--listen", endpoint, "--out", str(tmp_path / "g")])
+    assert s["controller"] == "greedy"
+    topo = load_topology(chain4)
+    q = topo.initial_angles()
+    for _ in range(150):
+        dq = greedy_increments(topo, q, topo.goal)
+        q = {a: q[a] + dq[a] for a in q}
+    ((x, y, _),) = kinematics.tips(topo, q).values()
+    assert s["final_error"][0] == pytest.approx(math.dist((x, y), topo.goal), abs=1e-6)
+    assert s["final_error"][0] < 1.0
 
 
 def test_bad_topology_is_a_clear_error(tmp_path, capsys):
