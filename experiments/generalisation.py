@@ -65,6 +65,12 @@ LEARNER_NAMES = {LEARNER: "sweep", SIGNED_G3: "signed g3", NO_G_PERP: "no g_perp
 RUN_SUFFIX = {LEARNER: "-g3u", SIGNED_G3: "-gperp", NO_G_PERP: "", DEFAULT_LEARNER: "-default"}
 
 
+# Model-based references on the same test goals, same start pose, steps and 1-degree moves (no learning, one run
+# each: deterministic). "greedy" is each joint alone moving to bring the tip nearest (sim/baseline.py): what a
+# per-joint policy greedy in the distance - what the shaped reward pays for - can reach at best.
+REFERENCES = {"pseudo-inverse": "baseline", "greedy per joint": "greedy"}
+
+
 @dataclass(frozen=True)
 class Training:
     label: str
@@ -169,9 +175,28 @@ def run(ctx: Context) -> dict[str, Any]:
         for seed in ctx.seed_list
         for i, g in enumerate(test_sets[k][: 2 if q else SCRATCH_GOALS])
     }
-    done = run_specs(ctx, [*eval_specs.values(), *scratch_specs.values()], "test")
+    ref_specs = {
+        (name, block): Spec(
+            f"gen-ref{block}-{controller}",
+            epochs=len(test_sets[block]),
+            steps=eval_steps,
+            goals=tuple(test_sets[block]),
+            controller=controller,
+        )
+        for name, controller in REFERENCES.items()
+        for block in test_sets
+    }
+    done = run_specs(ctx, [*eval_specs.values(), *scratch_specs.values(), *ref_specs.values()], "test")
     evals = dict(zip(eval_specs, done[: len(eval_specs)], strict=True))
-    scratch = dict(zip(scratch_specs, done[len(eval_specs) :], strict=True))
+    scratch = dict(zip(scratch_specs, done[len(eval_specs) : len(eval_specs) + len(scratch_specs)], strict=True))
+    refs = dict(zip(ref_specs, done[len(eval_specs) + len(scratch_specs) :], strict=True))
+    references = {
+        name: {
+            f"test_set_{block}": {**stats(refs[(name, block)].final_errors), "errors": refs[(name, block)].final_errors}
+            for block in test_sets
+        }
+        for name in REFERENCES
+    }
 
     per: dict[str, Any] = {}
     for (label, block, _seed), r in evals.items():
@@ -214,6 +239,7 @@ def run(ctx: Context) -> dict[str, Any]:
             "per_level": per,
             "training_final_error_last_pass": train_err,
             "learning_on_scratch": {"final_error": scratch_err, **stats(scratch_err)},
+            "references": references,
             "paper": {f"Level-{lv}": {"mean": m, "std": s} for lv, (m, s) in PAPER.items()},
         }
     )
@@ -282,8 +308,9 @@ def run(ctx: Context) -> dict[str, Any]:
         f"{ctx.seeds} seeds) ends within 0.5 in {100 * frac_within(scratch_err):.0f} % of them (mean error "
         f"{np.mean(scratch_err):.3f}, median {np.median(scratch_err):.3f})."
     )
-    _verdict(rep, per, trainings, k, q)
-    _figures(ctx, rep, trainings, per, evals, trained, test_sets, k)
+    _references(rep, references, per, trainings[0].label if q else "Level-3", k)
+    _verdict(rep, per, trainings, k, q, references)
+    _figures(ctx, rep, trainings, per, evals, trained, test_sets, k, references)
     rep.write(
         {
             "topology": "examples/chain4.toml",
@@ -305,7 +332,46 @@ def run(ctx: Context) -> dict[str, Any]:
     return rep.results
 
 
-def _verdict(rep: Report, per: dict, trainings: list, k: int, quick: bool) -> None:
+def _references(rep: Report, references: dict, per: dict, swarm: str, k: int) -> None:
+    """The model-based references' table, and how many of the swarm's misses the greedy one misses too."""
+    rows = [
+        [
+            name,
+            block.rsplit("_", 1)[-1],
+            f"{e['mean']:.3f}",
+            f"{e['std']:.3f}",
+            f"{e['median']:.3f}",
+            f"{100 * e['frac_within_0_5']:.0f} %",
+            f"{e['max']:.2f}",
+        ]
+        for name, sets in references.items()
+        for block, e in sorted(sets.items())
+    ]
+    rep.text(
+        "### References: model-based controllers, no learning",
+        "",
+        "The same test goals, start configuration, episode length and 1° moves, through the same simulator; one run "
+        "each (deterministic). 'pseudo-inverse' is `kinswarm baseline`; 'greedy per joint' is `kinswarm baseline "
+        "--law greedy`: each joint alone takes the move (−1°, 0, +1°) that, the others held, brings the tip "
+        "nearest. It knows the model; like an agent it sees only its own effect and is greedy in the distance, "
+        "which is what the shaped reward pays for. Neither bounds what learning can reach: on some goals "
+        "behind the start tip both end folded against a joint's ±180° limit.",
+    )
+    rep.table(["reference", "test set", "mean", "STD", "median", "within 0.5", "max"], rows)
+    greedy = references["greedy per joint"][f"test_set_{k}"]["errors"]
+    hard = {i for i, e in enumerate(greedy) if e > 0.5}
+    missed = [
+        (i, s) for s, errs in enumerate(per[swarm][f"test_set_{k}"]["errors"]) for i, e in enumerate(errs) if e > 0.5
+    ]
+    if missed:
+        shared = sum(i in hard for i, _ in missed)
+        rep.text(
+            f"Of the {swarm} swarms' misses (error > 0.5) on test set {k}, {shared} of {len(missed)} (all seeds) are "
+            f"at the {len(hard)} goals the greedy reference misses too."
+        )
+
+
+def _verdict(rep: Report, per: dict, trainings: list, k: int, quick: bool, references: dict) -> None:
     lines = ["## Paper | kinswarm", ""]
     for t in trainings:
         label, level = t.label, t.level
@@ -327,6 +393,15 @@ def _verdict(rep: Report, per: dict, trainings: list, k: int, quick: bool) -> No
                 f"- {label} on the second test set (block {k + 1}, {len(e2['per_seed'])} seeds): mean "
                 f"{e2['mean']:.3f} ± {e2['mean_std_over_seeds']:.3f}, {100 * e2['frac_within_0_5']:.0f} % within 0.5."
             )
+    refs = ", ".join(
+        f"{name} {e['mean']:.3f} ({100 * e['frac_within_0_5']:.0f} % within 0.5)"
+        for name, sets in references.items()
+        for e in (sets[f"test_set_{k}"],)
+    )
+    lines.append(
+        f"- The model-based references (no learning) on test set {k}: {refs}; "
+        f"the paper's Level-3 mean is {PAPER[3][0]}."
+    )
     ctl = [t for t in trainings if "control" in t.label]
     if ctl:
         c = per[ctl[0].label][f"test_set_{k}"]
@@ -348,6 +423,7 @@ def _figures(
     trained: dict,
     test_sets: dict,
     k: int,
+    references: dict,
 ) -> None:
     plt = plt_module()
     # Fig. 12: mean and STD per level.
@@ -407,6 +483,11 @@ def _figures(
     for i, label in enumerate(t.label for t in trainings):
         errs = np.sort(np.concatenate([np.asarray(e) for e in per[label][f"test_set_{k}"]["errors"]]))
         ax.plot(np.clip(errs, 1e-3, None), np.arange(1, len(errs) + 1) / len(errs), color=f"C{i}", label=label)
+    for ls, (name, sets) in zip(("--", ":"), references.items(), strict=False):
+        errs = np.sort(sets[f"test_set_{k}"]["errors"])
+        ax.plot(
+            np.clip(errs, 1e-3, None), np.arange(1, len(errs) + 1) / len(errs), "k" + ls, label=f"{name} (no learning)"
+        )
     ax.axvline(0.5, color="grey", ls="--", lw=0.8)
     ax.set_xscale("log")
     ax.set_xlabel("final error on a test goal")

@@ -54,6 +54,11 @@ def test_quick_experiment(quick_all, name):
         for block in ("test_set_0", "test_set_1"):
             for key in ("mean", "std", "median", "frac_within_0_5"):
                 assert math.isfinite(level[block][key])
+        refs = results["references"]  # the model-based controllers on the same goals
+        assert set(refs) == {"pseudo-inverse", "greedy per joint"}
+        for name in refs:
+            for block in ("test_set_0", "test_set_1"):
+                assert len(refs[name][block]["errors"]) == len(results["test_sets"][block.rsplit("_", 1)[-1]])
     if name == "robustness":
         assert set(results["per_scenario"]) == {"paper-recovery", "paper-fail-disturb-fail", "paper-locked"}
         assert set(results["per_scenario"]["paper-locked"]) == {"frozen", "learning", "scratch", "baseline"}
