@@ -66,8 +66,9 @@ RUN_SUFFIX = {LEARNER: "-g3u", SIGNED_G3: "-gperp", NO_G_PERP: "", DEFAULT_LEARN
 
 
 # Model-based references on the same test goals, same start pose, steps and 1-degree moves (no learning, one run
-# each: deterministic). "greedy" is each joint alone moving to bring the tip nearest (sim/baseline.py): what a
-# per-joint policy greedy in the distance - what the shaped reward pays for - can reach at best.
+# each: deterministic). "greedy" is each joint alone moving to bring the tip nearest (sim/baseline.py): a per-joint
+# policy greedy in the distance, which is what the shaped reward pays for. Not a bound on learning (the swarm's
+# median beats it).
 REFERENCES = {"pseudo-inverse": "baseline", "greedy per joint": "greedy"}
 
 

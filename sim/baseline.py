@@ -53,7 +53,7 @@ def greedy_increments(
     *,
     max_step: float = math.radians(1),
 ) -> dict[str, float]:
-    """The best a joint can do on its own: each DOF agent takes the one of -max_step, 0, +max_step that, with
+    """Each joint greedy on its own: each DOF agent takes the one of -max_step, 0, +max_step that, with
     every other joint held, leaves the squared distance of its tips to the goal smallest (hold unless a move
     is strictly better; limits respected); then all move at once.
 
