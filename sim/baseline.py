@@ -59,7 +59,8 @@ def greedy_increments(
 
     A reference, not a learner: it knows the model, but like an agent it decides from its own effect on the
     tip alone, greedily in the distance (what the shaped reward pays for). It can fold into a configuration
-    where no single joint's move helps (a local minimum of the distance); the pseudo-inverse cannot.
+    where no single joint's move helps (a local minimum of the distance); the pseudo-inverse moves all joints
+    together, though it too can end folded against a joint limit.
     """
     if max_step <= 0:
         raise ValueError(f"max_step must be > 0, got {max_step}")
