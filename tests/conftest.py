@@ -10,10 +10,11 @@ import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
 EXAMPLES = ROOT / "examples"
-# The step deadline of runs a test compares for equality (placements, hosts, spam): a command that misses its
-# deadline makes its joint hold, and on a starved machine the 500 ms default was missed in CI, so runs parted for a
-# reason that is not what the test is about. Such tests also check that no command was missed.
-EQUAL_RUN_DEADLINE_MS = 30_000
+# The step deadline of runs whose test checks that no command was missed, or compares runs for equality (placements,
+# hosts, spam): a command that misses its deadline makes its joint hold. On a starved CI machine the 500 ms default
+# was missed (twice: equal runs parted, and a 5-process tree run at 23 steps/s missed 6 commands), for a reason that
+# is not what these tests are about. Timing belongs in benchmarks/.
+LOCKSTEP_DEADLINE_MS = 30_000
 
 
 def free_port() -> int:

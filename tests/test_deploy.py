@@ -26,7 +26,7 @@ from kinswarm.actors.runtime import NetSpec
 from kinswarm.protocol.topology import load_topology
 
 sys.path.insert(0, str(Path(__file__).parent))
-from conftest import EQUAL_RUN_DEADLINE_MS  # noqa: E402
+from conftest import LOCKSTEP_DEADLINE_MS  # noqa: E402
 from netns import Hosts, NetnsUnavailable  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -222,7 +222,7 @@ def _single(tmp_path: Path, epochs: int, steps: int) -> list[float]:
 
 @pytest.mark.timeout(240)
 def test_split_over_two_hosts_learns_what_single_learns(hosts: Hosts, tmp_path: Path) -> None:
-    plan = _net_plan(tmp_path, hosts, epochs=3, steps=120, deadline_ms=EQUAL_RUN_DEADLINE_MS)
+    plan = _net_plan(tmp_path, hosts, epochs=3, steps=120, deadline_ms=LOCKSTEP_DEADLINE_MS)
     leader = _up(hosts, plan, tmp_path)
     assert _wait(leader, 180, tmp_path / "brain.log") == 0, (tmp_path / "brain.log").read_text()[-3000:]
     assert _missed(tmp_path / "brain") == 0
@@ -235,7 +235,7 @@ def test_split_over_two_hosts_learns_what_single_learns(hosts: Hosts, tmp_path: 
 @pytest.mark.parametrize("hosts", [["brain", "limbs", "tips"]], indirect=True)
 def test_three_hosts_relay_through_the_leader(hosts: Hosts, tmp_path: Path) -> None:
     """a3 on limbs and a4 on tips share no link: their messages go through the leader's router."""
-    plan = _net_plan(tmp_path, hosts, epochs=2, steps=120, deadline_ms=EQUAL_RUN_DEADLINE_MS)
+    plan = _net_plan(tmp_path, hosts, epochs=2, steps=120, deadline_ms=LOCKSTEP_DEADLINE_MS)
     text = plan.read_text().replace('actors = ["agents"]', 'actors = ["a2", "a3"]')
     plan.write_text(text + f'[[host]]\nname = "tips"\naddress = "{hosts.address("tips")}"\nactors = ["a4"]\n')
     hosts.spawn(
@@ -345,7 +345,7 @@ def test_clients_of_one_router_train(hosts: Hosts, tmp_path: Path) -> None:
     while "listening" not in (tmp_path / "hub.log").read_text():
         assert time.monotonic() < deadline, (tmp_path / "hub.log").read_text()
         time.sleep(0.1)
-    plan = _net_plan(tmp_path, hosts, epochs=3, steps=120, client=True, deadline_ms=EQUAL_RUN_DEADLINE_MS)
+    plan = _net_plan(tmp_path, hosts, epochs=3, steps=120, client=True, deadline_ms=LOCKSTEP_DEADLINE_MS)
     leader = _up(hosts, plan, tmp_path)
     assert _wait(leader, 180, tmp_path / "brain.log") == 0, (tmp_path / "brain.log").read_text()[-3000:]
     assert _missed(tmp_path / "brain") == 0

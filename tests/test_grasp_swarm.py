@@ -6,7 +6,7 @@ from __future__ import annotations
 import json
 
 import pytest
-from conftest import EXAMPLES, free_port, swarm_pids
+from conftest import EXAMPLES, LOCKSTEP_DEADLINE_MS, free_port, swarm_pids
 from kinswarm.actors.cli import main as cli_main
 
 pytestmark = pytest.mark.timeout(240)
@@ -17,6 +17,7 @@ GRASP3 = EXAMPLES / "grasp3.toml"
 def test_grasp_swarm_runs_in_processes(tmp_path):
     out = tmp_path / "g"
     args = ["run", str(GRASP3), "--placement", "process", "--epochs", "1", "--steps", "40", "--seed", "2"]
+    args += ["--deadline-ms", str(LOCKSTEP_DEADLINE_MS)]
     args += ["--listen", f"tcp/127.0.0.1:{free_port()}", "--out", str(out), "--no-progress"]
     assert cli_main(args) == 0
     summary = json.loads((out / "summary.json").read_text())

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 import zenoh
-from conftest import EQUAL_RUN_DEADLINE_MS, free_port, swarm_pids
+from conftest import LOCKSTEP_DEADLINE_MS, free_port, swarm_pids
 from kinswarm.actors.cli import main as cli_main
 from kinswarm.actors.config import RunConfig
 from kinswarm.actors.runtime import open_session
@@ -43,6 +43,8 @@ def test_single_run_leaves_its_files(tmp_path, chain4, endpoint):
             "2",
             "--steps",
             "60",
+            "--deadline-ms",
+            str(LOCKSTEP_DEADLINE_MS),
             "--listen",
             endpoint,
             "--out",
@@ -69,7 +71,7 @@ def test_single_run_leaves_its_files(tmp_path, chain4, endpoint):
 
 
 def test_process_and_single_give_the_same_run(tmp_path, chain4):
-    common = ["--epochs", "3", "--steps", "120", "--seed", "11", "--deadline-ms", str(EQUAL_RUN_DEADLINE_MS)]
+    common = ["--epochs", "3", "--steps", "120", "--seed", "11", "--deadline-ms", str(LOCKSTEP_DEADLINE_MS)]
     a = run(
         [
             "run",
@@ -113,6 +115,8 @@ def test_tree_runs_in_processes(tmp_path, tree5, endpoint):
             "2",
             "--steps",
             "50",
+            "--deadline-ms",
+            str(LOCKSTEP_DEADLINE_MS),
             "--listen",
             endpoint,
             "--out",
@@ -162,7 +166,7 @@ def _spam(run_id: str, connect: str, stop: threading.Event) -> int:
 
 def test_malformed_messages_are_rejected_and_the_run_goes_on(tmp_path, chain4):
     common = ["run", str(chain4), "--placement", "process", "--epochs", "3", "--steps", "100", "--seed", "5"]
-    common += ["--deadline-ms", str(EQUAL_RUN_DEADLINE_MS)]
+    common += ["--deadline-ms", str(LOCKSTEP_DEADLINE_MS)]
     clean = run(common + ["--out", str(tmp_path / "clean"), "--listen", f"tcp/127.0.0.1:{free_port()}"])
     port = free_port()
     stop = threading.Event()

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import EQUAL_RUN_DEADLINE_MS, free_port
+from conftest import LOCKSTEP_DEADLINE_MS, free_port
 from kinswarm.actors.cli import main as cli_main
 from kinswarm.actors.learning.learner import Learner
 from kinswarm.actors.learning.settings import LearnerSettings
@@ -62,7 +62,7 @@ def _run(topo: Path, placement: str, out: Path, epochs: int, steps: int) -> dict
         "--listen",
         f"tcp/127.0.0.1:{free_port()}",
         "--deadline-ms",
-        str(EQUAL_RUN_DEADLINE_MS),
+        str(LOCKSTEP_DEADLINE_MS),
         "--no-progress",
     ]
     assert cli_main(args) == 0
