@@ -16,9 +16,11 @@ from __future__ import annotations
 
 import asyncio
 import dataclasses
+import functools
 import hashlib
 import json
 import math
+import os
 import shutil
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -68,10 +70,19 @@ class Spec:
     # Not part of the identity: it changes nothing in the run.
     checkpoint: bool = False
 
-    def identity(self, with_epochs: bool = True) -> str:
+    def identity(self, with_epochs: bool = True, portable: bool = True) -> str:
+        """The run's hash. Portable: files by content and `from_dir` by its run's directory name, so a cache
+        serves any checkout and any --out (until 2026-11-22 absolute paths were hashed; find_cached still
+        recognises those runs)."""
         d = dataclasses.asdict(self)
         d.pop("name")
         d.pop("checkpoint")
+        if portable:
+            d["topology"] = _content(self.topology)
+            if self.scenario is not None:
+                d["scenario"] = _content(self.scenario)
+            if self.from_dir is not None:
+                d["from_dir"] = Path(self.from_dir).name  # itself "<name>-<identity>": portable
         if not d["successive"]:  # added later: the runs cached before it keep their identity
             d.pop("successive")
         if not with_epochs:
@@ -103,6 +114,20 @@ class Spec:
             learner=dict(self.learner),
             scenario=self.scenario,
         )
+
+
+def _content(path: str) -> str:
+    """A file by what it holds (a missing file by its path: the run will say what is wrong)."""
+    try:
+        st = os.stat(path)
+    except OSError:
+        return path
+    return _content_hash(os.path.realpath(path), st.st_mtime_ns, st.st_size)
+
+
+@functools.lru_cache(maxsize=256)
+def _content_hash(path: str, mtime_ns: int, size: int) -> str:
+    return "sha256:" + hashlib.sha256(Path(path).read_bytes()).hexdigest()[:16]
 
 
 def learner_overrides(**kw: Any) -> tuple[tuple[str, Any], ...]:
@@ -208,17 +233,39 @@ def find_cached(spec: Spec, runs: Path) -> Path | None:
         return None
     want = spec.identity(with_epochs=False)
     best: tuple[int, Path] | None = None
-    for d in runs.iterdir():
-        done = _finished(d) if d.is_dir() else None
-        if done is None or done["spec"].get("identity_wo_epochs") != want:
+    for name, (identity, epochs) in _index(runs).items():
+        if identity != want:
             continue
-        epochs = int(done["spec"]["epochs"])
         if epochs == spec.epochs or (epochs > spec.epochs and not spec.observe and not spec.checkpoint):
             if best is None or epochs < best[0]:
-                best = (epochs, d)
+                best = (epochs, runs / name)
     # absolute, like a fresh run's: a path that goes into another spec (`from_dir`) must not depend on how
     # --out was spelled, or that spec's identity would change between a fresh and a cached run
     return None if best is None else best[1].resolve()
+
+
+# runs directory -> {finished run's directory name: (identity without epochs, epochs)}; a finished run never changes
+_INDEX: dict[Path, dict[str, tuple[str, int]]] = {}
+
+
+def _index(runs: Path) -> dict[str, tuple[str, int]]:
+    known = _INDEX.setdefault(runs.resolve(), {})
+    for d in runs.iterdir():
+        if d.name not in known and d.is_dir() and (done := _finished(d)) is not None:
+            known[d.name] = (_identity_of(done["spec"]), int(done["spec"]["epochs"]))
+    return known
+
+
+def _identity_of(recorded: dict[str, Any]) -> str:
+    """A finished run's identity without epochs, as spec.json records it; for a run cached when identities hashed
+    absolute paths, today's identity of the spec it records."""
+    stored = recorded.get("identity_wo_epochs", "")
+    names = {f.name for f in dataclasses.fields(Spec)}
+    try:
+        old = Spec(**{k: v for k, v in recorded.items() if k in names})
+    except TypeError:  # not a spec this code knows
+        return stored
+    return old.identity(False) if stored == old.identity(False, portable=False) else stored
 
 
 def run_spec(spec: Spec, runs: Path) -> RunOutcome:

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import math
+import shutil
 from pathlib import Path
 
 import pytest
@@ -13,7 +14,7 @@ from kinswarm.experiments import EXPERIMENTS
 from kinswarm.experiments.common import mean_std, settled_epoch
 from kinswarm.experiments.cost import CentralisedFuzzyQ, eq13, eq15, measure_centralised
 from kinswarm.experiments.goals import halton, quadtree, training_order
-from kinswarm.experiments.swarm import Spec, run_spec
+from kinswarm.experiments.swarm import CHAIN4, Spec, find_cached, run_spec
 
 FIGURES = {
     "convergence": ["convergence.png"],
@@ -117,6 +118,48 @@ def test_run_cache_reuses_a_longer_run(tmp_path, monkeypatch):
     assert long.rows[1]["final_error"] != long.rows[0]["final_error"]  # a different goal per epoch
 
 
+@pytest.mark.timeout(90)
+def test_run_cache_serves_another_checkout_and_older_caches(tmp_path):
+    """A cached run is known by its files' content, not their paths: a copied checkout (another topology path) with
+    a copied cache (another --out) reuses it, a frozen evaluation `--from` it too; so does a cache written when
+    identities hashed absolute paths. An edited topology file is not served."""
+    a = tmp_path / "a"
+    a.mkdir()
+    (a / "chain4.toml").write_text(CHAIN4.read_text())
+    one = tmp_path / "one" / "runs"
+
+    def specs(topo: Path, from_dir: Path | None) -> tuple[Spec, Spec]:
+        train = Spec("c", epochs=1, steps=20, topology=str(topo), checkpoint=True)
+        frozen = Spec("f", epochs=1, steps=20, topology=str(topo), learn=False, explore=False, from_dir=str(from_dir))
+        return train, frozen
+
+    train = run_spec(specs(a / "chain4.toml", None)[0], one)
+    frozen = run_spec(specs(a / "chain4.toml", train.out)[1], one)
+
+    shutil.copytree(a, tmp_path / "b")
+    topo_b = tmp_path / "b" / "chain4.toml"
+    shutil.copytree(one, tmp_path / "two" / "runs")
+    two = tmp_path / "two" / "runs"
+    t2 = find_cached(specs(topo_b, None)[0], two)
+    assert t2 == (two / train.out.name).resolve()
+    assert find_cached(specs(topo_b, t2)[1], two) == (two / frozen.out.name).resolve()
+
+    shutil.copytree(two, tmp_path / "old" / "runs")  # as written before: identities of absolute paths
+    old = tmp_path / "old" / "runs"
+    for d in (train.out.name, frozen.out.name):
+        rec = json.loads((old / d / "spec.json").read_text())
+        fields = {k: v for k, v in rec.items() if k in Spec.__dataclass_fields__}
+        rec["identity_wo_epochs"] = Spec(**fields).identity(False, portable=False)
+        assert rec["identity_wo_epochs"] != Spec(**fields).identity(False)
+        (old / d / "spec.json").write_text(json.dumps(rec))
+    t3 = find_cached(specs(topo_b, None)[0], old)
+    assert t3 == (old / train.out.name).resolve()
+    assert find_cached(specs(topo_b, t3)[1], old) == (old / frozen.out.name).resolve()
+
+    topo_b.write_text(topo_b.read_text().replace("initial_deg = 10.0", "initial_deg = 11.0", 1))
+    assert find_cached(specs(topo_b, None)[0], two) is None
+
+
 @pytest.mark.slow
 @pytest.mark.timeout(4 * 3600)
 def test_all_experiments_full(tmp_path):
@@ -142,5 +185,6 @@ def test_frozen_runs_are_not_reused_from_before_the_counts_were_frozen():
 
     train = Spec("t", seed=0, epochs=2, steps=10)
     frozen = Spec("t", seed=0, epochs=2, steps=10, learn=False, explore=False)
-    assert train.identity() == identity_before(train)
-    assert frozen.identity() != identity_before(frozen)
+    # (identities hashed absolute paths then: portable=False)
+    assert train.identity(portable=False) == identity_before(train)
+    assert frozen.identity(portable=False) != identity_before(frozen)
