@@ -27,7 +27,17 @@ from kinswarm.protocol.messages import EpochDone
 from kinswarm.protocol.topology import Topology, TopologyError, load_topology
 
 log = logging.getLogger("kinswarm")
-EXPERIMENT_NAMES = ("convergence", "optimality", "generalisation", "robustness", "cost", "all", "corridor", "grasp")
+EXPERIMENT_NAMES = (
+    "convergence",
+    "optimality",
+    "generalisation",
+    "robustness",
+    "cost",
+    "all",
+    "ablations",
+    "corridor",
+    "grasp",
+)
 
 
 def _goal(text: str) -> tuple[float, float]:

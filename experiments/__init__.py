@@ -16,8 +16,9 @@ from .common import Context
 # `all` runs them in this order: optimality's long default-s runs are reused by convergence (their first
 # epochs) and robustness (the trained swarm).
 EXPERIMENTS = ("cost", "optimality", "convergence", "robustness", "generalisation")
-# Issue 6's tasks (§5.4, §5.5): run by name only, not by `all` (their own reports, their own cost)
-TASKS: tuple[str, ...] = ("corridor", "grasp")
+# Run by name only, not by `all` (their own reports, their own cost): the evidence for the learner the README
+# recommends for generalisation, and issue 6's tasks (§5.4, §5.5)
+BY_NAME: tuple[str, ...] = ("ablations", "corridor", "grasp")
 
 
 def run_experiment(
@@ -36,9 +37,9 @@ def run_experiment(
     if test_set < 0:
         raise ValueError(f"--test-set must be >= 0, got {test_set}")
     names = EXPERIMENTS if name == "all" else (name,)
-    unknown = [n for n in names if n not in EXPERIMENTS + TASKS]
+    unknown = [n for n in names if n not in EXPERIMENTS + BY_NAME]
     if unknown:
-        raise ValueError(f"unknown experiment {unknown[0]!r}; choose from {', '.join(EXPERIMENTS + TASKS)} or all")
+        raise ValueError(f"unknown experiment {unknown[0]!r}; choose from {', '.join(EXPERIMENTS + BY_NAME)} or all")
     out = Path(out)
     results: dict[str, Any] = {}
     for n in names:

@@ -13,6 +13,7 @@ an untrained swarm *learning* within one episode per test goal (not a generalisa
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -98,28 +99,54 @@ def stats(errors: list[float]) -> dict[str, float]:
     }
 
 
+@dataclass
+class Tested:
+    """Trained swarms and their frozen tests (train_and_test)."""
+
+    trainings: list[Training]
+    seeds_of: Callable[[Training], list[int]]
+    test_sets: dict[int, list[tuple[float, float]]]
+    train_steps: int
+    eval_steps: int
+    trained: dict[tuple[str, int], RunOutcome]
+    evals: dict[tuple[str, int, int], RunOutcome]
+    scratch: dict[tuple[int, int], RunOutcome]
+    references: dict[str, Any]
+    per: dict[str, Any]  # label -> test_set_K -> errors, per-seed stats, their mean and std over seeds
+    train_err: dict[str, list[float]]  # label -> per seed: mean final error over the last pass of training goals
+    runs: list[RunOutcome]  # every run once, for the report's run list
+
+    @property
+    def scratch_err(self) -> list[float]:
+        return [r.final_errors[-1] for r in self.scratch.values()]
+
+
 def run(ctx: Context) -> dict[str, Any]:
     q = ctx.quick
     levels = (1,) if q else LEVELS
+    control_epochs = REPS * 4**2  # Level-1's goals for Level-2's epochs
+    trainings = [
+        Training(f"Level-{L}", L, reps_for(L) * 4**L, LEARNER, min_seeds=L3_SEEDS if L == 3 else 0) for L in levels
+    ]
+    if q:
+        trainings = [Training("Level-1", 1, 4, LEARNER)]
+    else:
+        trainings.append(Training(f"Level-1, {control_epochs} epochs (control)", 1, control_epochs, LEARNER, False))
+        # §5.2 "successive on-line requests": the Level-3 swarm, each test goal from where the last one ended
+        trainings.append(Training("Level-3, successive test goals", 3, REPS * 4**3, LEARNER, False, True))
+    t = train_and_test(ctx, trainings, second_level=1 if q else 3, with_scratch=True)
+    return _report(ctx, t, levels)
+
+
+def train_and_test(ctx: Context, trainings: list[Training], second_level: int, with_scratch: bool) -> Tested:
+    """Train every row's swarms (one per seed), test each frozen on test set K (the sweep's rows from
+    `second_level` up on K+1 too), run the model-based references on the same goals, and, `with_scratch`,
+    the learning-on episodes from scratch."""
+    q = ctx.quick
     train_steps, eval_steps = (100, 100) if q else (500, EVAL_STEPS)
     n_test = 8 if q else TEST_SIZE
     k = ctx.test_set
     test_sets = {k: halton(k)[:n_test], k + 1: halton(k + 1)[:n_test]}
-    second_level = 1 if q else 3
-    control_epochs = None if q else REPS * 4**2  # Level-1's goals for Level-2's epochs
-
-    trainings = [
-        Training(f"Level-{L}", L, reps_for(L) * 4**L, LEARNER, min_seeds=L3_SEEDS if L == 3 else 0) for L in levels
-    ]
-    if control_epochs:
-        trainings.append(Training(f"Level-1, {control_epochs} epochs (control)", 1, control_epochs, LEARNER, False))
-        trainings.append(Training("Level-3, signed g3", 3, REPS * 4**3, SIGNED_G3, False, min_seeds=L3_SEEDS))
-        trainings.append(Training("Level-3, without g_perp", 3, REPS * 4**3, NO_G_PERP, False))
-        trainings.append(Training("Level-3, default learner", 3, REPS * 4**3, DEFAULT_LEARNER, False))
-        # §5.2 "successive on-line requests": the Level-3 swarm, each test goal from where the last one ended
-        trainings.append(Training("Level-3, successive test goals", 3, REPS * 4**3, LEARNER, False, True))
-    if q:
-        trainings = [Training("Level-1", 1, 4, LEARNER)]
 
     def seeds_of(t: Training) -> list[int]:
         return ctx.seed_list if q else list(range(max(ctx.seeds, t.min_seeds)))
@@ -173,7 +200,7 @@ def run(ctx: Context) -> dict[str, Any]:
             goals=(g,),
             learner=LEARNER,
         )
-        for seed in ctx.seed_list
+        for seed in (ctx.seed_list if with_scratch else ())
         for i, g in enumerate(test_sets[k][: 2 if q else SCRATCH_GOALS])
     }
     ref_specs = {
@@ -189,7 +216,7 @@ def run(ctx: Context) -> dict[str, Any]:
     }
     done = run_specs(ctx, [*eval_specs.values(), *scratch_specs.values(), *ref_specs.values()], "test")
     evals = dict(zip(eval_specs, done[: len(eval_specs)], strict=True))
-    scratch = dict(zip(scratch_specs, done[len(eval_specs) : len(eval_specs) + len(scratch_specs)], strict=True))
+    scratch_runs = dict(zip(scratch_specs, done[len(eval_specs) : len(eval_specs) + len(scratch_specs)], strict=True))
     refs = dict(zip(ref_specs, done[len(eval_specs) + len(scratch_specs) :], strict=True))
     references = {
         name: {
@@ -214,12 +241,33 @@ def run(ctx: Context) -> dict[str, Any]:
                 entry[key] = m
                 entry[f"{key}_std_over_seeds"] = s
             entry["pooled"] = stats([e for errs in entry["errors"] for e in errs])
-    scratch_err = [r.final_errors[-1] for r in scratch.values()]
     train_err = {
         t.label: [float(np.mean(trained[(t.label, s)].final_errors[-min(4**t.level, t.epochs) :])) for s in seeds_of(t)]
         for t in trainings
     }
 
+    return Tested(
+        trainings=trainings,
+        seeds_of=seeds_of,
+        test_sets=test_sets,
+        train_steps=train_steps,
+        eval_steps=eval_steps,
+        trained=trained,
+        evals=evals,
+        scratch=scratch_runs,
+        references=references,
+        per=per,
+        train_err=train_err,
+        runs=[*{r.out: r for r in trained.values()}.values(), *done],  # a shared training once
+    )
+
+
+def _report(ctx: Context, tested: Tested, levels: tuple[int, ...]) -> dict[str, Any]:
+    q, k = ctx.quick, ctx.test_set
+    trainings, per, seeds_of = tested.trainings, tested.per, tested.seeds_of
+    train_steps, eval_steps, test_sets = tested.train_steps, tested.eval_steps, tested.test_sets
+    scratch_err, references = tested.scratch_err, tested.references
+    n_test = len(test_sets[k])
     rep = Report(ctx, "Generalisation: quad-tree training goals, unseen Halton test goals", "5.2, Figs. 10-12")
     rep.results.update(
         {
@@ -238,7 +286,7 @@ def run(ctx: Context) -> dict[str, Any]:
             "train_steps": train_steps,
             "eval_steps": eval_steps,
             "per_level": per,
-            "training_final_error_last_pass": train_err,
+            "training_final_error_last_pass": tested.train_err,
             "learning_on_scratch": {"final_error": scratch_err, **stats(scratch_err)},
             "references": references,
             "paper": {f"Level-{lv}": {"mean": m, "std": s} for lv, (m, s) in PAPER.items()},
@@ -256,6 +304,44 @@ def run(ctx: Context) -> dict[str, Any]:
         f"mean, STD, median and the fraction within 0.5 over the {n_test} test goals, each then mean ± std over "
         "seeds.",
     )
+    table(rep, tested)
+    rep.text(
+        f"Learner: {LEARNER_TEXT} (the configuration the README recommends for generalisation; what each of its "
+        "parts buys: `kinswarm experiment ablations`, docs/results/ablations/report.md). Shaped reward. "
+        f"Level-3's rows run on at least {L3_SEEDS} seeds: with the signed-g3 learner, seeds 0-2 gave a mean of "
+        "0.233 and seeds 0-5 0.372. 'Successive test goals' tests the Level-3 swarms the "
+        'paper\'s way (§5.2: "successive on-line requests"): each test goal from where the last one ended, not '
+        "from the start configuration."
+    )
+    rep.text(
+        f"Learning on, from scratch (**not** a generalisation test): an untrained swarm given one "
+        f"{train_steps}-step learning episode per test goal ({len(scratch_err) // max(ctx.seeds, 1)} goals × "
+        f"{ctx.seeds} seeds) ends within 0.5 in {100 * frac_within(scratch_err):.0f} % of them (mean error "
+        f"{np.mean(scratch_err):.3f}, median {np.median(scratch_err):.3f})."
+    )
+    _references(rep, references, per, trainings[0].label if q else "Level-3", k)
+    _verdict(rep, per, trainings, k, q, references)
+    _figures(ctx, rep, trainings, per, tested.evals, test_sets, k, references)
+    rep.write(
+        {
+            "topology": "examples/chain4.toml",
+            "reward": "shaped (default)",
+            "learner": LEARNER_TEXT,
+            "reps_per_goal": REPS,
+            "train_steps": train_steps,
+            "eval_steps": eval_steps,
+            "test_set": k,
+            "test_goals": n_test,
+        },
+        tested.runs,
+    )
+    return rep.results
+
+
+def table(rep: Report, tested: Tested) -> None:
+    """One row per training and test set: the paper's numbers where they apply, ours as mean ± std over seeds."""
+    k = rep.ctx.test_set
+    per, seeds_of, eval_steps = tested.per, tested.seeds_of, tested.eval_steps
     header = [
         "training",
         "learner",
@@ -270,7 +356,7 @@ def run(ctx: Context) -> dict[str, Any]:
         f"mean at step {eval_steps // 2}",
     ]
     rows = []
-    for t in trainings:
+    for t in tested.trainings:
         for block, entry in sorted(per[t.label].items()):
             paper = PAPER.get(t.level) if "control" not in t.label and block == f"test_set_{k}" else None
             rows.append(
@@ -289,48 +375,6 @@ def run(ctx: Context) -> dict[str, Any]:
                 ]
             )
     rep.table(header, rows)
-    rep.text(
-        f"Learners: 'sweep' = {LEARNER_TEXT} (the configuration the README recommends for generalisation); "
-        f"'signed g3' = the sweep's learner with g3 signed ({G_PERP_TEXT}); 'no g_perp' = that without g_perp "
-        f"({COARSE_TEXT}); 'default' = the README's defaults "
-        "(n_sets 20/20/13/7/7/7, q in the state, no g_perp). All use the shaped reward. g_perp is the component "
-        "of goal − tip along the direction the agent's own joint moves the tip: a function of S_i (g1, g2, theta, "
-        "d), not new information, but with fine sets near 0 — g1 and g2's 5 sets over ±24 do not tell a tip 0.6 "
-        "from the goal from one at the goal. Unsigned g3 is |g3|: signed, a goal straight behind the tip (an arm "
-        "too long for a goal near it) falls on both ends of g3's range, +π and −π, which share no set. "
-        f"Level-3's rows run on at least {L3_SEEDS} seeds: with the signed-g3 learner, seeds 0-2 gave a mean of "
-        "0.233 and seeds 0-5 0.372. 'Successive test goals' tests the Level-3 swarms of the sweep the "
-        'paper\'s way (§5.2: "successive on-line requests"): each test goal from where the last one ended, not '
-        "from the start configuration."
-    )
-    rep.text(
-        f"Learning on, from scratch (**not** a generalisation test): an untrained swarm given one "
-        f"{train_steps}-step learning episode per test goal ({len(scratch_err) // max(ctx.seeds, 1)} goals × "
-        f"{ctx.seeds} seeds) ends within 0.5 in {100 * frac_within(scratch_err):.0f} % of them (mean error "
-        f"{np.mean(scratch_err):.3f}, median {np.median(scratch_err):.3f})."
-    )
-    _references(rep, references, per, trainings[0].label if q else "Level-3", k)
-    _verdict(rep, per, trainings, k, q, references)
-    _figures(ctx, rep, trainings, per, evals, trained, test_sets, k, references)
-    rep.write(
-        {
-            "topology": "examples/chain4.toml",
-            "reward": "shaped (default)",
-            "learner": {
-                "sweep": LEARNER_TEXT,
-                "signed g3": G_PERP_TEXT,
-                "no g_perp": COARSE_TEXT,
-                "default": "defaults",
-            },
-            "reps_per_goal": REPS,
-            "train_steps": train_steps,
-            "eval_steps": eval_steps,
-            "test_set": k,
-            "test_goals": n_test,
-        },
-        [*{r.out: r for r in trained.values()}.values(), *done],  # a shared training once
-    )
-    return rep.results
 
 
 def _references(rep: Report, references: dict, per: dict, swarm: str, k: int) -> None:
@@ -421,7 +465,6 @@ def _figures(
     trainings: list,
     per: dict,
     evals: dict[tuple[str, int, int], RunOutcome],
-    trained: dict,
     test_sets: dict,
     k: int,
     references: dict,
@@ -479,9 +522,14 @@ def _figures(
         fig, "error_map.png", "Fig. 11 analogue: error over the task space for the lowest and highest level"
     )
 
-    # Error distributions per level.
+    cdf(rep, [t.label for t in trainings], per, k, references)
+
+
+def cdf(rep: Report, labels: list[str], per: dict, k: int, references: dict) -> None:
+    """cdf.png: the test errors' distribution per training, the model-based references dashed."""
+    plt = plt_module()
     fig, ax = plt.subplots(figsize=(7, 3.8))
-    for i, label in enumerate(t.label for t in trainings):
+    for i, label in enumerate(labels):
         errs = np.sort(np.concatenate([np.asarray(e) for e in per[label][f"test_set_{k}"]["errors"]]))
         ax.plot(np.clip(errs, 1e-3, None), np.arange(1, len(errs) + 1) / len(errs), color=f"C{i}", label=label)
     for ls, (name, sets) in zip(("--", ":"), references.items(), strict=False):

@@ -22,6 +22,7 @@ FIGURES = {
     "generalisation": ["levels.png", "error_map.png", "cdf.png"],
     "robustness": ["tracking.png"],
     "cost": ["cost.png"],
+    "ablations": ["cdf.png"],
 }
 
 
@@ -65,6 +66,23 @@ def test_quick_experiment(quick_all, name):
         assert set(results["per_scenario"]["paper-locked"]) == {"frozen", "learning", "scratch", "baseline"}
     if name == "cost":
         assert results["centralised_limit_n"] == 4  # 2^24 rules per step: refused, never allocated
+
+
+@pytest.mark.timeout(300)
+def test_quick_ablations(tmp_path):
+    """Run by name only (not by `all`): every learner's row, on the same test goals as the references."""
+    assert kinswarm(["experiment", "ablations", "--quick", "--seeds", "1", "--out", str(tmp_path)]) == 0
+    results = _check_report(tmp_path, "ablations")
+    assert list(results["per_row"]) == [
+        "Level-1",
+        "Level-1, signed g3",
+        "Level-1, without g_perp",
+        "Level-1, default learner",
+    ]
+    for row in results["per_row"].values():
+        assert set(row) == {"test_set_0"} and len(row["test_set_0"]["errors"][0]) == 8
+    assert len({json.dumps(r["learner"], sort_keys=True) for r in results["rows"].values()}) == 4
+    assert not (tmp_path / "generalisation").exists()
 
 
 def test_unknown_experiment_is_refused(capsys):
