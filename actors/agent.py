@@ -45,7 +45,7 @@ from kinswarm.actors.learning.reward import (
     reach_reward,
 )
 from kinswarm.actors.learning.settings import LearnerSettings
-from kinswarm.actors.learning.state import agent_state, joint_frame, link_end
+from kinswarm.actors.learning.state import agent_state, joint_frame, link_end, moves_to_goal
 from kinswarm.actors.runtime import Node
 from kinswarm.protocol.messages import Bye, Checkpoint, Cmd, Down, Event, Fault, Obs, Saved, Stop, Task, Up
 from kinswarm.protocol.topology import Topology
@@ -473,6 +473,8 @@ class Agent:
                 local = dict(self.sense_now)
                 if "g_perp" in self.extra_state:  # the goal along my joint's motion of the tip (grasp "goal")
                     local["g_perp"] = goal_along_motion(cur.frame, tip, cur.goal)
+                if "g_moves" in self.extra_state:  # the same in my own moves (state.moves_to_goal)
+                    local["g_moves"] = moves_to_goal(cur.frame, tip, cur.goal, self.cfg.action_rad)
                 s = np.concatenate([s, [local.get(n, 0.0) for n in self.extra_state]])
             avoid = None
             if cur.sense[1] and self.learner.settings.collision_tabu:  # my last move was refused: not again

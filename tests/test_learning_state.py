@@ -4,7 +4,7 @@ import math
 
 import numpy as np
 import pytest
-from kinswarm.actors.learning import agent_state, joint_frame, link_end
+from kinswarm.actors.learning import agent_state, joint_frame, link_end, moves_to_goal
 
 
 def test_joint_frame_and_link_end():
@@ -54,3 +54,15 @@ def test_g3_unsigned_needs_a_range_from_zero():
         LearnerSettings(g3="both")
     r = LearnerSettings().ranges
     assert LearnerSettings(g3="unsigned", ranges=(*r[:5], (0.0, math.pi))).g3 == "unsigned"
+
+
+def test_moves_to_goal_counts_the_goal_in_own_moves():
+    """g_perp over the tip's shift by one own move, log-compressed: the same number for every joint."""
+    one = math.radians(1.0)
+    near, far = (0.0, 0.0, 0.0), (0.0, 0.0, 0.7)  # joint frames; tips 3 and 12 away
+    assert moves_to_goal(near, (3.0, 0.0), (3.0, 3.0 * one), one) == pytest.approx(math.log(2.0))  # one move ahead
+    assert moves_to_goal(far, (0.0, 12.0), (12.0 * one, 12.0), one) == pytest.approx(-math.log(2.0))  # one behind
+    assert moves_to_goal(near, (3.0, 0.0), (3.5, 0.0), one) == 0.0  # straight out: no move of mine helps
+    assert moves_to_goal(near, (0.0, 0.0), (1.0, 1.0), one) == 0.0  # tip on the joint
+    x = 0.1 / (3.0 * one)
+    assert moves_to_goal(near, (3.0, 0.0), (2.0, 0.1), one) == pytest.approx(math.log1p(x))

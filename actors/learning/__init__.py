@@ -6,7 +6,7 @@ from .learner import Learner
 from .qlearning import SparseFuzzyQ
 from .reward import REWARD_MODES, reach_reward
 from .settings import STATE_NAMES, LearnerSettings
-from .state import agent_state, joint_frame, link_end
+from .state import agent_state, joint_frame, link_end, moves_to_goal
 
 __all__ = [
     "REWARD_MODES",
@@ -22,6 +22,7 @@ __all__ = [
     "joint_frame",
     "link_end",
     "memberships_1d",
+    "moves_to_goal",
     "probabilities",
     "reach_reward",
     "select_action",

@@ -51,7 +51,8 @@ class LearnerSettings:
         extra_state, extra_sets, extra_ranges: named state variables appended to S_i (after the scene
             variables below), read from the agent's `sense` (its own Obs.sense and the Down.sense from its
             parent), with their membership sets and ranges; "g_perp" is computed by the agent itself (the goal's
-            component along the direction its own joint moves the tip). Empty by default; set per agent from
+            component along the direction its own joint moves the tip), and so is "g_moves" (the same counted in
+            the tip's shift by one own move, log-compressed: state.moves_to_goal). Empty by default; set per agent from
             `grasp_state` in a grasp scene (actors/learning/grasp.py, grasp_learner_settings); the generalisation
             experiment's learner adds g_perp for reaching (experiments/generalisation.py).
         grasp_state: the finger agents' state in a grasp scene (paper §5.5): "reach" = the paper's S_i

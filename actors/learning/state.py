@@ -52,3 +52,16 @@ def agent_state(
     if g3_unsigned:
         g3 = abs(g3)
     return np.array([q, theta, d, g1, g2, g3])
+
+
+def moves_to_goal(frame: Sequence[float], tip: Sequence[float], goal: Sequence[float], move_rad: float) -> float:
+    """g_moves: the goal's component along the direction this agent's joint moves the tip (g_perp), counted in
+    the tip's displacement by one own move (|joint -> tip| * move_rad) and log-compressed, sign(x) ln(1 + |x|).
+    |x| < 0.5, i.e. |g_moves| < 0.41: one move overshoots by more than it gains. The same for every joint,
+    where g_perp's scale is not: one 1-degree move shifts the tip 0.21 from the base of chain4, 0.05 from a4."""
+    rx, ry = tip[0] - frame[0], tip[1] - frame[1]
+    r2 = rx * rx + ry * ry
+    if r2 == 0.0:
+        return 0.0
+    x = ((goal[0] - tip[0]) * -ry + (goal[1] - tip[1]) * rx) / (r2 * move_rad)  # g_perp / (r * move_rad)
+    return math.copysign(math.log1p(abs(x)), x)
