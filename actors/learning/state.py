@@ -58,7 +58,10 @@ def moves_to_goal(frame: Sequence[float], tip: Sequence[float], goal: Sequence[f
     """g_moves: the goal's component along the direction this agent's joint moves the tip (g_perp), counted in
     the tip's displacement by one own move (|joint -> tip| * move_rad) and log-compressed, sign(x) ln(1 + |x|).
     |x| < 0.5, i.e. |g_moves| < 0.41: one move overshoots by more than it gains. The same for every joint,
-    where g_perp's scale is not: one 1-degree move shifts the tip 0.21 from the base of chain4, 0.05 from a4."""
+    where g_perp's scale is not: one 1-degree move shifts the tip 0.21 from the base of chain4, 0.05 from a4.
+    Measured at Level-3 (generalisation's protocol, 6 seeds, test sets 0 / 1; 2026-11-22): in place of g_perp
+    (9 sets over +-3.5) 0.314 / 0.312, beside it 0.297 / 0.308, against g_perp alone 0.268 / 0.279. It lowers the
+    error on reached goals (0.098 -> 0.077) but misses more: not in the recommended learner."""
     rx, ry = tip[0] - frame[0], tip[1] - frame[1]
     r2 = rx * rx + ry * ry
     if r2 == 0.0:
