@@ -35,7 +35,7 @@ from pathlib import Path
 import numpy as np
 from kinswarm.actors.checkpoint import CheckpointError, digest, load_checkpoint, load_latest, save_checkpoint
 from kinswarm.actors.config import RunConfig
-from kinswarm.actors.learning.grasp import GraspReward, goal_along_motion, grasp_learner_settings
+from kinswarm.actors.learning.grasp import GraspReward, grasp_learner_settings
 from kinswarm.actors.learning.learner import Learner
 from kinswarm.actors.learning.reward import (
     corridor_reward,
@@ -45,7 +45,7 @@ from kinswarm.actors.learning.reward import (
     reach_reward,
 )
 from kinswarm.actors.learning.settings import LearnerSettings
-from kinswarm.actors.learning.state import agent_state, joint_frame, link_end, moves_to_goal
+from kinswarm.actors.learning.state import agent_state, goal_along_motion, joint_frame, link_end, moves_to_goal
 from kinswarm.actors.runtime import Node
 from kinswarm.protocol.messages import Bye, Checkpoint, Cmd, Down, Event, Fault, Obs, Saved, Stop, Task, Up
 from kinswarm.protocol.topology import Topology

@@ -22,22 +22,13 @@ from kinswarm.actors.config import PLACEMENTS, REWARDS, ConfigError, RunConfig
 from kinswarm.actors.learning.grasp import scene_reward_problem
 from kinswarm.actors.plan import Plan, PlanError, load_plan, local_plan
 from kinswarm.actors.runtime import DEFAULT_LISTEN, NetSpec, open_session, setup_logging
+from kinswarm.experiments import BY_NAME, EXPERIMENTS
 from kinswarm.protocol.faults import FAULTS
 from kinswarm.protocol.messages import EpochDone
 from kinswarm.protocol.topology import Topology, TopologyError, load_topology
 
 log = logging.getLogger("kinswarm")
-EXPERIMENT_NAMES = (
-    "convergence",
-    "optimality",
-    "generalisation",
-    "robustness",
-    "cost",
-    "all",
-    "ablations",
-    "corridor",
-    "grasp",
-)
+EXPERIMENT_NAMES = (*EXPERIMENTS, "all", *BY_NAME)
 
 
 def _goal(text: str) -> tuple[float, float]:

@@ -11,8 +11,6 @@ import time
 from pathlib import Path
 from typing import Any
 
-from .common import Context
-
 # `all` runs them in this order: optimality's long default-s runs are reused by convergence (their first
 # epochs) and robustness (the trained swarm).
 EXPERIMENTS = ("cost", "optimality", "convergence", "robustness", "generalisation")
@@ -40,6 +38,8 @@ def run_experiment(
     unknown = [n for n in names if n not in EXPERIMENTS + BY_NAME]
     if unknown:
         raise ValueError(f"unknown experiment {unknown[0]!r}; choose from {', '.join(EXPERIMENTS + BY_NAME)} or all")
+    from .common import Context  # here: the CLI imports the names above without the experiments' machinery
+
     out = Path(out)
     results: dict[str, Any] = {}
     for n in names:

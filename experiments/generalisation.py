@@ -46,7 +46,7 @@ _R = LearnerSettings().ranges
 COARSE = {"n_sets": (2, 8, 6, 5, 5, 5), "ranges": ((-1000.0, 1000.0), *_R[1:])}
 COARSE_TEXT = "n_sets (2, 8, 6, 5, 5, 5) with q over ±1000 rad (q out of the state)"
 # The sweep's learner adds g_perp, the component of goal - tip along the direction the agent's own joint moves the
-# tip (agent.py, grasp.goal_along_motion), with 7 fine sets over ±1.5: g1 and g2 (5 sets over ±24) cannot tell a
+# tip (agent.py, state.goal_along_motion), with 7 fine sets over ±1.5: g1 and g2 (5 sets over ±24) cannot tell a
 # tip 0.6 from the goal from one at the goal, so frozen swarms stopped short or overshot. Measured on Level-3 (2
 # epochs per goal, seeds 0-2, 100 test goals): mean 0.446 -> 0.243, within 0.5 85 % -> 92 %.
 G_PERP = {"extra_state": ("g_perp",), "extra_sets": (7,), "extra_ranges": ((-1.5, 1.5),)}

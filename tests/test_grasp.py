@@ -14,11 +14,11 @@ from kinswarm.actors.learning.grasp import (
     balance_targets,
     contact_goals,
     eq12,
-    goal_along_motion,
     grasp_learner_settings,
     grip_forces,
     scene_reward_problem,
 )
+from kinswarm.actors.learning.state import goal_along_motion
 from kinswarm.protocol.topology import ObjectSpec, TopologyError, load_topology, parse_topology
 from kinswarm.sim.contact import ContactModel, ContactReading, net_wrench
 

@@ -288,16 +288,6 @@ def _in_front(tip: Sequence[float], point: Vec, normal: Vec, center: Vec, half_e
     return outside and along < (half_extents[1] if abs(nx) > abs(ny) else half_extents[0])
 
 
-def goal_along_motion(frame: Sequence[float], tip: Sequence[float], goal: Sequence[float]) -> float:
-    """g_perp: the component of goal - tip along the direction this agent's joint moves the tip (z x
-    (tip - joint), unit): > 0 means increasing the joint angle brings the tip towards the goal."""
-    rx, ry = tip[0] - frame[0], tip[1] - frame[1]
-    r = math.hypot(rx, ry)
-    if r == 0.0:
-        return 0.0
-    return ((goal[0] - tip[0]) * -ry + (goal[1] - tip[1]) * rx) / r
-
-
 class GraspReward:
     """The grasp agent's reward, goals and per-finger context, one call per step (it keeps t-1)."""
 
