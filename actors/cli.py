@@ -21,7 +21,7 @@ from kinswarm.actors.checkpoint import CheckpointError, load_checkpoint
 from kinswarm.actors.config import PLACEMENTS, REWARDS, ConfigError, RunConfig
 from kinswarm.actors.learning.grasp import scene_reward_problem
 from kinswarm.actors.plan import Plan, PlanError, load_plan, local_plan
-from kinswarm.actors.runtime import DEFAULT_LISTEN, NetSpec, open_session, setup_logging
+from kinswarm.actors.runtime import DEFAULT_LISTEN, LEASE_MS, NetSpec, open_session, setup_logging
 from kinswarm.experiments import BY_NAME, EXPERIMENTS
 from kinswarm.protocol.faults import FAULTS
 from kinswarm.protocol.messages import EpochDone
@@ -87,6 +87,14 @@ def _add_common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--listen", default=DEFAULT_LISTEN, help=f"the supervisor's endpoint (default {DEFAULT_LISTEN})")
     p.add_argument("--out", type=Path, default=None, help="run directory (default runs/<run-id>)")
     p.add_argument("--deadline-ms", type=int, default=500, help="per-step deadline; a missing cmd holds")
+    p.add_argument(
+        "--lease-ms",
+        type=int,
+        default=LEASE_MS,
+        help=f"how long a silent Zenoh peer still counts as present (default {LEASE_MS}). On an overloaded or "
+        "shared machine a starved actor can miss it and count as down for a moment (its joint holds); a longer "
+        "lease rides that out, at the price of noticing a frozen actor that much later",
+    )
     p.add_argument("--scenario", type=Path, default=None, help="a TOML timeline of faults (e.g. scenarios/*.toml)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--log-level", default="WARNING")
@@ -229,6 +237,7 @@ def _up(a: argparse.Namespace) -> tuple[dict, RunConfig]:
         listen=plan.hosts[a.host].listen,
         out=a.out,
         deadline_ms=a.deadline_ms if a.deadline_ms is not None else r.get("deadline_ms", 500),
+        lease_ms=plan.lease_ms,
         scenario=a.scenario or (Path(r["scenario"]) if "scenario" in r else None),
         learn=True,
         explore=True,
@@ -236,7 +245,7 @@ def _up(a: argparse.Namespace) -> tuple[dict, RunConfig]:
     )
     cfg, topo = _resolve(ns, "agents")
     if len(plan.hosts) > 1:  # the sim holds its steps while one of them is silent
-        cfg = dataclasses.replace(cfg, hosts=list(plan.hosts), lease_ms=plan.lease_ms)
+        cfg = dataclasses.replace(cfg, hosts=list(plan.hosts))
     print(f"kinswarm: host {a.host} leads run {cfg.run_id} of plan {plan.name} -> {cfg.out}", flush=True)
     return run_swarm(cfg, topo, progress=progress, plan=plan, host=a.host, wait_s=a.wait), cfg
 
@@ -282,6 +291,7 @@ def _resolve(a: argparse.Namespace, controller: str) -> tuple[RunConfig, Topolog
         explore=getattr(a, "explore", False),
         successive=getattr(a, "successive", False),
         deadline_ms=a.deadline_ms,
+        lease_ms=a.lease_ms,
         checkpoint_every=getattr(a, "checkpoint_every", 0),
         controller=controller,
         scenario=str(a.scenario.resolve()) if a.scenario else None,
@@ -416,7 +426,7 @@ def run_swarm(
 ) -> dict:
     """Run one swarm (or, with a deploy plan, one host's share of it) to the end and return its summary
     (used by the CLI, experiments and tests). Without a plan: the one-host plan (`kinswarm run`)."""
-    plan = plan if plan is not None else local_plan(cfg.listen)
+    plan = plan if plan is not None else local_plan(cfg.listen, cfg.lease_ms)
     host = host if host is not None else plan.leader
     out = Path(cfg.out)
     out.mkdir(parents=True, exist_ok=True)

@@ -64,6 +64,8 @@ class RunConfig:
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or v < lo:
                 raise ConfigError(f"{name}: expected an integer >= {lo}, got {v!r}")
+        if self.lease_ms > 60_000:
+            raise ConfigError(f"lease_ms: expected at most 60000, got {self.lease_ms}")
         if self.reward not in REWARDS:
             raise ConfigError(f"reward: {self.reward!r} is not one of {', '.join(REWARDS)}")
         if self.placement not in PLACEMENTS:

@@ -245,10 +245,10 @@ def dictionary_file(credentials: str | Path, users: dict[str, str]) -> str:
 
 
 # -- loading -----------------------------------------------------------------------------------------
-def local_plan(listen: str) -> Plan:
+def local_plan(listen: str, lease_ms: int = LEASE_MS) -> Plan:
     """The embedded default (deploy/local.toml): one host, every actor on it, peers on loopback."""
     host = Host(name="local", address="127.0.0.1", listen=listen, actors=("sim", "agents"))
-    return Plan(source="(local)", name="local", leader="local", hosts={"local": host})
+    return Plan(source="(local)", name="local", leader="local", hosts={"local": host}, lease_ms=lease_ms)
 
 
 def load_plan(path: str | Path) -> Plan:

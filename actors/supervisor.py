@@ -272,7 +272,7 @@ class Supervisor:
         self.on_epoch = on_epoch
         self.expected = actors_of(cfg, topo)
         # Several hosts: this supervisor spawns and restarts its host's share; the leader also trains.
-        self.plan = plan if plan is not None else local_plan(cfg.listen)
+        self.plan = plan if plan is not None else local_plan(cfg.listen, cfg.lease_ms)
         self.host = host if host is not None else self.plan.leader
         self.lead = self.host == self.plan.leader
         self.multi = len(self.plan.hosts) > 1

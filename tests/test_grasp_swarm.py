@@ -6,7 +6,7 @@ from __future__ import annotations
 import json
 
 import pytest
-from conftest import EXAMPLES, LOCKSTEP_DEADLINE_MS, free_port, swarm_pids
+from conftest import EXAMPLES, LOCKSTEP_ARGS, LOCKSTEP_LEASE_MS, free_port, swarm_pids
 from kinswarm.actors.cli import main as cli_main
 
 pytestmark = pytest.mark.timeout(240)
@@ -17,10 +17,13 @@ GRASP3 = EXAMPLES / "grasp3.toml"
 def test_grasp_swarm_runs_in_processes(tmp_path):
     out = tmp_path / "g"
     args = ["run", str(GRASP3), "--placement", "process", "--epochs", "1", "--steps", "40", "--seed", "2"]
-    args += ["--deadline-ms", str(LOCKSTEP_DEADLINE_MS)]
+    args += LOCKSTEP_ARGS
     args += ["--listen", f"tcp/127.0.0.1:{free_port()}", "--out", str(out), "--no-progress"]
-    assert cli_main(args) == 0
+    rc = cli_main(args)
     summary = json.loads((out / "summary.json").read_text())
+    assert rc == 0, summary.get("error")
+    # every actor's session carries the test's lease (the flag reaches the processes it spawns)
+    assert {json.loads(f.read_text())["lease_ms"] for f in (out / "net").glob("*.json")} == {LOCKSTEP_LEASE_MS}
     assert summary["missed_cmds"] == 0 and len(summary["final_error"]) == 1
     assert sorted(p.stem for p in (out / "agents").glob("*.npz")) == sorted(
         f"f{i}_{j}" for i in (1, 2, 3) for j in (1, 2, 3, 4)

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 import zenoh
-from conftest import LOCKSTEP_DEADLINE_MS, free_port, swarm_pids
+from conftest import LOCKSTEP_ARGS, free_port, swarm_pids
 from kinswarm.actors.cli import main as cli_main
 from kinswarm.actors.config import RunConfig
 from kinswarm.actors.runtime import open_session
@@ -43,8 +43,7 @@ def test_single_run_leaves_its_files(tmp_path, chain4, endpoint):
             "2",
             "--steps",
             "60",
-            "--deadline-ms",
-            str(LOCKSTEP_DEADLINE_MS),
+            *LOCKSTEP_ARGS,
             "--listen",
             endpoint,
             "--out",
@@ -71,7 +70,7 @@ def test_single_run_leaves_its_files(tmp_path, chain4, endpoint):
 
 
 def test_process_and_single_give_the_same_run(tmp_path, chain4):
-    common = ["--epochs", "3", "--steps", "120", "--seed", "11", "--deadline-ms", str(LOCKSTEP_DEADLINE_MS)]
+    common = ["--epochs", "3", "--steps", "120", "--seed", "11", *LOCKSTEP_ARGS]
     a = run(
         [
             "run",
@@ -115,8 +114,7 @@ def test_tree_runs_in_processes(tmp_path, tree5, endpoint):
             "2",
             "--steps",
             "50",
-            "--deadline-ms",
-            str(LOCKSTEP_DEADLINE_MS),
+            *LOCKSTEP_ARGS,
             "--listen",
             endpoint,
             "--out",
@@ -166,7 +164,7 @@ def _spam(run_id: str, connect: str, stop: threading.Event) -> int:
 
 def test_malformed_messages_are_rejected_and_the_run_goes_on(tmp_path, chain4):
     common = ["run", str(chain4), "--placement", "process", "--epochs", "3", "--steps", "100", "--seed", "5"]
-    common += ["--deadline-ms", str(LOCKSTEP_DEADLINE_MS)]
+    common += LOCKSTEP_ARGS
     clean = run(common + ["--out", str(tmp_path / "clean"), "--listen", f"tcp/127.0.0.1:{free_port()}"])
     port = free_port()
     stop = threading.Event()
@@ -362,6 +360,13 @@ def test_bad_topology_is_a_clear_error(tmp_path, capsys):
     assert cli_main(["run", str(p), "--no-progress"]) == 2
     err = capsys.readouterr().err
     assert "t.toml" in err and "agent[0].link_length" in err
+
+
+@pytest.mark.parametrize(("lease", "why"), [("50", "lease_ms: expected an integer >= 100"), ("90000", "at most 60000")])
+def test_bad_lease_is_a_clear_error(tmp_path, chain4, capsys, lease, why):
+    assert cli_main(["run", str(chain4), "--lease-ms", lease, "--out", str(tmp_path / "x"), "--no-progress"]) == 2
+    assert why in capsys.readouterr().err
+    assert not (tmp_path / "x").exists()
 
 
 def test_config_round_trip(tmp_path):

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import LOCKSTEP_DEADLINE_MS, free_port
+from conftest import LOCKSTEP_ARGS, free_port
 from kinswarm.actors.cli import main as cli_main
 from kinswarm.actors.learning.learner import Learner
 from kinswarm.actors.learning.settings import LearnerSettings
@@ -61,8 +61,7 @@ def _run(topo: Path, placement: str, out: Path, epochs: int, steps: int) -> dict
         str(out),
         "--listen",
         f"tcp/127.0.0.1:{free_port()}",
-        "--deadline-ms",
-        str(LOCKSTEP_DEADLINE_MS),
+        *LOCKSTEP_ARGS,
         "--no-progress",
     ]
     assert cli_main(args) == 0
