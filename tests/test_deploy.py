@@ -26,13 +26,14 @@ from kinswarm.actors.runtime import NetSpec
 from kinswarm.protocol.topology import load_topology
 
 sys.path.insert(0, str(Path(__file__).parent))
-from conftest import LOCKSTEP_DEADLINE_MS  # noqa: E402
+from conftest import LOCKSTEP_DEADLINE_MS, LOCKSTEP_LEASE_MS  # noqa: E402
 from netns import Hosts, NetnsUnavailable  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 CHAIN4 = ROOT / "examples" / "chain4.toml"
 KINSWARM = [sys.executable, "-m", "kinswarm.actors.cli"]
 PROBE = [sys.executable, str(Path(__file__).parent / "netns_probe.py")]
+LOCKSTEP = {"deadline_ms": LOCKSTEP_DEADLINE_MS, "lease_ms": LOCKSTEP_LEASE_MS}  # conftest: exact comparisons
 
 
 # -- plans -------------------------------------------------------------------------------------------
@@ -156,8 +157,11 @@ def _net_plan(
     extra: str = "",
     client: bool = False,
     deadline_ms: int = RunConfig.deadline_ms,
+    lease_ms: int | None = None,
 ) -> Path:
-    zenoh = f'[zenoh]\nmode = "client"\nrouters = ["tcp/{h.address("hub")}:7447"]\n' if client else ""
+    lines = ['mode = "client"', f'routers = ["tcp/{h.address("hub")}:7447"]'] if client else []
+    lines += [f"lease_ms = {lease_ms}"] if lease_ms is not None else []
+    zenoh = "[zenoh]\n" + "".join(f"{line}\n" for line in lines) if lines else ""
     text = f"""
 [plan]
 name = "nst"
@@ -222,7 +226,7 @@ def _single(tmp_path: Path, epochs: int, steps: int) -> list[float]:
 
 @pytest.mark.timeout(240)
 def test_split_over_two_hosts_learns_what_single_learns(hosts: Hosts, tmp_path: Path) -> None:
-    plan = _net_plan(tmp_path, hosts, epochs=3, steps=120, deadline_ms=LOCKSTEP_DEADLINE_MS)
+    plan = _net_plan(tmp_path, hosts, epochs=3, steps=120, **LOCKSTEP)
     leader = _up(hosts, plan, tmp_path)
     assert _wait(leader, 180, tmp_path / "brain.log") == 0, (tmp_path / "brain.log").read_text()[-3000:]
     assert _missed(tmp_path / "brain") == 0
@@ -235,7 +239,7 @@ def test_split_over_two_hosts_learns_what_single_learns(hosts: Hosts, tmp_path: 
 @pytest.mark.parametrize("hosts", [["brain", "limbs", "tips"]], indirect=True)
 def test_three_hosts_relay_through_the_leader(hosts: Hosts, tmp_path: Path) -> None:
     """a3 on limbs and a4 on tips share no link: their messages go through the leader's router."""
-    plan = _net_plan(tmp_path, hosts, epochs=2, steps=120, deadline_ms=LOCKSTEP_DEADLINE_MS)
+    plan = _net_plan(tmp_path, hosts, epochs=2, steps=120, **LOCKSTEP)
     text = plan.read_text().replace('actors = ["agents"]', 'actors = ["a2", "a3"]')
     plan.write_text(text + f'[[host]]\nname = "tips"\naddress = "{hosts.address("tips")}"\nactors = ["a4"]\n')
     hosts.spawn(
@@ -345,7 +349,7 @@ def test_clients_of_one_router_train(hosts: Hosts, tmp_path: Path) -> None:
     while "listening" not in (tmp_path / "hub.log").read_text():
         assert time.monotonic() < deadline, (tmp_path / "hub.log").read_text()
         time.sleep(0.1)
-    plan = _net_plan(tmp_path, hosts, epochs=3, steps=120, client=True, deadline_ms=LOCKSTEP_DEADLINE_MS)
+    plan = _net_plan(tmp_path, hosts, epochs=3, steps=120, client=True, **LOCKSTEP)
     leader = _up(hosts, plan, tmp_path)
     assert _wait(leader, 180, tmp_path / "brain.log") == 0, (tmp_path / "brain.log").read_text()[-3000:]
     assert _missed(tmp_path / "brain") == 0
