@@ -410,6 +410,7 @@ async def _supervise(
                 "rejected_messages": result.rejected,
                 "rejected_by_actor": result.rejected_by,
                 "restarts": result.restarts,
+                "tokens_lost": result.tokens_lost,
             },
         )
         write_plots(out)
@@ -523,6 +524,12 @@ def main(argv: list[str] | None = None) -> int:
         print(
             f"{cfg.run_id}: {len(fe)} epochs, final error {fe[-1]:.3f} (last {len(last)}: {within} within 0.5), "
             f"{summary['steps_per_second']:.0f} steps/s, {summary['wall_seconds']:.1f} s -> {cfg.out}"
+        )
+    if lost := sum(summary.get("tokens_lost", {}).values()):
+        print(
+            f"kinswarm: {lost} liveliness token(s) went away while training (events.jsonl): a fault, or an actor "
+            f"starved past the {cfg.lease_ms} ms lease (--lease-ms); such a run can differ from an undisturbed one",
+            file=sys.stderr,
         )
     if summary.get("error"):
         print(f"kinswarm: the run failed: {summary['error']}", file=sys.stderr)

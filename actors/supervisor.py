@@ -237,6 +237,8 @@ class RunResult:
     rejected: int = 0  # messages every actor refused (from their Bye) plus the supervisor's own
     rejected_by: dict[str, int] = field(default_factory=dict)
     restarts: dict[str, int] = field(default_factory=dict)
+    # liveliness tokens gone while training, by actor: a kill, a freeze, or a process starved past the lease
+    tokens_lost: dict[str, int] = field(default_factory=dict)
 
 
 @dataclass
@@ -423,6 +425,8 @@ class Supervisor:
             self.alive.discard(actor)
         if self.training and actor[0] != "supervisor":
             self._event("alive" if up else "lost", actor[1], "liveliness token " + ("back" if up else "gone"))
+            if not up:
+                self.result.tokens_lost[actor[1]] = self.result.tokens_lost.get(actor[1], 0) + 1
 
     async def _wait_alive(self, expected: list[ActorId], timeout: float, what: str = "") -> None:
         deadline = time.monotonic() + timeout

@@ -80,6 +80,7 @@ def test_kill_each_agent_in_turn_restarts_it_from_its_checkpoint(tmp_path, chain
         time.sleep(2.5)
     code, text = run.finish()
     assert code == 0, text
+    assert "liveliness token(s) went away while training" in text  # the command tells what summary.json counts
     ev = run.events()
     for agent in ("a1", "a2", "a3", "a4"):
         mine = [e for e in ev if e["target"] == agent]
@@ -95,6 +96,7 @@ def test_kill_each_agent_in_turn_restarts_it_from_its_checkpoint(tmp_path, chain
     # the freeze test below checks it)
     s = run.summary()
     assert len(s["final_error"]) == 20 and s["restarts"] == {"a1": 1, "a2": 1, "a3": 1, "a4": 1}
+    assert all(s["tokens_lost"].get(a, 0) >= 1 for a in ("a1", "a2", "a3", "a4")), s["tokens_lost"]
     assert swarm_pids(str(run.out)) == []
 
 
