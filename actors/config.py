@@ -17,6 +17,7 @@ from kinswarm.protocol.topology import Topology, load_topology
 
 REWARDS = ("paper", "strict", "shaped", "contact", "global", "force")  # contact, global, force: grasp scenes only
 PLACEMENTS = ("process", "single")
+LEASE_RANGE_MS = (100, 60_000)  # the Zenoh leases accepted: --lease-ms and a plan's [zenoh] lease_ms
 CONTROLLERS = ("agents", "baseline", "greedy")  # the learning agents, or a model-based law (sim/controller.py)
 
 
@@ -59,13 +60,13 @@ class RunConfig:
     def __post_init__(self) -> None:
         check_id("run id", self.run_id)
         ints = (("epochs", 1), ("steps", 1), ("deadline_ms", 1), ("checkpoint_every", 0), ("max_restarts", 0))
-        ints += (("lease_ms", 100),)
+        ints += (("lease_ms", LEASE_RANGE_MS[0]),)
         for name, lo in ints:
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or v < lo:
                 raise ConfigError(f"{name}: expected an integer >= {lo}, got {v!r}")
-        if self.lease_ms > 60_000:
-            raise ConfigError(f"lease_ms: expected at most 60000, got {self.lease_ms}")
+        if self.lease_ms > LEASE_RANGE_MS[1]:
+            raise ConfigError(f"lease_ms: expected at most {LEASE_RANGE_MS[1]}, got {self.lease_ms}")
         if self.reward not in REWARDS:
             raise ConfigError(f"reward: {self.reward!r} is not one of {', '.join(REWARDS)}")
         if self.placement not in PLACEMENTS:

@@ -29,6 +29,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from kinswarm.actors.config import LEASE_RANGE_MS
 from kinswarm.actors.runtime import LEASE_MS, NetSpec
 from kinswarm.protocol.keys import check_id
 from kinswarm.protocol.topology import Topology
@@ -274,8 +275,9 @@ def load_plan(path: str | Path) -> Plan:
     if mode not in MODES:
         raise PlanError(src, "zenoh.mode", f"{mode!r} is not one of {', '.join(MODES)}")
     lease = z.get("lease_ms", LEASE_MS)
-    if isinstance(lease, bool) or not isinstance(lease, int) or not 100 <= lease <= 60000:
-        raise PlanError(src, "zenoh.lease_ms", f"expected an integer in [100, 60000], got {lease!r}")
+    lo, hi = LEASE_RANGE_MS
+    if isinstance(lease, bool) or not isinstance(lease, int) or not lo <= lease <= hi:
+        raise PlanError(src, "zenoh.lease_ms", f"expected an integer in [{lo}, {hi}], got {lease!r}")
     if z.get("multicast_scouting", False) is not False:
         raise PlanError(src, "zenoh.multicast_scouting", "must be false: peers meet only through the plan's endpoints")
     routers = z.get("routers", [])
