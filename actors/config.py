@@ -15,7 +15,8 @@ from typing import Any
 from kinswarm.protocol.keys import check_id
 from kinswarm.protocol.topology import Topology, load_topology
 
-REWARDS = ("paper", "strict", "shaped", "contact", "global", "force")  # contact, global, force: grasp scenes only
+# contact, global, force: grasp scenes only; graded: reaching scenes only (actors/learning/grasp.py says which fit)
+REWARDS = ("paper", "strict", "shaped", "graded", "contact", "global", "force")
 PLACEMENTS = ("process", "single")
 LEASE_RANGE_MS = (100, 60_000)  # the Zenoh leases accepted: --lease-ms and a plan's [zenoh] lease_ms
 CONTROLLERS = ("agents", "baseline", "greedy")  # the learning agents, or a model-based law (sim/controller.py)

@@ -1,4 +1,4 @@
-"""Eq. 10 and its two variants."""
+"""Eq. 10 and its three variants."""
 
 import math
 
@@ -33,6 +33,16 @@ def test_shaped_outside_gradient():
     assert reach_reward(1.0, 1.0, "shaped") == 0.0  # strict inside
 
 
+def test_graded_has_the_gradient_inside_too():
+    # outside D_min: as shaped
+    assert reach_reward(5.0, 5.5, "graded", k=20.0) == reach_reward(5.0, 5.5, "shaped", k=20.0)
+    # inside: strict plus k (D_prev - D), so a step towards the goal beats keeping still by more than e^(-c D)
+    assert reach_reward(2.0, 2.1, "graded", k=20.0) == pytest.approx(math.exp(-2.0) + 20 * 0.1)
+    assert reach_reward(2.1, 2.0, "graded", k=20.0) == pytest.approx(-1.0 - 20 * 0.1)
+    assert reach_reward(2.0, 2.0, "graded") == 0.0  # keep: strict's 0, no gradient
+    assert reach_reward(2.0, 2.1, "graded", k=0.0) == reach_reward(2.0, 2.1, "strict")
+
+
 def test_unknown_mode():
-    with pytest.raises(ValueError, match="paper, strict, shaped"):
+    with pytest.raises(ValueError, match="paper, strict, shaped, graded"):
         reach_reward(1.0, 1.0, "bogus")

@@ -45,15 +45,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .reward import REWARD_MODES
 from .settings import LearnerSettings
 
 GRASP_REWARDS: tuple[str, ...] = ("paper", "contact", "global", "force", "shaped")
-REACH_REWARDS: tuple[str, ...] = ("paper", "strict", "shaped")  # reward.py's modes
 
 
 def scene_reward_problem(grasp_scene: bool, reward: str) -> str | None:
     """Why `reward` does not fit the scene, or None: grasp rewards need an [object], reach ones a chain."""
-    allowed = GRASP_REWARDS if grasp_scene else REACH_REWARDS
+    allowed = GRASP_REWARDS if grasp_scene else REWARD_MODES
     if reward in allowed:
         return None
     return f"a {'grasp' if grasp_scene else 'reaching'} scene takes {', '.join(allowed)}"

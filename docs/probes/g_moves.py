@@ -25,7 +25,8 @@ if __name__ == "__main__":  # spawned workers import this file
     g.LEARNER_NAMES[learner] = variant
     ctx = Context(name="probe", out=out / "probe", runs=out / "runs", seeds=6, quick=False, jobs=2, test_set=0)
     t0 = time.time()
-    row = g.Training(f"Level-3 {variant}", 3, 128, learner, True, min_seeds=6)
+    # as measured: the sweep's reward before graded (and no epsilon_decay)
+    row = g.Training(f"Level-3 {variant}", 3, 128, learner, True, min_seeds=6, reward="shaped")
     tested = g.train_and_test(ctx, [row], second_level=3, with_scratch=False)
     for block, e in sorted(tested.per[row.label].items()):
         per_seed = [round(p["mean"], 3) for p in e["per_seed"]]

@@ -23,10 +23,11 @@ def successive_training(name: str, **kw: Any) -> Spec:
 if __name__ == "__main__":  # spawned workers import this file
     out = Path(sys.argv[1])
     g.Spec = successive_training  # train_and_test builds its specs through this name
-    g.RUN_SUFFIX[g.LEARNER] += "-succ"
+    g.RUN_SUFFIX[g.NO_EPSILON_DECAY] += "-succ"
     ctx = Context(name="probe", out=out / "probe", runs=out / "runs", seeds=6, quick=False, jobs=2, test_set=0)
     t0 = time.time()
-    row = g.Training("Level-3 successive training", 3, 128, g.LEARNER, True, min_seeds=6)
+    # as measured: the sweep's learner and reward before epsilon_decay and graded
+    row = g.Training("Level-3 successive training", 3, 128, g.NO_EPSILON_DECAY, True, min_seeds=6, reward="shaped")
     tested = g.train_and_test(ctx, [row], second_level=3, with_scratch=False)
     for block, e in sorted(tested.per[row.label].items()):
         per_seed = [round(p["mean"], 3) for p in e["per_seed"]]
