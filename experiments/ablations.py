@@ -60,7 +60,12 @@ def run(ctx: Context) -> dict[str, Any]:
     rep.results.update(
         {
             "rows": {
-                t.label: {"learner": dict(t.learner), "training_epochs": t.epochs, "seeds": tested.seeds_of(t)}
+                t.label: {
+                    "learner": dict(t.learner),
+                    "reward": t.reward,
+                    "training_epochs": t.epochs,
+                    "seeds": tested.seeds_of(t),
+                }
                 for t in trainings
             },
             "train_steps": tested.train_steps,

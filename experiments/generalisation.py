@@ -310,6 +310,7 @@ def _report(ctx: Context, tested: Tested, levels: tuple[int, ...]) -> dict[str, 
                     "level": t.level,
                     "training_epochs": t.epochs,
                     "learner": dict(t.learner),
+                    "reward": t.reward,
                     "sweep": t.main,
                     "seeds": seeds_of(t),
                 }

@@ -75,13 +75,17 @@ def test_quick_ablations(tmp_path):
     results = _check_report(tmp_path, "ablations")
     assert list(results["per_row"]) == [
         "Level-1",
+        "Level-1, no ε decay",
+        "Level-1, shaped reward",
         "Level-1, signed g3",
         "Level-1, without g_perp",
         "Level-1, default learner",
     ]
     for row in results["per_row"].values():
         assert set(row) == {"test_set_0"} and len(row["test_set_0"]["errors"][0]) == 8
-    assert len({json.dumps(r["learner"], sort_keys=True) for r in results["rows"].values()}) == 4
+    rows = results["rows"].values()
+    assert len({(json.dumps(r["learner"], sort_keys=True), r["reward"]) for r in rows}) == 6
+    assert [r["reward"] for r in rows] == ["graded", "graded", "shaped", "shaped", "shaped", "shaped"]
     assert not (tmp_path / "generalisation").exists()
 
 
