@@ -12,11 +12,13 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from kinswarm.actors.learning.grasp import GRASP_REWARDS
+from kinswarm.actors.learning.reward import REWARD_MODES
 from kinswarm.protocol.keys import check_id
 from kinswarm.protocol.topology import Topology, load_topology
 
-# contact, global, force: grasp scenes only; graded: reaching scenes only (actors/learning/grasp.py says which fit)
-REWARDS = ("paper", "strict", "shaped", "graded", "contact", "global", "force")
+# the reaching modes, then the grasp ones (actors/learning/grasp.py's scene_reward_problem says which fit a scene)
+REWARDS = tuple(dict.fromkeys((*REWARD_MODES, *GRASP_REWARDS)))
 PLACEMENTS = ("process", "single")
 LEASE_RANGE_MS = (100, 60_000)  # the Zenoh leases accepted: --lease-ms and a plan's [zenoh] lease_ms
 CONTROLLERS = ("agents", "baseline", "greedy")  # the learning agents, or a model-based law (sim/controller.py)

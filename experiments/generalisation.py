@@ -111,8 +111,12 @@ class Training:
 
     @property
     def suffix(self) -> str:
-        """Its runs' name suffix: the learner's, then the reward unless shaped (the older caches' names)."""
-        return RUN_SUFFIX[self.learner] + ("" if self.reward == "shaped" else f"-{self.reward}")
+        return run_suffix(self.learner, self.reward)
+
+
+def run_suffix(learner: tuple, reward: str) -> str:
+    """Run names' suffix: the learner's, then the reward unless shaped (the older caches' names)."""
+    return RUN_SUFFIX[learner] + ("" if reward == "shaped" else f"-{reward}")
 
 
 def reps_for(level: int) -> int:
@@ -226,7 +230,7 @@ def train_and_test(ctx: Context, trainings: list[Training], second_level: int, w
                 )
     scratch_specs = {
         (i, seed): Spec(
-            f"gen-scratch-g{i}{RUN_SUFFIX[LEARNER]}-{REWARD}",
+            f"gen-scratch-g{i}{run_suffix(LEARNER, REWARD)}",
             seed=seed,
             epochs=1,
             steps=train_steps,

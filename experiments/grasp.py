@@ -56,6 +56,23 @@ def _median(v: list[float]) -> float:
     return s[n // 2] if n % 2 else 0.5 * (s[n // 2 - 1] + s[n // 2])
 
 
+def frozen_spec(trained: RunOutcome, name: str) -> Spec:
+    """The trained swarm frozen (`--learn off --explore off`): one epoch of its length from the start configuration."""
+    t = trained.spec
+    return Spec(
+        name=name,
+        seed=t.seed,
+        reward=t.reward,
+        learner=t.learner,
+        topology=t.topology,
+        epochs=1,
+        steps=t.steps,
+        from_dir=str(trained.out),
+        learn=False,
+        explore=False,
+    )
+
+
 def run(ctx: Context) -> dict[str, Any]:
     topo = load_topology(GRASP3)
     epochs, steps = (3, 60) if ctx.quick else (30, 400)
@@ -70,19 +87,7 @@ def run(ctx: Context) -> dict[str, Any]:
     scores = [_score(o, topo) for o in outcomes]
     # the trained swarms frozen (`--learn off --explore off`): one epoch from the start configuration
     frozen_specs = [
-        Spec(
-            name=f"grasp-shaped-frozen-s{o.spec.seed}",
-            seed=o.spec.seed,
-            reward="shaped",
-            topology=str(GRASP3),
-            epochs=1,
-            steps=steps,
-            from_dir=str(o.out),
-            learn=False,
-            explore=False,
-        )
-        for o in outcomes
-        if o.spec.reward == "shaped"
+        frozen_spec(o, f"grasp-shaped-frozen-s{o.spec.seed}") for o in outcomes if o.spec.reward == "shaped"
     ]
     # ... and replayed greedily but still learning (`--learn on --explore off`): what the TD updates within the
     # epoch add to the frozen policy

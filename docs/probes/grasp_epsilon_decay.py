@@ -10,7 +10,7 @@ from pathlib import Path
 
 from kinswarm.actors.grasp_report import epoch_quality
 from kinswarm.experiments.common import Context, run_specs, settings
-from kinswarm.experiments.grasp import GRASP3, _score
+from kinswarm.experiments.grasp import GRASP3, _score, frozen_spec
 from kinswarm.experiments.swarm import Spec
 from kinswarm.protocol.topology import load_topology
 
@@ -23,21 +23,7 @@ if __name__ == "__main__":
     base = {"topology": str(GRASP3), "epochs": 30, "steps": 400, "learner": learner}
     specs = [Spec(name=f"grasp-ed-s{s}", seed=s, reward="shaped", checkpoint=True, **base) for s in range(3)]
     outs = run_specs(ctx, specs, "train")
-    frozen = [
-        Spec(
-            name=f"grasp-ed-frozen-s{o.spec.seed}",
-            seed=o.spec.seed,
-            reward="shaped",
-            topology=str(GRASP3),
-            epochs=1,
-            steps=400,
-            learner=learner,
-            from_dir=str(o.out),
-            learn=False,
-            explore=False,
-        )
-        for o in outs
-    ]
+    frozen = [frozen_spec(o, f"grasp-ed-frozen-s{o.spec.seed}") for o in outs]
     fz = run_specs(ctx, frozen, "frozen")
     for o, f in zip(outs, fz, strict=True):
         sc = _score(o, topo)
