@@ -4,12 +4,14 @@
 
     python docs/probes/corridor_round4.py OUT graded 0,2,3,4    # reward graded instead of shaped, ~12 min
     python docs/probes/corridor_round4.py OUT subtree 0,2,3,4   # clearance of the links each agent moves, ~12 min
+    python docs/probes/corridor_round4.py OUT long 0,2           # follow unchanged, 200 epochs, ~20 min
 
 graded: shaped's distance gradient inside D_min too (what made the frozen reaching swarm generalise, and the
 corridor lies inside D_min: the mouth is 2.5 from the target, D_min = 3).
 subtree: each agent senses the smallest clearance of its own link and of every link below it (the links its
 joint moves) instead of its own link's only. The simulator computes it here, patched into `Scene.clearances`
 (the walls' refusals do not change: a penetration anywhere still shows as a negative value somewhere).
+long: `follow` itself trained for 200 epochs instead of 100 (its first 100 epochs are the experiment's runs).
 """
 
 import asyncio
@@ -45,7 +47,7 @@ def subtree_clearances(self: obstacles.Scene) -> dict[str, float]:
     return out
 
 
-VARIANT = next((v for v in ("graded", "subtree") if v in sys.argv[2:3]), "")
+VARIANT = next((v for v in ("graded", "subtree", "long") if v in sys.argv[2:3]), "")
 if VARIANT == "subtree":  # at import: spawned workers import this file too
     obstacles.Scene.clearances = subtree_clearances
 
@@ -66,6 +68,8 @@ def refusals_by_agent(frozen: Spec) -> dict[str, list[int]]:
 
 
 if __name__ == "__main__":
+    if not VARIANT or len(sys.argv) != 4:
+        raise SystemExit("usage: corridor_round4.py OUT graded|subtree|long SEEDS (e.g. 0,2,3,4)")
     out, seeds = Path(sys.argv[1]), [int(s) for s in sys.argv[3].split(",")]
     reward, over, topology = CONFIGS["follow"]
     reward = "graded" if VARIANT == "graded" else reward
@@ -73,7 +77,8 @@ if __name__ == "__main__":
     runs = out / f"runs-{VARIANT}"
     ctx = Context(name="probe", out=out / "probe", runs=runs, seeds=len(seeds), quick=False, jobs=2, test_set=0)
     common: dict[str, Any] = {"steps": STEPS, "reward": reward, "learner": settings(**over), "topology": str(topology)}
-    specs = [Spec(f"corr4-{VARIANT}", seed=s, epochs=EPOCHS, checkpoint=True, **common) for s in seeds]
+    epochs = 2 * EPOCHS if VARIANT == "long" else EPOCHS
+    specs = [Spec(f"corr4-{VARIANT}", seed=s, epochs=epochs, checkpoint=True, **common) for s in seeds]
     trained: list[RunOutcome] = run_specs(ctx, specs, "train")
     frozen_specs = [
         Spec(
