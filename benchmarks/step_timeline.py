@@ -13,7 +13,6 @@ makes every put leave the process (about half the rate).
 from __future__ import annotations
 
 import argparse
-import socket
 import statistics
 import subprocess
 import sys
@@ -23,15 +22,10 @@ from pathlib import Path
 from typing import Any
 
 from kinswarm.actors.runtime import open_session
+from step_rate import free_port  # benchmarks/ is this script's directory, so first on sys.path
 
 ROOT = Path(__file__).resolve().parent.parent
 RUN_ID = "timeline"
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def record(placement: str, epochs: int, steps: int) -> list[tuple[int, str]]:
@@ -46,7 +40,7 @@ def record(placement: str, epochs: int, steps: int) -> list[tuple[int, str]]:
     with tempfile.TemporaryDirectory() as out:
         cmd = [sys.executable, "-m", "kinswarm.actors.cli", "run", str(ROOT / "examples" / "chain4.toml")]
         cmd += ["--placement", placement, "--epochs", str(epochs), "--steps", str(steps)]
-        cmd += ["--run-id", RUN_ID, "--listen", endpoint, "--out", out]
+        cmd += ["--run-id", RUN_ID, "--listen", endpoint, "--out", out, "--no-progress"]
         proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
         session = None
         try:
@@ -82,10 +76,14 @@ def main() -> None:
             cut.append({"t0": t})
         elif cut and key not in cut[-1]:
             cut[-1][key] = t
-    whole = [s for s in cut if len(s) >= len(max(cut, key=len))]  # every message of the step seen
+    longest = max(map(len, cut), default=0)
+    whole = [s for s in cut if len(s) == longest]  # every message of the step seen
     kept = whole[len(whole) // a.epochs :]
     if len(kept) < 2:
-        raise SystemExit(f"too few complete steps observed ({len(kept)}); was the run too short?")
+        raise SystemExit(
+            f"too few complete steps observed ({len(kept)}): the observer joins about a second after the run "
+            "starts, and a short `single` run can be over by then; give it more --epochs or --steps"
+        )
     period = statistics.median((b["t0"] - s["t0"]) / 1e3 for s, b in zip(kept, kept[1:], strict=False))
     delays = {k: statistics.median((s[k] - s["t0"]) / 1e3 for s in kept if k in s) for k in kept[0] if k != "t0"}
     print(f"{a.placement} placement, 4-joint chain: {len(kept)} steps after the first epoch")
