@@ -7,8 +7,10 @@ import json
 import math
 import os
 import platform
+import signal
 import statistics
 import sys
+import threading
 import time
 from collections.abc import Callable, Iterable, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
@@ -63,9 +65,49 @@ def _progress(total: int, desc: str) -> Any:
     return tqdm(total=total, desc=desc, unit="run", dynamic_ncols=True)
 
 
+_PARENT: int | None = None  # in a worker: the pid of the process that started it
+
+
+def _orphaned() -> bool:
+    return _PARENT is not None and os.getppid() != _PARENT
+
+
+def _exit_with_parent(parent: int) -> None:
+    """A worker's initializer: when its parent is gone (killed: Ctrl-C reaches the workers themselves) the
+    worker interrupts its run as Ctrl-C would (the swarm closes its sessions and worlds; an unfinished run is
+    never cached) and exits then, at the latest 30 s later, instead of running the batch on for nobody."""
+    global _PARENT
+    _PARENT = parent
+    # started from a background job a worker inherits SIGINT ignored, and asyncio.run then leaves it so
+    signal.signal(signal.SIGINT, signal.default_int_handler)
+
+    def watch() -> None:
+        while not _orphaned():
+            time.sleep(0.5)
+        os.kill(os.getpid(), signal.SIGINT)
+        time.sleep(30.0)
+        os._exit(1)
+
+    threading.Thread(target=watch, name="exit-with-parent", daemon=True).start()
+
+
+def worker_pool(jobs: int) -> ProcessPoolExecutor:
+    """`jobs` spawned worker processes (spawn: a fork would copy any open Zenoh session) that end with their
+    parent."""
+    return ProcessPoolExecutor(
+        max_workers=jobs, mp_context=get_context("spawn"), initializer=_exit_with_parent, initargs=(os.getpid(),)
+    )
+
+
 def _run_one(args: tuple[Spec, str]) -> RunOutcome:
     spec, runs = args
-    return run_spec(spec, Path(runs))
+    try:
+        if _orphaned():
+            raise RuntimeError("the experiment that queued this run is gone")
+        return run_spec(spec, Path(runs))
+    finally:
+        if _orphaned():  # the run has stopped and cleaned up: do not take the next one from the queue
+            os._exit(1)
 
 
 def run_specs(ctx: Context, specs: Sequence[Spec], desc: str = "") -> list[RunOutcome]:
@@ -83,7 +125,7 @@ def run_specs(ctx: Context, specs: Sequence[Spec], desc: str = "") -> list[RunOu
             # longest first, so one long run does not start last and hold up the batch
             order = sorted(range(len(specs)), key=lambda i: -specs[i].epochs * specs[i].steps)
             got: dict[int, RunOutcome] = {}
-            with ProcessPoolExecutor(max_workers=ctx.jobs, mp_context=get_context("spawn")) as pool:
+            with worker_pool(ctx.jobs) as pool:
                 futures = {pool.submit(_run_one, (specs[i], str(ctx.runs))): i for i in order}
                 for f in as_completed(futures):
                     got[futures[f]] = f.result()

@@ -5,7 +5,12 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import shutil
+import signal
+import subprocess
+import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -87,6 +92,59 @@ def test_quick_ablations(tmp_path):
     assert len({(json.dumps(r["learner"], sort_keys=True), r["reward"]) for r in rows}) == 6
     assert [r["reward"] for r in rows] == ["graded", "graded", "shaped", "shaped", "shaped", "shaped"]
     assert not (tmp_path / "generalisation").exists()
+
+
+_KILLED_PARENT = """
+import signal, sys, time
+from pathlib import Path
+from kinswarm.experiments.common import _run_one, worker_pool
+from kinswarm.experiments.swarm import CHAIN4, Spec
+
+if __name__ == "__main__":
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # as in a background job: the workers inherit it
+    runs = Path(sys.argv[1])
+    with worker_pool(2) as pool:
+        for seed in range(4):
+            pool.submit(_run_one, (Spec("long", seed=seed, epochs=100, steps=500, topology=str(CHAIN4)), str(runs)))
+        while len(pool._processes) < 2 or sum(1 for m in runs.glob("*/metrics.jsonl") if m.stat().st_size) < 2:
+            time.sleep(0.1)  # both workers are in a run: an epoch has ended in each
+        print(*pool._processes, flush=True)
+        time.sleep(120)
+"""
+
+
+def _alive(pid: int) -> bool:
+    try:  # a zombie (not reaped by this container's init) is gone too
+        return "State:\tZ" not in Path(f"/proc/{pid}/status").read_text()
+    except FileNotFoundError:
+        return False
+
+
+@pytest.mark.timeout(120)
+def test_workers_end_with_a_killed_parent(tmp_path):
+    """`kill -9` of an experiment (no Ctrl-C reaching its workers, which may even ignore SIGINT as in a background
+    job) stops the workers' runs and ends them: no worker runs the batch on for nobody, and no half run is cached."""
+    script, runs = tmp_path / "parent.py", tmp_path / "runs"
+    script.write_text(_KILLED_PARENT)
+    parent = subprocess.Popen([sys.executable, str(script), str(runs)], stdout=subprocess.PIPE, text=True)
+    workers: list[int] = []
+    try:
+        assert parent.stdout is not None
+        workers = [int(p) for p in parent.stdout.readline().split()]
+        assert len(workers) == 2 and all(_alive(p) for p in workers)
+        parent.kill()
+        parent.wait(10)
+        deadline = time.monotonic() + 20  # the workers' own fallback is 30 s: this sees the interrupted runs end
+        while any(_alive(p) for p in workers) and time.monotonic() < deadline:
+            time.sleep(0.2)
+        assert not any(_alive(p) for p in workers), "workers outlived their killed parent"
+        started = sorted(d.name for d in runs.iterdir())
+        assert len(started) == 2 and not list(runs.glob("*/spec.json")), started  # 2 runs begun, none finished
+    finally:
+        parent.kill()
+        for p in workers:
+            if _alive(p):
+                os.kill(p, signal.SIGKILL)
 
 
 def test_unknown_experiment_is_refused(capsys):
