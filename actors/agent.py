@@ -140,6 +140,7 @@ class Agent:
         self.listening: set[str] = set()  # lost agents whose obs/up keys this agent subscribed to
         self.restored: Event | None = None  # what a restart restored, announced once alive
         self.decided: tuple[Key, int] | None = None  # my last chosen step and action (sent up a step later)
+        self.tabu: dict[int, tuple[float, float]] = {}  # tabu_memory: refused action -> where the tip was then
         # the step whose visible children's actions the learner still awaits, and which of them were lost then
         self.observing: tuple[Key, frozenset[str]] | None = None
         # actions at an epoch's last step from the children's closing `up`, by that step: one child's may come
@@ -327,6 +328,7 @@ class Agent:
             self.D_prev = None
             self.waypoint = 0
             self.fl_prev = None
+            self.tabu = {}
             if self.learner is not None:
                 self.learner.start_epoch(self.epochs_before + epoch, t=step)
         elif self.learner is not None and key != (epoch, self.last_finished[1] + 1):
@@ -476,10 +478,7 @@ class Agent:
                 if "g_moves" in self.extra_state:  # the same in my own moves (state.moves_to_goal)
                     local["g_moves"] = moves_to_goal(cur.frame, tip, cur.goal, self.cfg.action_rad)
                 s = np.concatenate([s, [local.get(n, 0.0) for n in self.extra_state]])
-            avoid = None
-            if cur.sense[1] and self.learner.settings.collision_tabu:  # my last move was refused: not again
-                d = self.decided
-                avoid = d[1] if d is not None and d[0] == (epoch, step - 1) else None
+            avoid = self._tabu(cur, tip) if self.learner.settings.collision_tabu else ()
             action = self.learner.decide(s, reward, learn=self.cfg.learn, explore=self.cfg.explore, avoid=avoid)
             self.decided = (cur.key, action)
             if self.visible:
@@ -501,6 +500,21 @@ class Agent:
             self.node.send(self.keys.cmd(self.id), Cmd(epoch=epoch, step=step, delta=delta))
         self.last_finished = cur.key
         self.steps_done += 1
+
+    def _tabu(self, cur: _Step, tip: tuple[float, float]) -> list[int]:
+        """The actions left out of this step's choice (collision_tabu): the one the wall just refused, and with
+        tabu_memory every one refused since the tip of my chain last moved tabu_memory."""
+        assert self.learner is not None
+        epoch, step = cur.key
+        d = self.decided
+        refused = d[1] if cur.sense[1] and d is not None and d[0] == (epoch, step - 1) else None
+        memory = self.learner.settings.tabu_memory
+        if memory <= 0.0:
+            return [] if refused is None else [refused]
+        if refused is not None:
+            self.tabu[refused] = tip
+        self.tabu = {a: at for a, at in self.tabu.items() if math.dist(at, tip) < memory}
+        return list(self.tabu)
 
     def _scene_state(
         self, s: np.ndarray, reward: float | None, sense: tuple[float | None, int]

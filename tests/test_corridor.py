@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from conftest import EXAMPLES
-from kinswarm.actors.agent import learner_settings
+from kinswarm.actors.agent import Agent, _Step, learner_settings
 from kinswarm.actors.cli import main as cli_main
 from kinswarm.actors.config import RunConfig
 from kinswarm.actors.learning.fuzzy import FuzzyPartition
@@ -18,6 +18,7 @@ from kinswarm.actors.learning.learner import Learner
 from kinswarm.actors.learning.reward import corridor_reward, next_waypoint, path_distance
 from kinswarm.actors.learning.settings import LearnerSettings
 from kinswarm.protocol import codec
+from kinswarm.protocol.keys import Keys
 from kinswarm.protocol.messages import EpochDone, Obs, Task
 from kinswarm.protocol.topology import TopologyError, load_topology, parse_topology
 from kinswarm.sim.kinematics import frames
@@ -334,8 +335,46 @@ def test_collision_tabu_never_repeats_the_refused_action():
     picks = set()
     for explore in (False, True):
         for _ in range(200):
-            picks.add(learner.decide(s0, None, learn=False, explore=explore, avoid=2))
+            picks.add(learner.decide(s0, None, learn=False, explore=explore, avoid=[2]))
     assert 2 not in picks and picks <= {0, 1}
+    # both moves refused: only "keep" is left; all three is no information and leaves the choice alone
+    assert {learner.decide(s0, None, learn=False, explore=True, avoid=[0, 2]) for _ in range(100)} == {1}
+    assert learner.decide(s0, None, learn=False, explore=False, avoid=[0, 1, 2]) == 2
+
+
+def test_tabu_memory_holds_until_the_tip_moves(tmp_path):
+    """tabu_memory: each refused action stays left out until the tip of the agent's chain has moved
+    tabu_memory from where it was at that refusal; with 0 only the action refused at the step before."""
+
+    class Quiet:  # what an Agent needs of its Node to be built
+        keys = Keys("r")
+
+    def agent(memory: float) -> Agent:
+        over = {"collision_tabu": True, "tabu_memory": memory}
+        cfg = RunConfig(run_id="r", topology=str(CORRIDOR), out=str(tmp_path), learner=over)
+        return Agent(cfg, cfg.topo(), "a1", Quiet())  # type: ignore[arg-type]
+
+    def step(a: Agent, n: int, action: int, refused: bool, tip: tuple[float, float]) -> list[int]:
+        """Step n: my move of step n - 1 was `action`, refused or not; the tip is at `tip`."""
+        a.decided = ((0, n - 1), action)
+        cur = _Step((0, n), (0, 0, 0), (0, 0, 0), 0.0, (5.5, 2.0), None, frozenset(), {}, sense=(0.5, int(refused)))
+        return sorted(a._tabu(cur, tip))
+
+    one = agent(0.0)
+    assert step(one, 1, 2, True, (3.0, 2.0)) == [2]
+    assert step(one, 2, 0, True, (3.0, 2.0)) == [0]  # "increase" is free to be tried again: the alternation
+    assert step(one, 3, 1, False, (3.0, 2.0)) == []
+    mem = agent(0.1)
+    assert step(mem, 1, 2, True, (3.0, 2.0)) == [2]
+    assert step(mem, 2, 0, True, (3.0, 2.0)) == [0, 2]  # a jam: both ways refused, only "keep" is left
+    assert step(mem, 3, 1, False, (3.05, 2.0)) == [0, 2]  # the tip moved less than 0.1: still jammed
+    assert step(mem, 4, 1, False, (3.0, 2.09)) == [0, 2]  # a wiggle does not add up
+    assert step(mem, 5, 1, False, (3.0, 2.1)) == []  # moved 0.1 from both refusals: try again
+    assert step(mem, 6, 2, True, (3.0, 2.1)) == [2]
+    with pytest.raises(ValueError, match="tabu_memory must be >= 0"):
+        LearnerSettings(collision_tabu=True, tabu_memory=-1.0)
+    with pytest.raises(ValueError, match="tabu_memory needs collision_tabu"):
+        LearnerSettings(tabu_memory=0.1)
 
 
 # -- a run through the corridor ---------------------------------------------------------------------

@@ -65,5 +65,5 @@ def select_action(pi: np.ndarray, p_explore: float, rng: np.random.Generator, ex
             acc += p
             if u < acc:
                 return a
-        return len(pi) - 1
+        return max(a for a, p in enumerate(pi.tolist()) if p > 0.0)  # rounding left u past the sum
     return greedy(pi, rng)

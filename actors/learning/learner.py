@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Collection, Sequence
 
 import numpy as np
 
@@ -104,7 +104,7 @@ class Learner:
         reward: float | None,
         learn: bool = True,
         explore: bool = True,
-        avoid: int | None = None,
+        avoid: Collection[int] = (),
     ) -> int:
         """(a)-(b) of step(): the TD update of the previous transition, if observe() completed its joint
         action, then the choice of a(t). The visible actions at t are for observe()."""
@@ -132,8 +132,12 @@ class Learner:
         E = jasm.expected_values(q_now, P, self.n_actions)
         T = jasm.temperature(self.t, st.T_max, st.s)
         pi = jasm.boltzmann(E, T)
-        if avoid is not None and 0 <= avoid < self.n_actions and self.n_actions > 1:
-            pi[avoid] = 0.0  # an action known to be futile now (a wall refused it): neither chosen nor sampled
+        mask = [a for a in set(avoid) if 0 <= a < self.n_actions]
+        if mask and len(mask) < self.n_actions:
+            pi[mask] = 0.0  # actions known to be futile now (a wall refused them): neither chosen nor sampled
+            if pi.sum() <= 0.0:  # the rest underflowed: choose among them evenly
+                pi = np.ones(self.n_actions)
+                pi[mask] = 0.0
             pi /= pi.sum()
         a = jasm.select_action(pi, jasm.explore_probability(T, st.T_max, self.epsilon), self.rng, explore)
 

@@ -76,6 +76,12 @@ class LearnerSettings:
         collision_tabu: right after the wall refused the agent's own increment, that action is left out of
             the next choice (greedy and exploring): a refused move left the state unchanged, so choosing it again
             is futile unless others moved; this breaks the greedy deadlock even with learning off.
+        tabu_memory: with collision_tabu, how long a refused action stays left out. 0 (default): one step (a
+            refused "increase" may be followed by a refused "decrease", then "increase" again: the proximal agents
+            of a jammed chain alternate). > 0: every action refused since the tip of the agent's chain last moved
+            tabu_memory (in the scene's length units) stays left out, so a jammed agent tries each way once and
+            then keeps; the memory is the agent's decision state, not learned, and starts empty every epoch.
+            Measured on the corridor (docs/science.md, round 5): not better than one step, in training or frozen.
         epsilon_decay: per-epoch decay of epsilon, epsilon(epoch) = epsilon * (1 - epsilon_decay) ** epoch (default 0:
             the same exploration every epoch). With a slow T(t) decay (small s) exploration then lasts through
             the epoch early in training and fades over the epochs.
@@ -122,6 +128,7 @@ class LearnerSettings:
     epsilon_decay: float = 0.0
     fine_action: float = 1.0
     collision_tabu: bool = False
+    tabu_memory: float = 0.0
     follow_leader: float = 0.0
     follow_leader_links: int = 4
     g3: str = "signed"
@@ -200,6 +207,10 @@ class LearnerSettings:
         lo, hi = self.clearance_range
         if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
             raise ValueError(f"clearance_range must be finite with lo < hi, got ({lo}, {hi})")
+        if not (math.isfinite(self.tabu_memory) and self.tabu_memory >= 0.0):
+            raise ValueError(f"tabu_memory must be >= 0, got {self.tabu_memory}")
+        if self.tabu_memory > 0.0 and not self.collision_tabu:
+            raise ValueError("tabu_memory needs collision_tabu = true (it says how long the tabu lasts)")
         if not 0.0 <= self.epsilon_decay < 1.0:
             raise ValueError(f"epsilon_decay must be in [0, 1), got {self.epsilon_decay}")
         if not (math.isfinite(self.follow_leader) and self.follow_leader >= 0.0):
