@@ -1,10 +1,19 @@
-"""The corridor probes of 2026-11-22 (docs/science.md, Corridor, round 4): the `follow` configuration of
-`kinswarm experiment corridor` (hard set-up, 100 x 500) with one change, then each trained swarm frozen
-(`--learn off --explore off`) for one epoch, with the walls' refusals counted per agent.
+"""The corridor probes of 2026-11-22 and 23 (docs/science.md, Corridor, rounds 4 and 5): the `follow`
+configuration of `kinswarm experiment corridor` (hard set-up, 100 x 500) with changes, then each trained swarm
+frozen (`--learn off --explore off`) for one epoch, with the walls' refusals counted per agent.
 
-    python docs/probes/corridor_round4.py OUT graded 0,2,3,4    # reward graded instead of shaped, ~12 min
-    python docs/probes/corridor_round4.py OUT subtree 0,2,3,4   # clearance of the links each agent moves, ~12 min
-    python docs/probes/corridor_round4.py OUT long 0,2           # follow unchanged, 200 epochs, ~20 min
+    python docs/probes/corridor_probe.py OUT graded 0,2,3,4    # reward graded instead of shaped, ~12 min
+    python docs/probes/corridor_probe.py OUT subtree 0,2,3,4   # clearance of the links each agent moves, ~12 min
+    python docs/probes/corridor_probe.py OUT long 0,2          # follow unchanged, 200 epochs, ~20 min
+    python docs/probes/corridor_probe.py OUT memory 0,2,3,4    # tabu_memory 0.1, ~12 min
+    python docs/probes/corridor_probe.py OUT settle 0,2,3,4    # staying within 0.3 of the target pays, ~12 min
+    python docs/probes/corridor_probe.py OUT settle+refusal 0,2,3,4  # and the collision term for refusals only
+    python docs/probes/corridor_probe.py OUT frozen-memory RUN,RUN,...  # trained runs, frozen with memory
+
+frozen-memory trains nothing: it freezes the given training runs of `follow` (run directories of the
+experiment's cache, `kinswarm experiment corridor --out DIR`: DIR/runs/corr-follow-*) with tabu_memory 0.1.
+
+Changes combine with "+" (e.g. `memory+subtree`); each combination has a run cache of its own.
 
 graded: shaped's distance gradient inside D_min too (what made the frozen reaching swarm generalise, and the
 corridor lies inside D_min: the mouth is 2.5 from the target, D_min = 3).
@@ -12,17 +21,30 @@ subtree: each agent senses the smallest clearance of its own link and of every l
 joint moves) instead of its own link's only. The simulator computes it here, patched into `Scene.clearances`
 (the walls' refusals do not change: a penetration anywhere still shows as a negative value somewhere).
 long: `follow` itself trained for 200 epochs instead of 100 (its first 100 epochs are the experiment's runs).
+memory: LearnerSettings.tabu_memory = 0.1 (round 5): a refused move stays tabu until the tip moved 0.1, not for
+one step only, so a jammed agent tries each way once and then keeps.
+settle: the root's reward while the tip stays within TOL (0.3) of the target (at t - 1 and t) is e^(-c1 D) whatever
+the tip did, minus the collision term as in `shaped`. `shaped` pays e^(-c1 D) for an approach, 0 for "keep" and
+-1 for a step away, so at the target the greedy choice is a step in or out, never "keep", and the chain jitters
+against the walls (refusals in the last 100 steps of most epochs that end within 0.3).
+refusal: the root's collision term only for a refused move, not for a link closer than 0.1 to a wall (d_safe 0;
+the bar counts refusals, and in the epochs that end within 0.3 some link is that close in 4-99 % of the last 100
+steps, so sitting at the target pays about -4 there).
 """
 
 import asyncio
 import collections
+import json
+import math
 import sys
 import tempfile
 from pathlib import Path
 from typing import Any
 
+from kinswarm.actors import agent
+from kinswarm.actors.learning import reward as rewards
 from kinswarm.experiments.common import Context, run_specs, settings
-from kinswarm.experiments.corridor import CONFIGS, EPOCHS, STEPS, seed_metrics
+from kinswarm.experiments.corridor import CONFIGS, EPOCHS, STEPS, TOL, seed_metrics
 from kinswarm.experiments.swarm import RunOutcome, Spec, _supervise
 from kinswarm.protocol import codec
 from kinswarm.protocol.keys import Keys
@@ -47,9 +69,24 @@ def subtree_clearances(self: obstacles.Scene) -> dict[str, float]:
     return out
 
 
-VARIANT = next((v for v in ("graded", "subtree", "long") if v in sys.argv[2:3]), "")
-if VARIANT == "subtree":  # at import: spawned workers import this file too
+def probe_reward(D: float, D_prev: float, clearance: float, collisions: int, mode: str) -> float:
+    """`settle` and `refusal`: the root's reward (the agent module's corridor_reward) with either change."""
+    d_safe = 0.0 if "refusal" in PARTS else rewards.CORRIDOR_D_SAFE
+    if "settle" in PARTS and D <= TOL and D_prev <= TOL:
+        close = collisions > 0 or clearance < d_safe
+        penalty = rewards.CORRIDOR_WEIGHT * math.exp(-rewards.CORRIDOR_C2 * max(clearance, 0.0)) if close else 0.0
+        return math.exp(-rewards.CORRIDOR_C1 * D) - penalty
+    return rewards.corridor_reward(D, D_prev, clearance, collisions, mode, d_safe=d_safe)
+
+
+CHANGES = ("graded", "subtree", "long", "memory", "settle", "refusal", "frozen-memory")
+VARIANT = sys.argv[2] if len(sys.argv) > 2 else ""
+PARTS = set(VARIANT.split("+"))
+EVAL = "frozen-memory" in PARTS
+if "subtree" in PARTS:  # at import: spawned workers import this file too
     obstacles.Scene.clearances = subtree_clearances
+if PARTS & {"settle", "refusal"}:
+    agent.corridor_reward = probe_reward  # type: ignore[assignment]
 
 
 def refusals_by_agent(frozen: Spec) -> dict[str, list[int]]:
@@ -68,18 +105,26 @@ def refusals_by_agent(frozen: Spec) -> dict[str, list[int]]:
 
 
 if __name__ == "__main__":
-    if not VARIANT or len(sys.argv) != 4:
-        raise SystemExit("usage: corridor_round4.py OUT graded|subtree|long SEEDS (e.g. 0,2,3,4)")
-    out, seeds = Path(sys.argv[1]), [int(s) for s in sys.argv[3].split(",")]
+    if len(sys.argv) != 4 or not PARTS <= set(CHANGES):
+        raise SystemExit(f"usage: corridor_probe.py OUT CHANGE[+CHANGE...] SEEDS (e.g. 0,2,3,4); CHANGE: {CHANGES}")
+    out, args = Path(sys.argv[1]), sys.argv[3].split(",")
+    seeds = [json.loads((Path(a) / "config.json").read_text())["seed"] for a in args] if EVAL else [*map(int, args)]
     reward, over, topology = CONFIGS["follow"]
-    reward = "graded" if VARIANT == "graded" else reward
+    reward = "graded" if "graded" in PARTS else reward
+    over = {**over, "tabu_memory": 0.1} if "memory" in PARTS else over
     # a cache of its own per variant: `subtree` is not in a run's identity (a patch, not a setting)
     runs = out / f"runs-{VARIANT}"
     ctx = Context(name="probe", out=out / "probe", runs=runs, seeds=len(seeds), quick=False, jobs=2, test_set=0)
     common: dict[str, Any] = {"steps": STEPS, "reward": reward, "learner": settings(**over), "topology": str(topology)}
-    epochs = 2 * EPOCHS if VARIANT == "long" else EPOCHS
+    epochs = 2 * EPOCHS if "long" in PARTS else EPOCHS
     specs = [Spec(f"corr4-{VARIANT}", seed=s, epochs=epochs, checkpoint=True, **common) for s in seeds]
-    trained: list[RunOutcome] = run_specs(ctx, specs, "train")
+    if EVAL:  # the given runs as they are (their metrics rows for seed_metrics)
+        trained = [
+            RunOutcome(s, Path(a).resolve(), {}, [json.loads(line) for line in (Path(a) / "metrics.jsonl").open()])
+            for s, a in zip(specs, args, strict=True)
+        ]
+    else:
+        trained = run_specs(ctx, specs, "train")
     frozen_specs = [
         Spec(
             f"corr4-{VARIANT}-frozen",
@@ -88,7 +133,7 @@ if __name__ == "__main__":
             from_dir=str(o.out),
             learn=False,
             explore=False,
-            **common,
+            **{**common, "learner": settings(**{**over, "tabu_memory": 0.1})} if EVAL else common,
         )
         for o in trained
     ]
