@@ -18,6 +18,9 @@ Configurations (reasoning and measurements: docs/science.md, "Corridor (§5.4)")
   follow            guided plus follow_leader = 40 and gamma = 0.97: each of the last 4 agents is also rewarded for
                     its own link end's progress towards its place on the corridor's axis ("follow the leader",
                     round 2); on the first FOLLOW_SEEDS (5) seeds in the full version
+  settle            follow with the reward `settle` (round 5): a tip that stays within 0.3 of the target earns the
+                    approach reward whatever it did, and the collision term is paid for refused moves only; on
+                    the first FOLLOW_SEEDS seeds too
 The reference configurations run on the first REFERENCE_SEEDS seeds only in the full version.
 """
 
@@ -61,6 +64,7 @@ _KINSWARM: dict[str, Any] = {
     "epsilon_decay": 0.03,
     "ranges": _RANGES,
 }
+_FOLLOW: dict[str, Any] = {**_KINSWARM, "collision_tabu": True, "follow_leader": 40.0, "gamma": 0.97}
 #: label -> (reward, LearnerSettings overrides, topology)
 CONFIGS: dict[str, tuple[str, dict[str, Any], Path]] = {
     "paper": ("paper", {}, TOPOLOGY),
@@ -69,7 +73,9 @@ CONFIGS: dict[str, tuple[str, dict[str, Any], Path]] = {
     "guided": ("shaped", {**_KINSWARM, "collision_tabu": True}, GUIDED),
     # round 2: guided plus the body-aware local term (each of the last 4 agents: its own link end towards its
     # place on the corridor's axis; LearnerSettings.follow_leader), with gamma 0.97 (a longer horizon)
-    "follow": ("shaped", {**_KINSWARM, "collision_tabu": True, "follow_leader": 40.0, "gamma": 0.97}, GUIDED),
+    "follow": ("shaped", _FOLLOW, GUIDED),
+    # round 5: follow, rewarded for keeping still at the target and not for merely being near a wall
+    "settle": ("settle", _FOLLOW, GUIDED),
 }
 
 
@@ -108,7 +114,7 @@ def run(ctx: Context) -> dict[str, Any]:
     seeds_of = {
         label: ctx.seed_list
         if label == MAIN or ctx.quick
-        else ctx.seed_list[: FOLLOW_SEEDS if label == "follow" else REFERENCE_SEEDS]
+        else ctx.seed_list[: FOLLOW_SEEDS if label in ("follow", "settle") else REFERENCE_SEEDS]
         for label in CONFIGS
     }
     train_specs: dict[tuple[str, int], Spec] = {}
@@ -187,8 +193,10 @@ def run(ctx: Context) -> dict[str, Any]:
         f"`guided` adds `collision_tabu` and runs on `{GUIDED.relative_to(ROOT)}` (the hard set-up; the root "
         "measures the goal distance along the corridor's axis through [task] via); `follow` adds to `guided` the "
         "body-aware local term `follow_leader = 40` (each of the last 4 agents: + 40 x its own link end's "
-        "progress towards its place on the corridor's axis in the straight-in configuration) and gamma 0.97. "
-        "A bar counts as met only on the hard set-up with ≥ 5 seeds.",
+        "progress towards its place on the corridor's axis in the straight-in configuration) and gamma 0.97; "
+        "`settle` is `follow` with `--reward settle` (within 0.3 of the target the tip earns the approach reward "
+        "whatever it did, and the collision term is paid for refused moves only, not for a link nearer a wall "
+        "than 0.1). A bar counts as met only on the hard set-up with ≥ 5 seeds.",
     )
     rows = []
     for label, p in per.items():

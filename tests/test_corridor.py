@@ -240,6 +240,11 @@ def test_corridor_variants():
     assert r(4.0, 4.1, 0.5, 0, "shaped") == pytest.approx(-2.0 + 20 * 0.1)
     assert r(4.0, 4.1, 0.0, 1, "shaped") == pytest.approx(-2.0 + 20 * 0.1 - 5.0)
     assert r(1.0, 1.2, 0.05, 0, "shaped") == pytest.approx(math.exp(-0.5) - 5.0 * math.exp(-0.025))
+    # settle: a refused move costs as in shaped, a link merely near a wall nothing; an arrived tip is paid
+    assert r(1.0, 1.2, 0.05, 0, "settle") == pytest.approx(math.exp(-0.5))
+    assert r(1.0, 1.2, 0.05, 1, "settle") == pytest.approx(r(1.0, 1.2, 0.05, 1, "shaped"))
+    assert r(0.2, 0.2, 0.05, 0, "settle") == pytest.approx(math.exp(-0.1))  # shaped: 0 - 5 e^(-0.025)
+    assert r(0.2, 0.1, 0.0, 1, "settle") == pytest.approx(math.exp(-0.1) - 5.0)
     with pytest.raises(ValueError, match="unknown reward mode"):
         r(1.0, 1.0, 1.0, 0, "geodesic?")
 
