@@ -132,7 +132,7 @@ class Learner:
         E = jasm.expected_values(q_now, P, self.n_actions)
         T = jasm.temperature(self.t, st.T_max, st.s)
         pi = jasm.boltzmann(E, T)
-        mask = [a for a in set(avoid) if 0 <= a < self.n_actions]
+        mask = [a for a in set(avoid) if 0 <= a < self.n_actions] if avoid else []
         if mask and len(mask) < self.n_actions:
             pi[mask] = 0.0  # actions known to be futile now (a wall refused them): neither chosen nor sampled
             if pi.sum() <= 0.0:  # the rest underflowed: choose among them evenly

@@ -62,14 +62,15 @@ def corridor_reward(
     D_min: float = 3.0,
     c1: float = CORRIDOR_C1,
     c2: float = CORRIDOR_C2,
-    d_safe: float = CORRIDOR_D_SAFE,
+    d_safe: float | None = None,
     weight: float = CORRIDOR_WEIGHT,
     k: float = 20.0,
 ) -> float:
     """R(t) of the corridor task (paper §5.4, Eq. 11) from D = D_goal(t), D_prev = D_goal(t-1), the smallest
     link clearance min_i D_corridor^{a_i}(t) and the number of joint increments the walls refused at t-1.
 
-    Some agent is close to collide (exists a_i with C_ai = 1) when a move was refused or clearance < d_safe;
+    Some agent is close to collide (exists a_i with C_ai = 1) when a move was refused or clearance < d_safe
+    (by default CORRIDOR_D_SAFE, and 0 for settle: refusals only);
     the clearance of the closest agent is then min_i D_corridor (Eq. 11 takes the min over the agents that
     perceive a collision, which is the min over all of them).
 
@@ -92,7 +93,9 @@ def corridor_reward(
     """
     if mode not in REWARD_MODES:
         raise ValueError(f"unknown reward mode {mode!r}; allowed modes: {', '.join(REWARD_MODES)}")
-    close = collisions > 0 or (clearance < d_safe and mode != "settle")  # exists a_i with C_ai = 1
+    if d_safe is None:
+        d_safe = 0.0 if mode == "settle" else CORRIDOR_D_SAFE
+    close = collisions > 0 or clearance < d_safe  # exists a_i with C_ai = 1
     penalty = math.exp(-c2 * max(clearance, 0.0))  # e^(-c2 min_i D_corridor)
     if mode == "paper":
         if D > D_min:

@@ -23,10 +23,10 @@ joint moves) instead of its own link's only. The simulator computes it here, pat
 long: `follow` itself trained for 200 epochs instead of 100 (its first 100 epochs are the experiment's runs).
 memory: LearnerSettings.tabu_memory = 0.1 (round 5): a refused move stays tabu until the tip moved 0.1, not for
 one step only, so a jammed agent tries each way once and then keeps.
-settle: the root's reward while the tip stays within TOL (0.3) of the target (at t - 1 and t) is e^(-c1 D) whatever
-the tip did, minus the collision term as in `shaped`. `shaped` pays e^(-c1 D) for an approach, 0 for "keep" and
--1 for a step away, so at the target the greedy choice is a step in or out, never "keep", and the chain jitters
-against the walls (refusals in the last 100 steps of most epochs that end within 0.3).
+settle: the root's reward while the tip stays within 0.3 (reward.SETTLE_RADIUS) of the target (at t - 1 and t) is
+e^(-c1 D) whatever the tip did, minus the collision term as in `shaped`. `shaped` pays e^(-c1 D) for an approach,
+0 for "keep" and -1 for a step away, so at the target the greedy choice is a step in or out, never "keep", and the
+chain jitters against the walls (refusals in the last 100 steps of most epochs that end within 0.3).
 refusal: the root's collision term only for a refused move, not for a link closer than 0.1 to a wall (d_safe 0;
 the bar counts refusals, and in the epochs that end within 0.3 some link is that close in 4-99 % of the last 100
 steps, so sitting at the target pays about -4 there).
@@ -35,7 +35,6 @@ steps, so sitting at the target pays about -4 there).
 import asyncio
 import collections
 import json
-import math
 import sys
 import tempfile
 from pathlib import Path
@@ -44,7 +43,7 @@ from typing import Any
 from kinswarm.actors import agent
 from kinswarm.actors.learning import reward as rewards
 from kinswarm.experiments.common import Context, run_specs, settings
-from kinswarm.experiments.corridor import CONFIGS, EPOCHS, STEPS, TOL, seed_metrics
+from kinswarm.experiments.corridor import CONFIGS, EPOCHS, STEPS, seed_metrics
 from kinswarm.experiments.swarm import RunOutcome, Spec, _supervise
 from kinswarm.protocol import codec
 from kinswarm.protocol.keys import Keys
@@ -70,13 +69,12 @@ def subtree_clearances(self: obstacles.Scene) -> dict[str, float]:
 
 
 def probe_reward(D: float, D_prev: float, clearance: float, collisions: int, mode: str) -> float:
-    """`settle` and `refusal`: the root's reward (the agent module's corridor_reward) with either change."""
+    """`settle` and `refusal`: the root's reward (the agent module's corridor_reward) with either change; both
+    together are `--reward settle` (the probe patched them in before that reward existed)."""
     d_safe = 0.0 if "refusal" in PARTS else rewards.CORRIDOR_D_SAFE
-    if "settle" in PARTS and D <= TOL and D_prev <= TOL:
-        close = collisions > 0 or clearance < d_safe
-        penalty = rewards.CORRIDOR_WEIGHT * math.exp(-rewards.CORRIDOR_C2 * max(clearance, 0.0)) if close else 0.0
-        return math.exp(-rewards.CORRIDOR_C1 * D) - penalty
-    return rewards.corridor_reward(D, D_prev, clearance, collisions, mode, d_safe=d_safe)
+    return rewards.corridor_reward(
+        D, D_prev, clearance, collisions, "settle" if "settle" in PARTS else mode, d_safe=d_safe
+    )
 
 
 CHANGES = ("graded", "subtree", "long", "memory", "settle", "refusal", "frozen-memory")
