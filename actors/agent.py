@@ -458,17 +458,19 @@ class Agent:
             tips = dict(cur.tips)
             for c in cur.waiting:
                 tips.update(cur.ups[c].tips)
-        if not self.is_root:  # first: the parent's state needs only the tips
+        clearance = _subtree_clearance(cur)
+        if not self.is_root:  # first: the parent's state needs only the tips (and the subtree's clearance)
             d = self.decided
             prev = d[1] if d is not None and d[0] == (epoch, step - 1) else -1
-            self.node.send(self.keys.up(self.spec.parent), Up(epoch=epoch, step=step, tips=tips, action=prev))  # type: ignore[arg-type]
+            up = Up(epoch=epoch, step=step, tips=tips, action=prev, clearance=clearance)
+            self.node.send(self.keys.up(self.spec.parent), up)  # type: ignore[arg-type]
         if self.learner is not None:
             self._observe(cur)
             tip = _centroid([tips[leaf] for leaf in self.leaves])
             s = agent_state(cur.frame, cur.q, tip, cur.goal, self.learner.settings.g3 == "unsigned")
             reward = cur.reward
             if cur.sense[0] is not None:
-                s, reward = self._scene_state(s, reward, cur.sense)
+                s, reward = self._scene_state(s, reward, cur.sense, clearance)
             if self.fl_behind is not None:
                 reward = self._follow_leader(reward, cur)
             if self.extra_state:  # named extra variables (a grasp finger's force error, contact force)
@@ -517,13 +519,16 @@ class Agent:
         return list(self.tabu)
 
     def _scene_state(
-        self, s: np.ndarray, reward: float | None, sense: tuple[float | None, int]
+        self, s: np.ndarray, reward: float | None, sense: tuple[float | None, int], subtree: float | None
     ) -> tuple[np.ndarray, float | None]:
-        """A scene with obstacles (§5.4): the optional state variables (my link's clearance, whether my move
-        was refused) and the local collision penalty on the reward for my refused move (LearnerSettings)."""
+        """A scene with obstacles (§5.4): the optional state variables (my link's clearance or my subtree's,
+        whether my move was refused) and the local collision penalty on the reward for my refused move
+        (LearnerSettings)."""
         assert self.learner is not None
         st = self.learner.settings
         clearance, collided = sense
+        if st.clearance_of == "subtree" and subtree is not None:
+            clearance = subtree
         extra = [clearance] * st.clearance_state + [float(collided)] * st.collision_state
         if extra:
             s = np.concatenate((s, extra))
@@ -643,6 +648,13 @@ def _below(topo: Topology, agent: str) -> Iterator[str]:
     for c in topo.agents[agent].children:
         yield c
         yield from _below(topo, c)
+
+
+def _subtree_clearance(cur: _Step) -> float | None:
+    """The smallest clearance of my link (my Obs) and of the links below me (my live children's `Up`); links
+    of lost agents this one stands in for are not counted (their readings are not gathered)."""
+    known = [c for c in (cur.sense[0], *(cur.ups[child].clearance for child in cur.waiting)) if c is not None]
+    return min(known) if known else None
 
 
 def _centroid(points: list) -> tuple[float, float]:

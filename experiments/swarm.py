@@ -22,6 +22,7 @@ import json
 import math
 import os
 import shutil
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -169,8 +170,10 @@ class RunOutcome:
 
 
 async def _supervise(
-    cfg: RunConfig, topo: Topology, goals: tuple[Goal, ...] | None, observe: bool
+    cfg: RunConfig, topo: Topology, goals: tuple[Goal, ...] | None, observe: bool, record: Sequence[str] = ()
 ) -> tuple[RunResult, list[tuple[str, bytes]]]:
+    """Run cfg in this process. `observe`: record the task and every Obs (for trace.npz); `record`: key
+    expressions to record besides (tests and probes)."""
     session = open_session(listen=[cfg.listen])
     captured: list[tuple[str, bytes]] = []
     subs = []
@@ -178,9 +181,9 @@ async def _supervise(
     def keep(sample: Any) -> None:  # zenoh thread: only append; decoded after the run
         captured.append((str(sample.key_expr), sample.payload.to_bytes()))
 
-    if observe:  # declared before any actor exists: the first step is not missed
-        keys = Keys(cfg.run_id)
-        subs = [session.declare_subscriber(key, keep) for key in (keys.task, keys.obs("*"))]
+    keys = Keys(cfg.run_id)
+    exprs = [*((keys.task, keys.obs("*")) if observe else ()), *record]
+    subs = [session.declare_subscriber(key, keep) for key in exprs]  # before any actor exists: no step missed
     sup = GoalsSupervisor(cfg, topo, session, SinglePlacement(cfg, topo, session), goals=goals)
     try:
         result = await sup.run()

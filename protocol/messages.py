@@ -10,11 +10,12 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import ClassVar
 
-SCHEMA_VERSION = 5  # 2: faults, events, status, bye; payloads carry a MAC (codec.py). 3: Up.action is the
+SCHEMA_VERSION = 6  # 2: faults, events, status, bye; payloads carry a MAC (codec.py). 3: Up.action is the
 # sender's action of the step before (sent before it learns), plus a closing Up after an epoch's last step.
 # 4: scenes with obstacles (§5.4): Obs.clearance/collided, Task.clearance/collisions, EpochDone.collisions/clearance;
 # the grasp scene (§5.5): `sense` maps on Obs, Task and Down (contacts, force errors), `traces` on EpochDone
 # 5: several hosts (deploy plans): Setup (the leader's run for the other hosts), Heartbeat
+# 6: Up.clearance, the smallest link clearance of the sender's subtree (LearnerSettings.clearance_of "subtree")
 
 Vec2 = tuple[float, float]
 Vec3 = tuple[float, float, float]
@@ -78,13 +79,17 @@ class Up:
 
     `action` is the index in the agent's action set (0 decrease, 1 keep, 2 increase); -1 when the child
     took none at step - 1 (a compound agent, the epoch's first step, a step it missed). After the last step
-    of an epoch the child sends one more, with `step` = the epoch's length and that last step's action."""
+    of an epoch the child sends one more, with `step` = the epoch's length and that last step's action.
+
+    In a scene with obstacles `clearance` is the smallest signed clearance at `step` of the child's own link and
+    every link below it (None: no obstacles, or none of those links' clearances known)."""
 
     KIND: ClassVar[str] = "up"
     epoch: int
     step: int
     tips: dict[str, Vec3]
     action: int
+    clearance: float | None = None
 
 
 @dataclass(frozen=True)

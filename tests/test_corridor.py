@@ -3,6 +3,7 @@ fields, Eq. 11 and its variants, the scene settings of the learner, and a swarm 
 
 from __future__ import annotations
 
+import asyncio
 import json
 import math
 from pathlib import Path
@@ -10,22 +11,25 @@ from pathlib import Path
 import numpy as np
 import pytest
 from conftest import EXAMPLES
-from kinswarm.actors.agent import Agent, _Step, learner_settings
+from kinswarm.actors.agent import Agent, _Step, _subtree_clearance, learner_settings
 from kinswarm.actors.cli import main as cli_main
 from kinswarm.actors.config import RunConfig
 from kinswarm.actors.learning.fuzzy import FuzzyPartition
 from kinswarm.actors.learning.learner import Learner
 from kinswarm.actors.learning.reward import corridor_reward, next_waypoint, path_distance
 from kinswarm.actors.learning.settings import LearnerSettings
+from kinswarm.experiments.common import settings
+from kinswarm.experiments.swarm import Spec, _supervise
 from kinswarm.protocol import codec
 from kinswarm.protocol.keys import Keys
-from kinswarm.protocol.messages import EpochDone, Obs, Task
+from kinswarm.protocol.messages import EpochDone, Obs, Task, Up
 from kinswarm.protocol.topology import TopologyError, load_topology, parse_topology
 from kinswarm.sim.kinematics import frames
 from kinswarm.sim.obstacles import Scene, SceneError
 from kinswarm.sim.world import World
 
 CORRIDOR = EXAMPLES / "corridor7.toml"
+GUIDED = EXAMPLES / "corridor7-guided.toml"
 RADIUS = 0.1  # the capsule radius of sim/urdf.py
 
 
@@ -380,6 +384,66 @@ def test_tabu_memory_holds_until_the_tip_moves(tmp_path):
         LearnerSettings(collision_tabu=True, tabu_memory=-1.0)
     with pytest.raises(ValueError, match="tabu_memory needs collision_tabu"):
         LearnerSettings(tabu_memory=0.1)
+
+
+def test_subtree_clearance_is_the_smallest_below(tmp_path):
+    """clearance_of "subtree": the state holds the smallest of my link's clearance and my children's `Up`
+    clearances (each their own subtree's); "link" keeps my own link's."""
+
+    class Quiet:  # what an Agent needs of its Node to be built
+        keys = Keys("r")
+
+    def state(of: str, own: float, below: dict[str, float | None]) -> float:
+        over = {"clearance_state": True, "clearance_of": of}
+        cfg = RunConfig(run_id="r", topology=str(CORRIDOR), out=str(tmp_path), learner=over)
+        a = Agent(cfg, cfg.topo(), "a6", Quiet())  # type: ignore[arg-type]
+        ups = {c: Up(epoch=0, step=3, tips={"a7": (5.0, 2.0, 0.0)}, action=1, clearance=v) for c, v in below.items()}
+        cur = _Step((0, 3), (0, 0, 0), (0, 0, 0), 0.0, (5.5, 2.0), None, frozenset(below), {}, ups, (own, 0))
+        s, _ = a._scene_state(np.zeros(6), None, cur.sense, _subtree_clearance(cur))
+        return float(s[-1])
+
+    assert state("subtree", 0.8, {"a7": 0.05}) == 0.05  # my chain is against a wall, my own link is not
+    assert state("subtree", 0.02, {"a7": 0.4}) == 0.02
+    assert state("subtree", 0.8, {"a7": None}) == 0.8  # a child that knows none
+    assert state("link", 0.8, {"a7": 0.05}) == 0.8
+    with pytest.raises(ValueError, match="clearance_of must be one of"):
+        LearnerSettings(clearance_state=True, clearance_of="chain")
+    with pytest.raises(ValueError, match="clearance_of needs clearance_state"):
+        LearnerSettings(clearance_of="subtree")
+
+
+@pytest.mark.timeout(120)
+def test_up_carries_each_subtrees_smallest_clearance(tmp_path):
+    """On the wire, a real run: every child's `Up` at a step carries the smallest of the sim's clearances at that
+    step (`Obs`) over the child's own link and all links below it."""
+    learner = settings(clearance_state=True, clearance_of="subtree", collision_state=True, collision_tabu=True)
+    spec = Spec("up", seed=3, epochs=1, steps=40, reward="settle", learner=learner, topology=str(GUIDED))
+    cfg = spec.config(tmp_path)
+    topo = cfg.topo()
+    keys = Keys(cfg.run_id)
+    _, captured = asyncio.run(_supervise(cfg, topo, None, False, record=(keys.obs("*"), keys.up("*"))))
+    obs: dict[tuple[int, str], float] = {}
+    ups: list[tuple[str, Up]] = []
+    for key, payload in captured:
+        if key.startswith(keys.obs("")):
+            m = codec.decode(payload, Obs, cfg.run_id, cfg.key)
+            obs[(m.step, key[len(keys.obs("")) :])] = m.clearance
+        else:
+            parent = key[len(keys.root) + 3 : -3]  # <root>/a/<parent>/up
+            ups.append((parent, codec.decode(payload, Up, cfg.run_id, cfg.key)))
+    checked = 0
+    for parent, m in ups:
+        if m.step == cfg.steps:
+            continue  # the closing `up`: an action only
+        (child,) = [c for c in topo.agents[parent].children if set(topo.subtree_leaves(c)) == set(m.tips)]
+        below, stack = [], [child]
+        while stack:
+            below.append(stack.pop())
+            stack.extend(topo.agents[below[-1]].children)
+        assert m.clearance == min(obs[(m.step, a)] for a in below), (parent, m.step)
+        checked += 1
+    assert checked == 6 * cfg.steps  # a2..a7, every step
+    assert min(obs.values()) < 0.5 < max(obs.values())  # near and far links both seen
 
 
 # -- a run through the corridor ---------------------------------------------------------------------

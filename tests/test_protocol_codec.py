@@ -36,6 +36,7 @@ SAMPLES = [
     Down(epoch=3, step=4, base=(1.0, 2.0, 0.5), goal=(4.0, 6.0), reward=-1.5),
     Down(epoch=3, step=0, base=(0.0, 0.0, 0.0), goal=(4.0, 6.0), reward=None),
     Up(epoch=1, step=9, tips={"l2": (1.0, 1.0, 0.0), "r2": (-1.0, 1.0, 3.0)}, action=2),
+    Up(epoch=1, step=9, tips={"a7": (5.5, 2.0, 0.0)}, action=0, clearance=0.125),
     Cmd(epoch=1, step=9, delta=-0.0174),
     EpochStart(epoch=5, steps=500, goal=(1.0, 2.0)),
     EpochDone(

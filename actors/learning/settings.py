@@ -9,6 +9,7 @@ from dataclasses import dataclass, replace
 STATE_NAMES: tuple[str, ...] = ("q", "theta", "d", "g1", "g2", "g3")
 BOOTSTRAPS: tuple[str, ...] = ("joint_max", "expected")
 #: g3 as the bearing of the goal from the end effector (signed, the default) or its size only (unsigned).
+CLEARANCE_OF: tuple[str, ...] = ("link", "subtree")
 G3_MODES: tuple[str, ...] = ("signed", "unsigned")
 #: State of a grasp scene's finger agents (paper §5.5), see `grasp_state` below.
 GRASP_STATES: tuple[str, ...] = ("reach", "force", "contact", "goal")
@@ -70,6 +71,11 @@ class LearnerSettings:
     and whether its own increment was refused by a wall. Both are off by default (the paper's six variables):
         clearance_state: append the own link's clearance ("the distance from the corridor that is locally
             perceived by agent a_i") as a 7th state variable, clearance_sets sets over clearance_range (clipped).
+        clearance_of: what that clearance is of. "link" (default): the agent's own link's. "subtree": the smallest of
+            its own link's and of every link below it (the links its joint moves), from its Obs and its children's
+            `Up` (the bottom-up pass carries each subtree's smallest clearance): a proximal agent whose own link is
+            far from the walls then sees that the chain it moves is against one. Measured on the corridor
+            (docs/science.md, round 6).
         collision_state: append a 0/1 flag "my increment of the previous step was refused" (2 sets over [0, 1]).
             It breaks the greedy deadlock against a wall: a refused move leaves q and the tips unchanged, so
             without it the state, and hence the greedy choice, would repeat forever.
@@ -119,6 +125,7 @@ class LearnerSettings:
     clearance_state: bool = False
     clearance_sets: int = 5
     clearance_range: tuple[float, float] = (0.0, 1.0)
+    clearance_of: str = "link"
     collision_state: bool = False
     collision_penalty: float = 0.0
     extra_state: tuple[str, ...] = ()
@@ -207,6 +214,10 @@ class LearnerSettings:
         lo, hi = self.clearance_range
         if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
             raise ValueError(f"clearance_range must be finite with lo < hi, got ({lo}, {hi})")
+        if self.clearance_of not in CLEARANCE_OF:
+            raise ValueError(f"clearance_of must be one of {CLEARANCE_OF}, got {self.clearance_of!r}")
+        if self.clearance_of != "link" and not self.clearance_state:
+            raise ValueError("clearance_of needs clearance_state = true (it says which clearance the state holds)")
         if not (math.isfinite(self.tabu_memory) and self.tabu_memory >= 0.0):
             raise ValueError(f"tabu_memory must be >= 0, got {self.tabu_memory}")
         if self.tabu_memory > 0.0 and not self.collision_tabu:
