@@ -458,7 +458,7 @@ class Agent:
             tips = dict(cur.tips)
             for c in cur.waiting:
                 tips.update(cur.ups[c].tips)
-        clearance = _subtree_clearance(cur)
+        clearance = _subtree_clearance(cur) if self.topo.obstacles else None  # no work for plain reaching
         if not self.is_root:  # first: the parent's state needs only the tips (and the subtree's clearance)
             d = self.decided
             prev = d[1] if d is not None and d[0] == (epoch, step - 1) else -1

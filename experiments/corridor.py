@@ -118,6 +118,7 @@ def seed_metrics(train: RunOutcome, frozen: RunOutcome, tabu: RunOutcome) -> dic
 
 def run(ctx: Context) -> dict[str, Any]:
     epochs, steps = (QUICK_EPOCHS, QUICK_STEPS) if ctx.quick else (EPOCHS, STEPS)
+    long = {} if ctx.quick else LONG_EPOCHS
     seeds_of = {
         label: ctx.seed_list
         if label == MAIN or ctx.quick
@@ -130,7 +131,7 @@ def run(ctx: Context) -> dict[str, Any]:
             train_specs[(label, seed)] = Spec(
                 f"corr-{label}",
                 seed=seed,
-                epochs=epochs if ctx.quick else LONG_EPOCHS.get(label, epochs),
+                epochs=long.get(label, epochs),
                 steps=steps,
                 reward=reward,
                 learner=settings(**over),
@@ -185,7 +186,6 @@ def run(ctx: Context) -> dict[str, Any]:
         }
 
     rep = Report(ctx, "Corridor: a 7-DOF chain into a narrow corridor", "5.4, Fig. 23")
-    long = {} if ctx.quick else LONG_EPOCHS
     rep.results.update({"epochs": epochs, "epochs_of": long, "steps": steps, "tol": TOL, "tail": TAIL, "configs": per})
     rep.text(
         "## Set-up",

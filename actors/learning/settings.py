@@ -8,8 +8,9 @@ from dataclasses import dataclass, replace
 #: Names of the six state variables S_i = <q_i, theta_i, d_i, g1, g2, g3> (paper §3.3).
 STATE_NAMES: tuple[str, ...] = ("q", "theta", "d", "g1", "g2", "g3")
 BOOTSTRAPS: tuple[str, ...] = ("joint_max", "expected")
-#: g3 as the bearing of the goal from the end effector (signed, the default) or its size only (unsigned).
+#: The clearance state variable of a scene with obstacles: the agent's own link's, or its subtree's smallest.
 CLEARANCE_OF: tuple[str, ...] = ("link", "subtree")
+#: g3 as the bearing of the goal from the end effector (signed, the default) or its size only (unsigned).
 G3_MODES: tuple[str, ...] = ("signed", "unsigned")
 #: State of a grasp scene's finger agents (paper §5.5), see `grasp_state` below.
 GRASP_STATES: tuple[str, ...] = ("reach", "force", "contact", "goal")
