@@ -65,10 +65,10 @@ def learner_settings(cfg: RunConfig, topo: Topology, agent_id: str | None = None
         fn_max = (obj.kn + obj.cn) * obj.max_depth
         return grasp_learner_settings(finger, topo.agents[agent_id].is_leaf, fn_max, cfg.learner)
     settings = LearnerSettings.for_reach(topo.reach, **cfg.learner)
-    if (settings.clearance_state or settings.collision_state) and not topo.obstacles:
+    if (settings.clearance_state or settings.collision_state or settings.shield) and not topo.obstacles:
         raise ValueError(
-            f"learner settings clearance_state/collision_state need a scene with obstacles; {topo.source} has no "
-            "[[obstacle]]"
+            f"learner settings clearance_state/collision_state/shield need a scene with obstacles; {topo.source} "
+            "has no [[obstacle]]"
         )
     if settings.follow_leader > 0.0 and topo.via is None:
         raise ValueError(
@@ -121,7 +121,8 @@ class Agent:
                 cfg.reward, obj.grasp, obj.center, obj.half_extents, kn=obj.kn, kt=obj.kt, fine_action=fine
             )
             self.finger_of = {c: topo.subtree_leaves(c)[0] for c in self.spec.children}
-        self.grasp_in: dict[Key, dict[str, float]] = {}  # my own Obs.sense by step (a fingertip's contact)
+        # my own Obs.sense by step (a fingertip's contact, the shield's look-ahead)
+        self.local_in: dict[Key, dict[str, float]] = {}
         self.epoch = -1
         self.last_begun: Key = (-1, -1)
         self.last_finished: Key = (-1, -1)
@@ -243,7 +244,7 @@ class Agent:
                         if agent == self.id and m.clearance is not None:
                             self.sense_in[(m.epoch, m.step)] = (m.clearance, m.collided)
                         if m.sense and agent == self.id:
-                            self.grasp_in[(m.epoch, m.step)] = m.sense
+                            self.local_in[(m.epoch, m.step)] = m.sense
                         self._try_begin((m.epoch, m.step))
             elif kind.endswith("/down") or kind == "sim/task":
                 m2 = node.decode(key, payload, Task if self.is_root else Down)
@@ -362,9 +363,9 @@ class Agent:
             self.D_prev = D
         else:
             base, goal, reward, ctx = head.base, head.goal, head.reward, head.sense
-        self.sense_now = {**ctx, **self.grasp_in.pop(key, {})}
-        if self.grasp_in:
-            self.grasp_in = {kk: v for kk, v in self.grasp_in.items() if kk > key}
+        self.sense_now = {**ctx, **self.local_in.pop(key, {})}
+        if self.local_in:
+            self.local_in = {kk: v for kk, v in self.local_in.items() if kk > key}
         frame = joint_frame(base, self.spec.offset, q.get(self.id, 0.0))
         end = link_end(frame, self.spec.link_length)
         tips: dict[str, tuple[float, float, float]] = {}
@@ -480,7 +481,9 @@ class Agent:
                 if "g_moves" in self.extra_state:  # the same in my own moves (state.moves_to_goal)
                     local["g_moves"] = moves_to_goal(cur.frame, tip, cur.goal, self.cfg.action_rad)
                 s = np.concatenate([s, [local.get(n, 0.0) for n in self.extra_state]])
-            avoid = self._tabu(cur, tip) if self.learner.settings.collision_tabu else ()
+            avoid = self._tabu(cur, tip) if self.learner.settings.collision_tabu else []
+            if self.learner.settings.shield > 0.0:
+                avoid += self._shielded()
             action = self.learner.decide(s, reward, learn=self.cfg.learn, explore=self.cfg.explore, avoid=avoid)
             self.decided = (cur.key, action)
             if self.visible:
@@ -517,6 +520,14 @@ class Agent:
             self.tabu[refused] = tip
         self.tabu = {a: at for a, at in self.tabu.items() if math.dist(at, tip) < memory}
         return list(self.tabu)
+
+    def _shielded(self) -> list[int]:
+        """The moves the shield leaves out: those the simulator's look-ahead (my Obs.sense) finds would bring the
+        links I move nearer a wall than LearnerSettings.shield. Without a reading (a lost obs) none."""
+        assert self.learner is not None
+        shield = self.learner.settings.shield
+        ahead = (self.sense_now.get("ahead-"), None, self.sense_now.get("ahead+"))
+        return [a for a, c in enumerate(ahead) if c is not None and c < shield]
 
     def _scene_state(
         self, s: np.ndarray, reward: float | None, sense: tuple[float | None, int], subtree: float | None

@@ -21,6 +21,7 @@ from typing import Any
 
 import numpy as np
 import zenoh
+from kinswarm.actors.agent import learner_settings
 from kinswarm.actors.config import RunConfig
 from kinswarm.actors.runtime import Node
 from kinswarm.actors.scenario import ScenarioEntry, load_scenario
@@ -75,6 +76,8 @@ class SimActor:
             except BaseException:
                 self.world.close()
                 raise
+        # the agents whose shield (LearnerSettings.shield) needs the look-ahead in their obs
+        self.shielded = frozenset(a for a in topo.dof_agents if learner_settings(cfg, topo, a).shield > 0.0)
         # a grasp scene (paper §5.5): the object, the fingertips' contacts, the net wrench (sim/contact.py)
         self.grasp = GraspScene(self.world, topo.object) if topo.object is not None else None
         self.traces: dict[str, list[float]] = {}
@@ -402,11 +405,16 @@ class SimActor:
 
     def _publish_scene_step(self, e: EpochStart, q: dict[str, float]) -> None:
         """_publish_step's messages in a scene with obstacles: each agent's own link clearance and whether its
-        increment of the step before was refused; the smallest clearance and the refusals for the root."""
-        k, send, c, refused = self.keys, self.node.send, self.clearance, self.refused
+        increment of the step before was refused (and a shielded agent's look-ahead); the smallest clearance and
+        the refusals for the root."""
+        k, send, c, refused, scene = self.keys, self.node.send, self.clearance, self.refused, self.scene
+        assert scene is not None
 
         def obs(a: str) -> Obs:
-            return Obs(epoch=e.epoch, step=self.t, q=q[a], clearance=c.get(a), collided=int(a in refused))
+            sense: dict[str, float] = {}
+            if a in self.shielded:
+                sense["ahead-"], sense["ahead+"] = scene.ahead(a, self.cfg.action_rad, c)
+            return Obs(epoch=e.epoch, step=self.t, q=q[a], clearance=c.get(a), collided=int(a in refused), sense=sense)
 
         for a in self._obs_first:
             send(k.obs(a), obs(a))

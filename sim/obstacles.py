@@ -10,10 +10,12 @@ that cause the penetration; those joints hold and are reported as collisions.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 
 from kinswarm.protocol.obstacles import ObstacleSpec
+from kinswarm.protocol.topology import Topology
 from kinswarm.sim.world import World, pb
 
 #: Links further than this from every obstacle report this clearance (the query's search radius).
@@ -21,6 +23,8 @@ MAX_CLEARANCE = 10.0
 #: Penetration tolerance: a link is "in" a wall when its signed clearance is below -PENETRATION_TOL. Touching
 #: (clearance 0) is allowed; the tolerance absorbs float32 noise of PyBullet's distance queries.
 PENETRATION_TOL = 1e-6
+#: Scene.ahead reports the present clearance without a query when its moves cannot come nearer a wall than this.
+AHEAD_FAR = 1.0
 _HALF_HEIGHT = 1.0  # z half-extent of the wall boxes: the links lie in z = 0
 
 
@@ -60,21 +64,50 @@ class Scene:
         topo = world.topo
         # links with a body: every agent with a link length > 0 (compound agents may have none)
         self.links = {a: world.joint_index[a] for a in topo.order if topo.agents[a].link_length > 0}
+        # what each DOF joint moves: its own link and every link below it, and how far from the joint they reach
+        self.moved_by: dict[str, tuple[str, ...]] = {}
+        self.radius: dict[str, float] = {}
+        for a in topo.dof_agents:
+            below, todo = [], [a]
+            while todo:
+                b = todo.pop()
+                below.append(b)
+                todo.extend(topo.agents[b].children)
+            self.moved_by[a] = tuple(b for b in below if b in self.links)
+            self.radius[a] = _reach(topo, a)
 
     def clearances(self) -> dict[str, float]:
         """Signed clearance of every agent's link to the nearest obstacle (MAX_CLEARANCE if none is near)."""
-        cid, robot = self.world.client, self.world.body
-        out: dict[str, float] = {}
-        for agent, link in self.links.items():
-            best = MAX_CLEARANCE
-            for body in self.bodies:
-                pts = pb.getClosestPoints(
-                    bodyA=robot, bodyB=body, distance=MAX_CLEARANCE, linkIndexA=link, physicsClientId=cid
-                )
-                for p in pts:
-                    best = min(best, float(p[8]))  # contactDistance: negative in penetration
-            out[agent] = best
-        return out
+        return {agent: self._clearance(agent) for agent in self.links}
+
+    def _clearance(self, agent: str) -> float:
+        cid, robot, link = self.world.client, self.world.body, self.links[agent]
+        best = MAX_CLEARANCE
+        for body in self.bodies:
+            pts = pb.getClosestPoints(
+                bodyA=robot, bodyB=body, distance=MAX_CLEARANCE, linkIndexA=link, physicsClientId=cid
+            )
+            for p in pts:
+                best = min(best, float(p[8]))  # contactDistance: negative in penetration
+        return best
+
+    def ahead(self, agent: str, step: float, clearance: Mapping[str, float]) -> tuple[float, float]:
+        """The look-ahead of LearnerSettings.shield: the smallest clearance of the links `agent`'s joint moves
+        after its move of -step and of +step alone from the present configuration (`clearance`: the present
+        clearances). A joint turning by `step` moves no point below it further than radius x |step| (plus the
+        links' radius x |step|, well under AHEAD_FAR's slack), so when no such move can come within AHEAD_FAR of a
+        wall both are the present clearance, without a query."""
+        now = min((clearance[b] for b in self.moved_by[agent]), default=MAX_CLEARANCE)
+        if now - self.radius[agent] * abs(step) > AHEAD_FAR:
+            return now, now
+        world = self.world
+        before = world.joint_positions()
+        out = []
+        for d in (-step, step):
+            world.apply_increments({agent: d})
+            out.append(min(self._clearance(b) for b in self.moved_by[agent]))
+            world.reset(before)
+        return out[0], out[1]
 
     def penetrating(self, clearance: Mapping[str, float]) -> list[str]:
         return [a for a, c in clearance.items() if c < -PENETRATION_TOL]
@@ -121,3 +154,10 @@ class Scene:
         if clearance_now is None:
             clearance_now = self.clearances()
         return Moved(applied, tuple(refused), clearance_now)
+
+
+def _reach(topo: Topology, agent: str, offset: bool = False) -> float:
+    """The longest path of links (and the children's offsets) from `agent`'s joint to a tip below it."""
+    a = topo.agents[agent]
+    own = math.hypot(*a.offset) if offset else 0.0
+    return own + a.link_length + max((_reach(topo, c, True) for c in a.children), default=0.0)

@@ -22,7 +22,7 @@ from kinswarm.experiments.common import settings
 from kinswarm.experiments.swarm import Spec, _supervise
 from kinswarm.protocol import codec
 from kinswarm.protocol.keys import Keys
-from kinswarm.protocol.messages import EpochDone, Obs, Task, Up
+from kinswarm.protocol.messages import Cmd, EpochDone, Obs, Task, Up
 from kinswarm.protocol.topology import TopologyError, load_topology, parse_topology
 from kinswarm.sim.kinematics import frames
 from kinswarm.sim.obstacles import Scene, SceneError
@@ -181,6 +181,34 @@ def test_penetrating_move_is_refused_and_reported(tmp_path):
         assert set(m.refused) == {"a1", "a2"} and world.joint_positions() == {"a1": 0.0, "a2": 0.0}
 
 
+def test_look_ahead_by_hand(tmp_path):
+    """Scene.ahead (the shield's reading): the links a joint moves, after its move alone, read off the drawing;
+    the world is left as it was."""
+    topo = load_topology(_one_wall_topology(tmp_path))  # wall bottom at y = 0.15, capsules' surface 0.05 below
+    step = math.radians(5.0)
+    with World(topo) as world:
+        scene = Scene(world)
+        c = scene.clearances()
+        # a1 up lifts the tip to 2 sin 5 deg = 0.174: 0.15 - 0.174 - 0.1 into the wall; down, the base stays 0.05 off
+        lo, hi = scene.ahead("a1", step, c)
+        assert lo == pytest.approx(0.05, abs=1e-4) and hi == pytest.approx(0.15 - 2 * math.sin(step) - 0.1, abs=1e-4)
+        # a2 moves its own link only: its tip to (1 + cos 5, sin 5 deg)
+        lo, hi = scene.ahead("a2", step, c)
+        assert lo == pytest.approx(0.05, abs=1e-4) and hi == pytest.approx(0.15 - math.sin(step) - 0.1, abs=1e-4)
+        assert world.joint_positions() == {"a1": 0.0, "a2": 0.0} and scene.clearances() == c
+        # each equals the clearances after making the move for real
+        for a, d in (("a1", -step), ("a2", step), ("a1", step)):
+            want = scene.ahead(a, step, c)[d > 0]
+            world.apply_increments({a: d})
+            assert min(scene.clearances()[b] for b in scene.moved_by[a]) == pytest.approx(want, abs=1e-9)
+            world.reset({"a1": 0.0, "a2": 0.0})
+    (tmp_path / "far").mkdir()  # the wall 5 away: no move of 5 degrees comes within AHEAD_FAR, so no query
+    with World(load_topology(_one_wall_topology(tmp_path / "far", gap=5.0))) as world:
+        scene = Scene(world)
+        c = scene.clearances()
+        assert c["a1"] == pytest.approx(5.0, abs=1e-4) and scene.ahead("a1", step, c) == (c["a1"], c["a1"])
+
+
 def test_start_inside_a_wall_is_an_error(tmp_path):
     p = tmp_path / "in.toml"
     p.write_text(
@@ -327,6 +355,11 @@ def test_scene_state_settings():
     cfg = RunConfig(run_id="r", topology=str(EXAMPLES / "chain4.toml"), out="/tmp/x", learner={"clearance_state": True})
     with pytest.raises(ValueError, match="need a scene with obstacles.*chain4.toml"):
         learner_settings(cfg, cfg.topo())
+    with pytest.raises(ValueError, match="shield must be a distance >= 0"):
+        LearnerSettings(shield=-0.1)
+    cfg = RunConfig(run_id="r", topology=str(EXAMPLES / "chain4.toml"), out="/tmp/x", learner={"shield": 0.1})
+    with pytest.raises(ValueError, match="shield need a scene with obstacles.*chain4.toml"):
+        learner_settings(cfg, cfg.topo())
 
 
 def test_collision_tabu_never_repeats_the_refused_action():
@@ -444,6 +477,36 @@ def test_up_carries_each_subtrees_smallest_clearance(tmp_path):
         checked += 1
     assert checked == 6 * cfg.steps  # a2..a7, every step
     assert min(obs.values()) < 0.5 < max(obs.values())  # near and far links both seen
+
+
+@pytest.mark.timeout(120)
+def test_shield_never_moves_where_the_look_ahead_forbids(tmp_path):
+    """On the wire, a real run with a wide shield: every agent's obs carries the look-ahead, and no agent ever
+    commands a move whose look-ahead (in that step's obs) is nearer a wall than the shield; some moves are left
+    out (the check can fail)."""
+    shield = 0.5
+    learner = settings(clearance_state=True, collision_state=True, collision_tabu=True, shield=shield)
+    spec = Spec("shield", seed=3, epochs=1, steps=60, reward="settle", learner=learner, topology=str(GUIDED))
+    cfg = spec.config(tmp_path)
+    topo = cfg.topo()
+    keys = Keys(cfg.run_id)
+    _, captured = asyncio.run(_supervise(cfg, topo, None, False, record=(keys.obs("*"), keys.cmd("*"))))
+    ahead: dict[tuple[int, str], tuple[float, float]] = {}
+    cmds: dict[tuple[int, str], float] = {}
+    for key, payload in captured:
+        if key.startswith(keys.obs("")):
+            m = codec.decode(payload, Obs, cfg.run_id, cfg.key)
+            ahead[(m.step, key[len(keys.obs("")) :])] = (m.sense["ahead-"], m.sense["ahead+"])
+        else:
+            c = codec.decode(payload, Cmd, cfg.run_id, cfg.key)
+            cmds[(c.step, key[len(keys.cmd("")) :])] = c.delta
+    assert len(ahead) == len(cmds) == 7 * cfg.steps
+    blocked = 0
+    for k, delta in cmds.items():
+        lo, hi = ahead[k]
+        assert not (delta < 0 and lo < shield) and not (delta > 0 and hi < shield), (k, delta, lo, hi)
+        blocked += (lo < shield) + (hi < shield)
+    assert blocked > 20
 
 
 # -- a run through the corridor ---------------------------------------------------------------------

@@ -89,6 +89,13 @@ class LearnerSettings:
             tabu_memory (in the scene's length units) stays left out, so a jammed agent tries each way once and
             then keeps; the memory is the agent's decision state, not learned, and starts empty every epoch.
             Measured on the corridor (docs/science.md, round 5): not better than one step, in training or frozen.
+        shield: a reflex against the walls, not learned (0, off, by default). > 0: the simulator looks one move
+            ahead for the agent (Obs.sense "ahead-", "ahead+": the smallest clearance of the links its joint moves
+            after its own move of -1 or +1 alone, from the present configuration), and a move that would bring
+            them nearer a wall than `shield` is left out of the choice, greedy and exploring ("keep" never is).
+            A proximity sensor on the links an agent moves, like a whisker; others' moves of the same step are
+            not foreseen, so the walls can still refuse a joint action. Measured on the corridor
+            (docs/science.md, round 7).
         epsilon_decay: per-epoch decay of epsilon, epsilon(epoch) = epsilon * (1 - epsilon_decay) ** epoch (default 0:
             the same exploration every epoch). With a slow T(t) decay (small s) exploration then lasts through
             the epoch early in training and fades over the epochs.
@@ -137,6 +144,7 @@ class LearnerSettings:
     fine_action: float = 1.0
     collision_tabu: bool = False
     tabu_memory: float = 0.0
+    shield: float = 0.0
     follow_leader: float = 0.0
     follow_leader_links: int = 4
     g3: str = "signed"
@@ -223,6 +231,8 @@ class LearnerSettings:
             raise ValueError(f"tabu_memory must be >= 0, got {self.tabu_memory}")
         if self.tabu_memory > 0.0 and not self.collision_tabu:
             raise ValueError("tabu_memory needs collision_tabu = true (it says how long the tabu lasts)")
+        if not (isinstance(self.shield, (int, float)) and math.isfinite(self.shield) and self.shield >= 0.0):
+            raise ValueError(f"shield must be a distance >= 0, got {self.shield!r}")
         if not 0.0 <= self.epsilon_decay < 1.0:
             raise ValueError(f"epsilon_decay must be in [0, 1), got {self.epsilon_decay}")
         if not (math.isfinite(self.follow_leader) and self.follow_leader >= 0.0):
