@@ -549,4 +549,5 @@ def test_quick_corridor_experiment(tmp_path):
         assert 0.0 <= seed["success_last"] <= 1.0 and seed["frozen_collisions"] >= 0
         assert seed["frozen_min_clearance"] >= -1e-5  # solid walls in the frozen run too
         assert isinstance(seed["frozen_success"], bool) and isinstance(seed["tabu_success"], bool)
+        assert isinstance(seed["shield_success"], bool) and seed["shield_collisions"] >= 0
         assert per["bar_training_met"] is False and per["bar_frozen_met"] is False  # one seed never meets a bar

@@ -1,4 +1,4 @@
-"""The corridor probes of 2026-11-22 and 23 (docs/science.md, Corridor, rounds 4-6): the `follow`
+"""The corridor probes of 2026-11-22 and 23 (docs/science.md, Corridor, rounds 4-7): the `follow`
 configuration of `kinswarm experiment corridor` (hard set-up, 100 x 500) with changes, then each trained swarm
 frozen (`--learn off --explore off`) for one epoch, with the walls' refusals counted per agent.
 
@@ -12,6 +12,7 @@ frozen (`--learn off --explore off`) for one epoch, with the walls' refusals cou
     python docs/probes/corridor_probe.py OUT settle+refusal+long 0,1,2,3,4          # round 6, ~20 min of 2 cores
     python docs/probes/corridor_probe.py OUT settle+refusal+subtree+long 0,1,2,3,4  # round 6
     python docs/probes/corridor_probe.py OUT settle+refusal+subtree+long+fine 0,1,2,3,4  # round 6
+    python docs/probes/corridor_probe.py OUT settle+refusal+subtree+long+shield=0.02 0,1,2,3,4  # round 7
 
 frozen-memory trains nothing: it freezes the given training runs of `follow` (run directories of the
 experiment's cache, `kinswarm experiment corridor --out DIR`: DIR/runs/corr-follow-*) with tabu_memory 0.1.
