@@ -99,39 +99,34 @@ def seed_metrics(
     ok = [r["final_error"] <= TOL and sum(r["collisions"][-LAST_STEPS:]) == 0 for r in tail]
     within = [r["final_error"] <= TOL for r in tail]
     f = frozen.rows[0]
-    return (
-        {
-            "success_last": sum(ok) / len(ok),  # within TOL and no collision in the last 100 steps
-            "within_last": sum(within) / len(within),
-            "median_final_last": float(np.median([r["final_error"] for r in tail])),
-            "collisions_per_epoch_last": float(np.mean([sum(r["collisions"]) for r in tail])),
-            "collisions_per_epoch_first10": float(np.mean([sum(r["collisions"]) for r in rows[:10]])),
-            "first_success_epoch": next(
-                (r["epoch"] for r in rows if r["final_error"] <= TOL and sum(r["collisions"][-LAST_STEPS:]) == 0),
-                None,
-            ),
-            "frozen_final_error": f["final_error"],
-            "frozen_collisions": sum(f["collisions"]),
-            "frozen_collisions_last100": sum(f["collisions"][-LAST_STEPS:]),
-            "frozen_min_clearance": min(f["clearance"]),
-            "frozen_success": bool(f["final_error"] <= TOL and sum(f["collisions"]) == 0),
-            # the same trained swarm, frozen, with collision_tabu at evaluation (a decision rule, nothing learned)
-            "tabu_final_error": tabu.rows[0]["final_error"],
-            "tabu_collisions": sum(tabu.rows[0]["collisions"]),
-            "tabu_success": bool(tabu.rows[0]["final_error"] <= TOL and sum(tabu.rows[0]["collisions"]) == 0),
-            "train_run": train.out.name,
-            "frozen_run": frozen.out.name,
-        }
-        | ({} if shield is None else _shield_metrics(shield.rows[0]))
-    )
-
-
-def _shield_metrics(row: dict[str, Any]) -> dict[str, Any]:
-    """The trained swarm frozen with collision_tabu and the shield at evaluation (reflexes, nothing learned)."""
     return {
-        "shield_final_error": row["final_error"],
-        "shield_collisions": sum(row["collisions"]),
-        "shield_success": bool(row["final_error"] <= TOL and sum(row["collisions"]) == 0),
+        "success_last": sum(ok) / len(ok),  # within TOL and no collision in the last 100 steps
+        "within_last": sum(within) / len(within),
+        "median_final_last": float(np.median([r["final_error"] for r in tail])),
+        "collisions_per_epoch_last": float(np.mean([sum(r["collisions"]) for r in tail])),
+        "collisions_per_epoch_first10": float(np.mean([sum(r["collisions"]) for r in rows[:10]])),
+        "first_success_epoch": next(
+            (r["epoch"] for r in rows if r["final_error"] <= TOL and sum(r["collisions"][-LAST_STEPS:]) == 0),
+            None,
+        ),
+        **_frozen_metrics("frozen", f),
+        "frozen_collisions_last100": sum(f["collisions"][-LAST_STEPS:]),
+        "frozen_min_clearance": min(f["clearance"]),
+        # the same trained swarm, frozen, with collision_tabu (and the shield) at evaluation: decision rules and
+        # reflexes, nothing learned
+        **_frozen_metrics("tabu", tabu.rows[0]),
+        **({} if shield is None else _frozen_metrics("shield", shield.rows[0])),
+        "train_run": train.out.name,
+        "frozen_run": frozen.out.name,
+    }
+
+
+def _frozen_metrics(prefix: str, row: dict[str, Any]) -> dict[str, Any]:
+    """A frozen epoch's final error, collisions and success (the frozen bar: within TOL, no collision at all)."""
+    return {
+        f"{prefix}_final_error": row["final_error"],
+        f"{prefix}_collisions": sum(row["collisions"]),
+        f"{prefix}_success": bool(row["final_error"] <= TOL and sum(row["collisions"]) == 0),
     }
 
 

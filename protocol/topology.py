@@ -138,13 +138,19 @@ class Topology:
     @property
     def reach(self) -> float:
         """Longest root-to-leaf sum of link lengths and offsets: the radius of the task space."""
+        r = self.agents[self.root]
+        return math.hypot(r.offset[0], r.offset[1]) + self.reach_below(self.root)
 
-        def longest(aid: str) -> float:
-            a = self.agents[aid]
-            below = max((longest(c) for c in a.children), default=0.0)
-            return math.hypot(a.offset[0], a.offset[1]) + a.link_length + below
+    def reach_below(self, aid: str) -> float:
+        """Longest sum of link lengths and offsets from `aid`'s joint to a leaf below it: how far from the joint
+        a point it moves can lie."""
+        a = self.agents[aid]
+        below = (math.hypot(*self.agents[c].offset[:2]) + self.reach_below(c) for c in a.children)
+        return a.link_length + max(below, default=0.0)
 
-        return longest(self.root)
+    def subtree(self, aid: str) -> tuple[str, ...]:
+        """`aid` and every agent below it, parents first."""
+        return (aid, *(b for c in self.agents[aid].children for b in self.subtree(c)))
 
     def depth(self, aid: str) -> int:
         d, a = 0, self.agents[aid]

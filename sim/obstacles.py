@@ -10,12 +10,10 @@ that cause the penetration; those joints hold and are reported as collisions.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 
 from kinswarm.protocol.obstacles import ObstacleSpec
-from kinswarm.protocol.topology import Topology
 from kinswarm.sim.world import World, pb
 
 #: Links further than this from every obstacle report this clearance (the query's search radius).
@@ -65,16 +63,8 @@ class Scene:
         # links with a body: every agent with a link length > 0 (compound agents may have none)
         self.links = {a: world.joint_index[a] for a in topo.order if topo.agents[a].link_length > 0}
         # what each DOF joint moves: its own link and every link below it, and how far from the joint they reach
-        self.moved_by: dict[str, tuple[str, ...]] = {}
-        self.radius: dict[str, float] = {}
-        for a in topo.dof_agents:
-            below, todo = [], [a]
-            while todo:
-                b = todo.pop()
-                below.append(b)
-                todo.extend(topo.agents[b].children)
-            self.moved_by[a] = tuple(b for b in below if b in self.links)
-            self.radius[a] = _reach(topo, a)
+        self.moved_by = {a: tuple(b for b in topo.subtree(a) if b in self.links) for a in topo.dof_agents}
+        self.radius = {a: topo.reach_below(a) for a in topo.dof_agents}
 
     def clearances(self) -> dict[str, float]:
         """Signed clearance of every agent's link to the nearest obstacle (MAX_CLEARANCE if none is near)."""
@@ -154,10 +144,3 @@ class Scene:
         if clearance_now is None:
             clearance_now = self.clearances()
         return Moved(applied, tuple(refused), clearance_now)
-
-
-def _reach(topo: Topology, agent: str, offset: bool = False) -> float:
-    """The longest path of links (and the children's offsets) from `agent`'s joint to a tip below it."""
-    a = topo.agents[agent]
-    own = math.hypot(*a.offset) if offset else 0.0
-    return own + a.link_length + max((_reach(topo, c, True) for c in a.children), default=0.0)

@@ -18,6 +18,10 @@ def test_tree(tree5):
     assert t.agents["base"].children == ("l1", "r1")
     assert set(t.end_effectors) == {"l2", "r2"}
     assert t.subtree_leaves("base") == ("l2", "r2")
+    assert t.subtree("base") == ("base", "l1", "l2", "r1", "r2") and t.subtree("r1") == ("r1", "r2")
+    # links of 2; the branches' offsets turn (30 deg) but do not move their joints: no length of their own
+    assert t.reach_below("base") == 6.0 and t.reach_below("l1") == 4.0 and t.reach_below("l2") == 2.0
+    assert t.reach == 6.0
 
 
 BASE = """
