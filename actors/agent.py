@@ -38,6 +38,7 @@ from kinswarm.actors.config import RunConfig
 from kinswarm.actors.learning.grasp import GraspReward, grasp_learner_settings
 from kinswarm.actors.learning.learner import Learner
 from kinswarm.actors.learning.reward import (
+    SETTLE_RADIUS,
     corridor_reward,
     follow_leader_distance,
     next_waypoint,
@@ -45,7 +46,7 @@ from kinswarm.actors.learning.reward import (
     reach_reward,
 )
 from kinswarm.actors.learning.settings import LearnerSettings
-from kinswarm.actors.learning.state import agent_state, goal_along_motion, joint_frame, link_end, moves_to_goal
+from kinswarm.actors.learning.state import agent_state, joint_frame, link_end, own_extras
 from kinswarm.actors.runtime import Node
 from kinswarm.protocol.messages import Bye, Checkpoint, Cmd, Down, Event, Fault, Obs, Saved, Stop, Task, Up
 from kinswarm.protocol.topology import Topology
@@ -112,6 +113,7 @@ class Agent:
             settings = learner_settings(cfg, topo, agent_id)
             self.learner = Learner(settings, len(self.visible), agent_seed(cfg.seed, agent_id))
             self.extra_state = settings.extra_state
+        self.settle_radius = self.learner.settings.settle_radius if self.learner is not None else SETTLE_RADIUS
         # a grasp scene's root is the grasp agent: per-finger rewards and force errors (learning/grasp.py)
         self.grasp: GraspReward | None = None
         obj = topo.object
@@ -357,9 +359,11 @@ class Agent:
             if self.D_prev is None:
                 reward = None
             elif head.clearance is not None:  # a scene with obstacles: the corridor's Eq. 11
-                reward = corridor_reward(D, self.D_prev, head.clearance, head.collisions, self.cfg.reward)
+                reward = corridor_reward(
+                    D, self.D_prev, head.clearance, head.collisions, self.cfg.reward, settle_radius=self.settle_radius
+                )
             else:
-                reward = reach_reward(D, self.D_prev, self.cfg.reward)
+                reward = reach_reward(D, self.D_prev, self.cfg.reward, settle_radius=self.settle_radius)
             self.D_prev = D
         else:
             base, goal, reward, ctx = head.base, head.goal, head.reward, head.sense
@@ -475,11 +479,10 @@ class Agent:
             if self.fl_behind is not None:
                 reward = self._follow_leader(reward, cur)
             if self.extra_state:  # named extra variables (a grasp finger's force error, contact force)
-                local = dict(self.sense_now)
-                if "g_perp" in self.extra_state:  # the goal along my joint's motion of the tip (grasp "goal")
-                    local["g_perp"] = goal_along_motion(cur.frame, tip, cur.goal)
-                if "g_moves" in self.extra_state:  # the same in my own moves (state.moves_to_goal)
-                    local["g_moves"] = moves_to_goal(cur.frame, tip, cur.goal, self.cfg.action_rad)
+                local = {
+                    **self.sense_now,
+                    **own_extras(self.extra_state, cur.frame, tip, cur.goal, self.cfg.action_rad),
+                }
                 s = np.concatenate([s, [local.get(n, 0.0) for n in self.extra_state]])
             avoid = self._tabu(cur, tip) if self.learner.settings.collision_tabu else []
             if self.learner.settings.shield > 0.0:

@@ -277,6 +277,13 @@ def test_corridor_variants():
     assert r(1.0, 1.2, 0.05, 1, "settle") == pytest.approx(r(1.0, 1.2, 0.05, 1, "shaped"))
     assert r(0.2, 0.2, 0.05, 0, "settle") == pytest.approx(math.exp(-0.1))  # shaped: 0 - 5 e^(-0.025)
     assert r(0.2, 0.1, 0.0, 1, "settle") == pytest.approx(math.exp(-0.1) - 5.0)
+    # a narrower settle radius (LearnerSettings.settle_radius): 0.2 from the goal is not arrived yet, so keeping
+    # still there pays what it pays in shaped (0), a step in e^(-c1 D) and a step out -1; 0.1 still is arrived
+    assert r(0.2, 0.2, 0.05, 0, "settle", settle_radius=0.15) == 0.0
+    assert r(0.2, 0.25, 0.05, 0, "settle", settle_radius=0.15) == pytest.approx(math.exp(-0.1))
+    assert r(0.2, 0.15, 0.05, 0, "settle", settle_radius=0.15) == -1.0
+    assert r(0.1, 0.05, 0.05, 0, "settle", settle_radius=0.15) == pytest.approx(math.exp(-0.05))
+    assert r(0.2, 0.15, 0.05, 0, "shaped", settle_radius=0.15) == r(0.2, 0.15, 0.05, 0, "shaped")  # settle's only
     with pytest.raises(ValueError, match="unknown reward mode"):
         r(1.0, 1.0, 1.0, 0, "geodesic?")
 
@@ -357,6 +364,9 @@ def test_scene_state_settings():
         learner_settings(cfg, cfg.topo())
     with pytest.raises(ValueError, match="shield must be a distance >= 0"):
         LearnerSettings(shield=-0.1)
+    for bad in (0.0, -0.3, float("nan"), "0.15"):
+        with pytest.raises(ValueError, match="settle_radius must be a distance > 0"):
+            LearnerSettings(settle_radius=bad)  # type: ignore[arg-type]
     cfg = RunConfig(run_id="r", topology=str(EXAMPLES / "chain4.toml"), out="/tmp/x", learner={"shield": 0.1})
     with pytest.raises(ValueError, match="shield need a scene with obstacles.*chain4.toml"):
         learner_settings(cfg, cfg.topo())

@@ -5,6 +5,7 @@ import math
 import numpy as np
 import pytest
 from kinswarm.actors.learning import agent_state, joint_frame, link_end, moves_to_goal
+from kinswarm.actors.learning.state import goal_along_motion, own_extras
 
 
 def test_joint_frame_and_link_end():
@@ -66,3 +67,17 @@ def test_moves_to_goal_counts_the_goal_in_own_moves():
     assert moves_to_goal(near, (0.0, 0.0), (1.0, 1.0), one) == 0.0  # tip on the joint
     x = 0.1 / (3.0 * one)
     assert moves_to_goal(near, (3.0, 0.0), (2.0, 0.1), one) == pytest.approx(math.log1p(x))
+
+
+def test_own_extras_computes_only_what_is_named():
+    """g_dist is the tip's distance to the goal; each variable is computed only when the settings name it."""
+    one = math.radians(1.0)
+    frame, tip, goal = (0.0, 0.0, 0.0), (3.0, 0.0), (3.3, 0.4)
+    assert own_extras(("g_dist",), frame, tip, goal, one) == {"g_dist": pytest.approx(0.5)}
+    both = own_extras(("force_error", "g_perp", "g_moves", "g_dist"), frame, tip, goal, one)
+    assert both == {
+        "g_perp": pytest.approx(goal_along_motion(frame, tip, goal)),
+        "g_moves": pytest.approx(moves_to_goal(frame, tip, goal, one)),
+        "g_dist": pytest.approx(0.5),
+    }
+    assert own_extras(("force_error",), frame, tip, goal, one) == {}  # the sense's, not the agent's

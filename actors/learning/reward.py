@@ -5,11 +5,20 @@ from __future__ import annotations
 import math
 
 REWARD_MODES: tuple[str, ...] = ("paper", "strict", "shaped", "graded", "settle")
-#: settle: within this of the goal (at t - 1 and t) the tip has arrived: the corridor's success tolerance
+#: settle: within this of the goal (at t - 1 and t) the tip has arrived (default: the corridor's success tolerance;
+#: LearnerSettings.settle_radius sets it per run)
 SETTLE_RADIUS = 0.3
 
 
-def reach_reward(D: float, D_prev: float, mode: str, D_min: float = 3.0, c: float = 1.0, k: float = 20.0) -> float:
+def reach_reward(
+    D: float,
+    D_prev: float,
+    mode: str,
+    D_min: float = 3.0,
+    c: float = 1.0,
+    k: float = 20.0,
+    settle_radius: float = SETTLE_RADIUS,
+) -> float:
     """R(t) from the goal distance D = D_goal(t) and D_prev = D_goal(t-1); Delta D = D - D_prev.
 
     paper (Eq. 10 as printed):
@@ -23,14 +32,14 @@ def reach_reward(D: float, D_prev: float, mode: str, D_min: float = 3.0, c: floa
     graded: shaped with the gradient inside D_min too, r = strict + k (D_prev - D). Inside D_min an approach
       earns e^(-c D) (0.05-0.37 at D = 1-3) against -1 for a step away, so "keep" (0) beat moving wherever the
       policy was unsure; frozen swarms stopped 1-3 from unseen goals. Measured in docs/science.md ("graded").
-    settle: shaped, but while the tip stays within SETTLE_RADIUS of the goal (at t - 1 and t) it earns e^(-c D)
+    settle: shaped, but while the tip stays within settle_radius of the goal (at t - 1 and t) it earns e^(-c D)
       whatever it did. Shaped pays there e^(-c D) for a step in, 0 for "keep" and -1 for a step out, so an arrived
       chain never learns to keep still; in a corridor its jitter is pushed into the walls.
     """
     if mode not in REWARD_MODES:
         raise ValueError(f"unknown reward mode {mode!r}; allowed modes: {', '.join(REWARD_MODES)}")
     dD = D - D_prev
-    if mode == "settle" and D <= SETTLE_RADIUS and D_prev <= SETTLE_RADIUS:
+    if mode == "settle" and D <= settle_radius and D_prev <= settle_radius:
         return math.exp(-c * D)
     if D > D_min:
         if mode in ("shaped", "graded", "settle"):
@@ -65,6 +74,7 @@ def corridor_reward(
     d_safe: float | None = None,
     weight: float = CORRIDOR_WEIGHT,
     k: float = 20.0,
+    settle_radius: float = SETTLE_RADIUS,
 ) -> float:
     """R(t) of the corridor task (paper §5.4, Eq. 11) from D = D_goal(t), D_prev = D_goal(t-1), the smallest
     link clearance min_i D_corridor^{a_i}(t) and the number of joint increments the walls refused at t-1.
@@ -105,9 +115,10 @@ def corridor_reward(
         if not close:
             return math.exp(-c1 * D)
         return -penalty
+    reach = reach_reward(D, D_prev, mode, D_min=D_min, c=c1, k=k, settle_radius=settle_radius)
     if mode == "strict":
-        return -weight * penalty if close else reach_reward(D, D_prev, mode, D_min=D_min, c=c1, k=k)
-    return reach_reward(D, D_prev, mode, D_min=D_min, c=c1, k=k) - (weight * penalty if close else 0.0)
+        return -weight * penalty if close else reach
+    return reach - (weight * penalty if close else 0.0)
 
 
 def path_distance(tip: tuple[float, float], goal: tuple[float, float], via: tuple[float, float], width: float) -> float:

@@ -5,6 +5,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, replace
 
+from .reward import SETTLE_RADIUS
+
 #: Names of the six state variables S_i = <q_i, theta_i, d_i, g1, g2, g3> (paper §3.3).
 STATE_NAMES: tuple[str, ...] = ("q", "theta", "d", "g1", "g2", "g3")
 BOOTSTRAPS: tuple[str, ...] = ("joint_max", "expected")
@@ -54,7 +56,9 @@ class LearnerSettings:
             variables below), read from the agent's `sense` (its own Obs.sense and the Down.sense from its
             parent), with their membership sets and ranges; "g_perp" is computed by the agent itself (the goal's
             component along the direction its own joint moves the tip), and so is "g_moves" (the same counted in
-            the tip's shift by one own move, log-compressed: state.moves_to_goal). Empty by default; set per agent from
+            the tip's shift by one own move, log-compressed: state.moves_to_goal), and "g_dist" (the distance from
+            the agent's tip to the goal; with sets over a short range it tells apart places near the goal that
+            g1, g2's coarse sets do not). Empty by default; set per agent from
             `grasp_state` in a grasp scene (actors/learning/grasp.py, grasp_learner_settings); the generalisation
             experiment's learner adds g_perp for reaching (experiments/generalisation.py).
         grasp_state: the finger agents' state in a grasp scene (paper §5.5): "reach" = the paper's S_i
@@ -109,6 +113,10 @@ class LearnerSettings:
             each of the last follow_leader_links agents (counted from the end effector) adds
             w (D_i(t-1) - D_i(t)) to its reward, D_i its own link end's distance to its place on the corridor's
             axis in the straight-in configuration (reward.follow_leader_distance). 0 (off) by default.
+        settle_radius: with `--reward settle`, the tip has arrived while it stays within this of the goal and then
+            earns e^(-c D) whatever it did (reward.reach_reward). By default SETTLE_RADIUS (0.3), the corridor's
+            success tolerance; round 8 of docs/science.md: 0.15, inside the tolerance, because a chain comes to
+            rest just inside the radius the reward gives it.
 
     Tuning (planar 4R chain, links 3, goal (4.16, 6.18), 60 epochs x 500 steps, 3 seeds): with the shaped
     reward every variant tried met the target (>= 80% of the last 20 epochs within 0.5, median <= 0.15)
@@ -147,6 +155,7 @@ class LearnerSettings:
     shield: float = 0.0
     follow_leader: float = 0.0
     follow_leader_links: int = 4
+    settle_radius: float = SETTLE_RADIUS
     g3: str = "signed"
 
     @property
@@ -235,6 +244,10 @@ class LearnerSettings:
             raise ValueError(f"shield must be a distance >= 0, got {self.shield!r}")
         if not 0.0 <= self.epsilon_decay < 1.0:
             raise ValueError(f"epsilon_decay must be in [0, 1), got {self.epsilon_decay}")
+        if not (isinstance(self.settle_radius, (int, float)) and math.isfinite(self.settle_radius)) or not (
+            self.settle_radius > 0.0
+        ):
+            raise ValueError(f"settle_radius must be a distance > 0, got {self.settle_radius!r}")
         if not (math.isfinite(self.follow_leader) and self.follow_leader >= 0.0):
             raise ValueError(f"follow_leader must be >= 0, got {self.follow_leader}")
         if not (isinstance(self.follow_leader_links, int) and self.follow_leader_links >= 1):
