@@ -13,6 +13,7 @@ frozen (`--learn off --explore off`) for one epoch, with the walls' refusals cou
     python docs/probes/corridor_probe.py OUT settle+refusal+subtree+long 0,1,2,3,4  # round 6
     python docs/probes/corridor_probe.py OUT settle+refusal+subtree+long+fine 0,1,2,3,4  # round 6
     python docs/probes/corridor_probe.py OUT settle+refusal+subtree+long+shield=0.02 0,1,2,3,4  # round 7
+    python docs/probes/corridor_probe.py OUT settle+refusal+subtree+long+settle_radius=0.15 0,1,2,3,4  # round 8
 
 frozen-memory trains nothing: it freezes the given training runs of `follow` (run directories of the
 experiment's cache, `kinswarm experiment corridor --out DIR`: DIR/runs/corr-follow-*) with tabu_memory 0.1.
@@ -59,12 +60,12 @@ from kinswarm.protocol.messages import Obs
 from kinswarm.protocol.topology import load_topology
 
 
-def probe_reward(D: float, D_prev: float, clearance: float, collisions: int, mode: str) -> float:
+def probe_reward(D: float, D_prev: float, clearance: float, collisions: int, mode: str, **kw: float) -> float:
     """`settle` and `refusal`: the root's reward (the agent module's corridor_reward) with either change; both
     together are `--reward settle` (the probe patched them in before that reward existed)."""
     d_safe = 0.0 if "refusal" in PARTS else rewards.CORRIDOR_D_SAFE
     return rewards.corridor_reward(
-        D, D_prev, clearance, collisions, "settle" if "settle" in PARTS else mode, d_safe=d_safe
+        D, D_prev, clearance, collisions, "settle" if "settle" in PARTS else mode, d_safe=d_safe, **kw
     )
 
 
