@@ -55,24 +55,16 @@ TOL = 0.3  # issue 6: "within 0.3 of the target"
 TAIL = 50  # the last 50 training epochs
 LAST_STEPS = 100  # no collision in the epoch's last 100 steps
 EPOCHS, STEPS = 100, 500
-LONG_EPOCHS = {
-    "subtree-200": 200,
-    "inner-200": 200,
-    "near-200": 200,
-}  # configurations trained longer than EPOCHS (full version only)
+# configurations trained longer than EPOCHS (full version only)
+LONG_EPOCHS = {"subtree-200": 200, "inner-200": 200, "near-200": 200}
 QUICK_EPOCHS, QUICK_STEPS = 3, 100
 #: the third frozen evaluation's LearnerSettings.shield (round 7: 0.02 left 4 of 5 subtree-200 swarms without a
 #: refusal; 0.05 kept them further from the target, 0.01 let two jam, docs/science.md)
 EVAL_SHIELD = 0.02
 REFERENCE_SEEDS = 2  # paper and kinswarm-relaxed are references: fewer seeds in the full version
 FOLLOW_SEEDS = 5  # round 2: follow on as many seeds as the bars need
-FULL_SEEDS = (
-    "follow",
-    "settle",
-    "subtree-200",
-    "inner-200",
-    "near-200",
-)  # besides MAIN: on FOLLOW_SEEDS seeds in the full version
+# besides MAIN: on FOLLOW_SEEDS seeds in the full version
+FULL_SEEDS = ("follow", "settle", "subtree-200", "inner-200", "near-200")
 MAIN = "kinswarm"  # the configuration issue 6's bars are checked on
 
 _PI = math.pi
@@ -89,6 +81,8 @@ _KINSWARM: dict[str, Any] = {
     "ranges": RANGES,
 }
 _FOLLOW: dict[str, Any] = {**_KINSWARM, "collision_tabu": True, "follow_leader": 40.0, "gamma": 0.97}
+_SUBTREE: dict[str, Any] = {**_FOLLOW, "clearance_of": "subtree"}
+_INNER: dict[str, Any] = {**_SUBTREE, "settle_radius": 0.15}
 #: round 8: g1, g2's sets (2.33 apart) hardly tell 0.1 from 0.4 from the target; g_dist's sets do, and far from it
 #: (clipped at 0.6) they add next to nothing
 G_DIST: dict[str, Any] = {
@@ -108,10 +102,10 @@ CONFIGS: dict[str, tuple[str, dict[str, Any], Path]] = {
     # round 5: follow, rewarded for keeping still at the target and not for merely being near a wall
     "settle": ("settle", _FOLLOW, GUIDED),
     # round 6: settle, with the clearance of the links each agent moves, trained twice as long
-    "subtree-200": ("settle", {**_FOLLOW, "clearance_of": "subtree"}, GUIDED),
+    "subtree-200": ("settle", _SUBTREE, GUIDED),
     # round 8: subtree-200, arrived only within 0.15; and also sensing how near the target its tip is
-    "inner-200": ("settle", {**_FOLLOW, "clearance_of": "subtree", "settle_radius": 0.15}, GUIDED),
-    "near-200": ("settle", {**_FOLLOW, "clearance_of": "subtree", "settle_radius": 0.15, **G_DIST}, GUIDED),
+    "inner-200": ("settle", _INNER, GUIDED),
+    "near-200": ("settle", {**_INNER, **G_DIST}, GUIDED),
 }
 
 

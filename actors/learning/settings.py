@@ -244,9 +244,8 @@ class LearnerSettings:
             raise ValueError(f"shield must be a distance >= 0, got {self.shield!r}")
         if not 0.0 <= self.epsilon_decay < 1.0:
             raise ValueError(f"epsilon_decay must be in [0, 1), got {self.epsilon_decay}")
-        if not (isinstance(self.settle_radius, (int, float)) and math.isfinite(self.settle_radius)) or not (
-            self.settle_radius > 0.0
-        ):
+        r = self.settle_radius
+        if not (isinstance(r, (int, float)) and math.isfinite(r) and r > 0.0):
             raise ValueError(f"settle_radius must be a distance > 0, got {self.settle_radius!r}")
         if not (math.isfinite(self.follow_leader) and self.follow_leader >= 0.0):
             raise ValueError(f"follow_leader must be >= 0, got {self.follow_leader}")

@@ -79,16 +79,12 @@ def moves_to_goal(frame: Sequence[float], tip: Sequence[float], goal: Sequence[f
     return math.copysign(math.log1p(abs(x)), x)
 
 
-#: the extra state variables an agent computes itself from its frame, its tip and the goal (the rest come from sense)
-OWN_EXTRAS = ("g_perp", "g_moves", "g_dist")
-
-
 def own_extras(
     names: Sequence[str], frame: Sequence[float], tip: Sequence[float], goal: Sequence[float], move_rad: float
 ) -> dict[str, float]:
-    """The variables of OWN_EXTRAS among `names`: g_perp (goal_along_motion), g_moves (moves_to_goal) and g_dist,
-    the distance from the tip to the goal (round 8 of the corridor: with sets over a short range it tells 0.1 from
-    0.4, which g1, g2's sets 2.33 apart hardly do)."""
+    """The extra state variables among `names` that an agent computes itself (the others come from its sense):
+    g_perp (goal_along_motion), g_moves (moves_to_goal) and g_dist, the distance from the tip to the goal (round 8 of
+    the corridor: with sets over a short range it tells 0.1 from 0.4, which g1, g2's sets 2.33 apart hardly do)."""
     out: dict[str, float] = {}
     if "g_perp" in names:
         out["g_perp"] = goal_along_motion(frame, tip, goal)
