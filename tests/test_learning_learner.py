@@ -19,6 +19,11 @@ def test_settings_validation_and_for_reach():
         (dict(ranges=((0, 1),) * 5 + ((1, 0),)), "ranges"),
         (dict(count_prior=0.0), "count_prior"),
         (dict(lr=0.0), "lr"),
+        (dict(lr_anneal=(5, 5)), "lr_anneal"),
+        (dict(lr_anneal=(6, 2)), "lr_anneal"),
+        (dict(lr_anneal=(-1, 4)), "lr_anneal"),
+        (dict(lr_anneal=(1.5, 4)), "lr_anneal"),
+        (dict(lr_anneal=(4,)), "lr_anneal"),
     ]:
         with pytest.raises(ValueError, match=match):
             LearnerSettings(**bad)
@@ -55,6 +60,26 @@ def test_counts_joint_index_and_lr_decay():
         ln.step(S0, None, [1])
     with pytest.raises(ValueError, match="visible action 3"):
         ln.step(S0, None, [1, 3])
+
+
+def test_lr_anneal_ramps_to_zero_and_then_learns_nothing():
+    """lr_anneal = (first, last): lr(epoch) as lr_decay gives it until `first`, then scaled linearly to 0 at `last`;
+    from there on a learning step changes no phi (the policy a frozen swarm runs), though counts go on."""
+    st = LearnerSettings(lr_anneal=[10, 20])  # a JSON list from --learner is accepted
+    assert st.lr_anneal == (10, 20)
+    ln = Learner(st, n_visible=1, seed=0)
+    decayed = [st.lr * (1 - st.lr_decay) ** e for e in (0, 10, 15, 20, 30)]
+    for epoch, expected in zip((0, 10, 15, 20, 30), [decayed[0], decayed[1], decayed[2] / 2, 0.0, 0.0], strict=True):
+        ln.start_epoch(epoch)
+        assert ln.lr == pytest.approx(expected)
+    ln.step(S0, None, [1])
+    ln.step(S1, 1.0, [2])
+    ln.step(S0, 1.0, [2])
+    assert ln.rules_used == 0  # lr 0: no TD update, not even the phi = 0 rows an update would allocate
+    np.testing.assert_allclose(ln.counts, [[1, 2, 3]])
+    restored = Learner(st, n_visible=1, seed=1)
+    restored.load_state_dict(ln.state_dict())  # an annealed checkpoint (lr 0) loads
+    assert restored.lr == 0.0
 
 
 def test_greedy_ties_random_at_start():

@@ -48,12 +48,15 @@ class Learner:
 
     # -- epochs ---------------------------------------------------------------------------------
     def start_epoch(self, epoch: int, t: int = 0) -> None:
-        """New epoch: lr = lr0 (1 - lr_decay)^epoch, pending dropped (no TD across resets), the schedule
-        T(t) at step t (0, or the step an agent restarted mid-epoch rejoins at)."""
+        """New epoch: lr = lr0 (1 - lr_decay)^epoch (times lr_anneal's ramp), pending dropped (no TD across
+        resets), the schedule T(t) at step t (0, or the step an agent restarted mid-epoch rejoins at)."""
         if epoch < 0 or t < 0:
             raise ValueError(f"epoch and t must be >= 0, got {epoch}, {t}")
         self.epoch = int(epoch)
         self.lr = self.settings.lr * (1.0 - self.settings.lr_decay) ** self.epoch
+        first, last = self.settings.lr_anneal
+        if last > 0:  # linearly down to 0 over [first, last], then no learning
+            self.lr *= min(max((last - self.epoch) / (last - first), 0.0), 1.0)
         self.epsilon = self.settings.epsilon * (1.0 - self.settings.epsilon_decay) ** self.epoch
         self.t = int(t)
         self._pending = None
@@ -117,7 +120,7 @@ class Learner:
         q_now = self.q.q_list(rows, w)  # Q(s(t), .), Eq. 2
 
         # (a) TD update of the previous transition with s(t) as s' (Eqs. 5-6).
-        if learn and reward is not None and self._pending is not None and self._pending[3] >= 0:
+        if learn and self.lr > 0.0 and reward is not None and self._pending is not None and self._pending[3] >= 0:
             p_rules, p_rows_list, p_w, p_joint = self._pending
             p_rows = self.q.touch_list(p_rules, p_rows_list)  # creates phi = 0 rows: Q(s, a) below is unchanged
             q_sa = float(p_w @ self.q.phi[p_rows, p_joint])  # Q(s(t-1), a(t-1)), Eq. 2
@@ -192,8 +195,8 @@ class Learner:
         if np.any(counts <= 0):
             raise ValueError("counts must be > 0 (Eq. 7 divides by their sum)")
         lr = np.asarray(d["lr"])
-        if lr.shape != () or not np.issubdtype(lr.dtype, np.floating) or not 0.0 < float(lr) <= 1.0:
-            raise ValueError(f"lr must be a float scalar in (0, 1], got {lr!r}")
+        if lr.shape != () or not np.issubdtype(lr.dtype, np.floating) or not 0.0 <= float(lr) <= 1.0:
+            raise ValueError(f"lr must be a float scalar in [0, 1] (0: annealed to the end), got {lr!r}")
         epoch = np.asarray(d["epoch"])
         if epoch.shape != () or not np.issubdtype(epoch.dtype, np.integer) or int(epoch) < 0:
             raise ValueError(f"epoch must be a non-negative integer scalar, got {epoch!r}")

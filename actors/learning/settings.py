@@ -45,6 +45,11 @@ class LearnerSettings:
         gamma: discount factor of Eq. 5.
         lr: learning rate lambda of Eq. 5 in epoch 0.
         lr_decay: per-epoch decay, lr(epoch) = lr * (1 - lr_decay) ** epoch (paper: 1/1050).
+        lr_anneal: (first, last) epochs over which lr(epoch) is also scaled linearly down to 0, and 0 from `last`
+            on: learning stops, so the last epochs of training run the greedy policy a frozen swarm runs
+            (`--learn off`). (0, 0): off (default). A swarm trained with online updates leans on them within the
+            epoch (a move that did badly is worth less at the next step, whose state shares most rules); measured
+            on the corridor (docs/science.md, round 9).
         T_max: initial temperature of T(t) = 1 + T_max * exp(-s t) (Eq. 8); must exceed 1.
         s: decay of T(t), t = step within the epoch.
         epsilon: epsilon-decreasing factor; exploration probability epsilon * (T(t) - 1) / (T_max - 1).
@@ -132,6 +137,7 @@ class LearnerSettings:
     gamma: float = 0.9
     lr: float = 0.5
     lr_decay: float = 1.0 / 1050.0
+    lr_anneal: tuple[int, int] = (0, 0)
     T_max: float = 10.0
     s: float = 0.05  # T(t) - 1 falls to ~8% by t = 50 of 500 steps: exploration tapers within the epoch
     epsilon: float = 1.0
@@ -211,6 +217,16 @@ class LearnerSettings:
             raise ValueError(f"lr must be in (0, 1], got {self.lr}")
         if not 0.0 <= self.lr_decay < 1.0:
             raise ValueError(f"lr_decay must be in [0, 1), got {self.lr_decay}")
+        anneal = tuple(self.lr_anneal)
+        if not (
+            len(anneal) == 2
+            and all(isinstance(e, int) and not isinstance(e, bool) for e in anneal)
+            and (0 <= anneal[0] < anneal[1] or anneal == (0, 0))
+        ):
+            raise ValueError(
+                f"lr_anneal must be two epochs 0 <= first < last, or (0, 0) for off, got {self.lr_anneal!r}"
+            )
+        object.__setattr__(self, "lr_anneal", anneal)
         if not (math.isfinite(self.T_max) and self.T_max > 1.0):
             raise ValueError(f"T_max must be > 1 (epsilon-decreasing divides by T_max - 1), got {self.T_max}")
         if not (math.isfinite(self.s) and self.s >= 0.0):
