@@ -557,7 +557,13 @@ def test_quick_corridor_experiment(tmp_path):
         per = res["configs"][label]
         seed = per["seeds"]["0"]
         assert 0.0 <= seed["success_last"] <= 1.0 and seed["frozen_collisions"] >= 0
+        assert 0.0 <= seed["strict_last"] <= seed["success_last"]  # no collision at all: within the last 100 too
         assert seed["frozen_min_clearance"] >= -1e-5  # solid walls in the frozen run too
         assert isinstance(seed["frozen_success"], bool) and isinstance(seed["tabu_success"], bool)
         assert isinstance(seed["shield_success"], bool) and seed["shield_collisions"] >= 0
         assert per["bar_training_met"] is False and per["bar_frozen_met"] is False  # one seed never meets a bar
+    # a continued configuration trains on from its base configuration's trained swarm (`--from`), annealed
+    cont = res["configs"]["anneal-260"]
+    assert cont["learner"]["lr_anneal"] == [200, 240]
+    cfg = json.loads((out / "runs" / cont["seeds"]["0"]["train_run"] / "config.json").read_text())
+    assert Path(cfg["from_dir"]).name == res["configs"]["inner-200"]["seeds"]["0"]["train_run"]
