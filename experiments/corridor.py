@@ -115,7 +115,7 @@ CONFIGS: dict[str, tuple[str, dict[str, Any], Path]] = {
     # round 9: inner-200 continued with the learning rate annealed to 0 (CONTINUED)
     "anneal-260": ("settle", {**_INNER, "lr_anneal": ANNEAL}, GUIDED),
 }
-#: label -> (the configuration whose trained swarm it continues (`--from`), epochs more); full version only
+#: label -> (the configuration whose trained swarm it continues (`--from`), epochs more; the quick version: EPOCHS)
 CONTINUED: dict[str, tuple[str, int]] = {"anneal-260": ("inner-200", 60)}
 
 
@@ -197,8 +197,8 @@ def run(ctx: Context) -> dict[str, Any]:
         for seed in seeds_of[label]
     }
     for key, out in zip(cont_specs, run_specs(ctx, list(cont_specs.values()), "continue"), strict=True):
-        base = trained[(CONTINUED[key[0]][0], key[1])]
-        trained[key] = dataclasses.replace(out, rows=base.rows + out.rows)  # the whole history: 200 + 60 epochs
+        prior = trained[(CONTINUED[key[0]][0], key[1])]
+        trained[key] = dataclasses.replace(out, rows=prior.rows + out.rows)  # the whole history, base's and its own
     train_specs.update(cont_specs)
     frozen_specs = {
         key: Spec(
@@ -261,6 +261,8 @@ def run(ctx: Context) -> dict[str, Any]:
             "bar_frozen_met": bool(label != "kinswarm-relaxed" and len(seeds) >= 5 and n_frozen >= 4),
         }
 
+    base, more = CONTINUED["anneal-260"]
+    total = LONG_EPOCHS[base] + more
     rep = Report(ctx, "Corridor: a 7-DOF chain into a narrow corridor", "5.4, Fig. 23")
     rep.results.update({"epochs": epochs, "epochs_of": long, "steps": steps, "tol": TOL, "tail": TAIL, "configs": per})
     rep.text(
@@ -288,9 +290,10 @@ def run(ctx: Context) -> dict[str, Any]:
         f"{LONG_EPOCHS['subtree-200'] - 1}); `inner-200` is `subtree-200` with `settle_radius = 0.15` (the "
         "tip has arrived only within 0.15 of the target), and `near-200` adds the tip's distance to the target "
         "(`g_dist`, 3 sets over [0, 0.6]) as an 8th state variable of every agent. `anneal-260` trains "
-        "`inner-200`'s swarms on for 60 epochs (`--from`) with `lr_anneal = [200, 240]`: the learning rate falls "
-        "linearly to 0 by epoch 240, so its last 20 epochs run the policy a frozen swarm runs; its last "
-        f"{TAIL} epochs are epochs 210-259. A bar counts as met only on the hard set-up with ≥ 5 seeds.",
+        f"`{base}`'s swarms on for {more} epochs (`--from`) with `lr_anneal = [{ANNEAL[0]}, {ANNEAL[1]}]`: the "
+        f"learning rate falls linearly to 0 by epoch {ANNEAL[1]}, so its last {total - ANNEAL[1]} epochs run the "
+        f"policy a frozen swarm runs; its last {TAIL} epochs are epochs {total - TAIL}-{total - 1}. A bar counts as "
+        "met only on the hard set-up with ≥ 5 seeds.",
     )
     rows = []
     for label, p in per.items():
