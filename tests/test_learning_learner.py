@@ -24,6 +24,9 @@ def test_settings_validation_and_for_reach():
         (dict(lr_anneal=(-1, 4)), "lr_anneal"),
         (dict(lr_anneal=(1.5, 4)), "lr_anneal"),
         (dict(lr_anneal=(4,)), "lr_anneal"),
+        (dict(count_freeze=-1), "count_freeze"),
+        (dict(count_freeze=2.0), "count_freeze"),
+        (dict(count_freeze=True), "count_freeze"),
     ]:
         with pytest.raises(ValueError, match=match):
             LearnerSettings(**bad)
@@ -80,6 +83,23 @@ def test_lr_anneal_ramps_to_zero_and_then_learns_nothing():
     restored = Learner(st, n_visible=1, seed=1)
     restored.load_state_dict(ln.state_dict())  # an annealed checkpoint (lr 0) loads
     assert restored.lr == 0.0
+
+
+def test_count_freeze_stops_the_counts_not_the_td_updates():
+    """count_freeze = N: the fictitious-play counts count in epochs before N and stay as they are from N on, while
+    the TD updates go on (lr > 0)."""
+    ln = Learner(LearnerSettings(count_freeze=3), n_visible=1, seed=0)
+    ln.start_epoch(2)
+    ln.step(S0, None, [2])
+    np.testing.assert_allclose(ln.counts, [[1, 1, 2]])
+    ln.start_epoch(3)
+    ln.step(S0, None, [0])
+    ln.step(S1, 1.0, [0])
+    np.testing.assert_allclose(ln.counts, [[1, 1, 2]])
+    assert ln.rules_used > 0  # learning went on
+    ln.start_epoch(0)  # (a run --from an earlier epoch) counts again
+    ln.step(S0, None, [0])
+    np.testing.assert_allclose(ln.counts, [[2, 1, 2]])
 
 
 def test_greedy_ties_random_at_start():

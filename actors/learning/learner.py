@@ -45,11 +45,13 @@ class Learner:
         # rules and rows as lists
         self._pending: tuple[list[int], list[int], np.ndarray, int] | None = None
         self._own = 0  # a(t) of the pending transition
+        self._counting = True  # fictitious play counts in this epoch (count_freeze)
 
     # -- epochs ---------------------------------------------------------------------------------
     def start_epoch(self, epoch: int, t: int = 0) -> None:
-        """New epoch: lr = lr0 (1 - lr_decay)^epoch (times lr_anneal's ramp), pending dropped (no TD across
-        resets), the schedule T(t) at step t (0, or the step an agent restarted mid-epoch rejoins at)."""
+        """New epoch: lr = lr0 (1 - lr_decay)^epoch (times lr_anneal's ramp), the counts counting or not
+        (count_freeze), pending dropped (no TD across resets), the schedule T(t) at step t (0, or the step an
+        agent restarted mid-epoch rejoins at)."""
         if epoch < 0 or t < 0:
             raise ValueError(f"epoch and t must be >= 0, got {epoch}, {t}")
         self.epoch = int(epoch)
@@ -58,6 +60,7 @@ class Learner:
         if last > 0:  # linearly down to 0 over [first, last], then no learning
             self.lr *= min(max((last - self.epoch) / (last - first), 0.0), 1.0)
         self.epsilon = self.settings.epsilon * (1.0 - self.settings.epsilon_decay) ** self.epoch
+        self._counting = not 0 < self.settings.count_freeze <= self.epoch
         self.t = int(t)
         self._pending = None
 
@@ -156,7 +159,7 @@ class Learner:
         too (counting on during a test made each test goal's outcome depend on the goals and steps before it)."""
         self._check_visible(visible_actions)
         # (c) fictitious play: count what the visible agents did (Eq. 7 next time).
-        if learn:
+        if learn and self._counting:
             for j, b in enumerate(visible_actions):
                 self.counts[j, b] += 1.0
         # (d) the joint action(t) of the pending (s(t), joint action(t)).

@@ -56,6 +56,10 @@ class LearnerSettings:
         bootstrap: "joint_max" = max over joint actions of Q(s', .) as printed in Eq. 5;
             "expected" = max over own actions of E(s', .) (Eq. 9), i.e. what the agent can choose.
         count_prior: initial fictitious-play count of every action, so Eq. 7 is defined at the start.
+        count_freeze: from this epoch on the fictitious-play counts (Eq. 7) stay as they are, as in a frozen swarm;
+            0 (default): they count in every training epoch. With lr_anneal's `first`, the epochs of the anneal
+            run one deterministic greedy trajectory that only the TD updates change, and the epochs at lr 0 are
+            the frozen epoch step for step (counting on at lr 0, each epoch was another draw; round 10).
         n_actions: own actions (0 decrease, 1 keep, 2 increase).
         extra_state, extra_sets, extra_ranges: named state variables appended to S_i (after the scene
             variables below), read from the agent's `sense` (its own Obs.sense and the Down.sense from its
@@ -143,6 +147,7 @@ class LearnerSettings:
     epsilon: float = 1.0
     bootstrap: str = "expected"
     count_prior: float = 1.0
+    count_freeze: int = 0
     n_actions: int = 3
     clearance_state: bool = False
     clearance_sets: int = 5
@@ -237,6 +242,9 @@ class LearnerSettings:
             raise ValueError(f"bootstrap must be one of {BOOTSTRAPS}, got {self.bootstrap!r}")
         if not (math.isfinite(self.count_prior) and self.count_prior > 0):
             raise ValueError(f"count_prior must be > 0 so Eq. 7 is defined, got {self.count_prior}")
+        freeze = self.count_freeze
+        if not (isinstance(freeze, int) and not isinstance(freeze, bool) and freeze >= 0):
+            raise ValueError(f"count_freeze must be an epoch (int >= 0; 0 for never), got {self.count_freeze!r}")
         if not (isinstance(self.n_actions, int) and self.n_actions >= 1):
             raise ValueError(f"n_actions must be an int >= 1, got {self.n_actions}")
         object.__setattr__(self, "clearance_range", tuple(float(v) for v in self.clearance_range))
