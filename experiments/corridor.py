@@ -33,6 +33,9 @@ Configurations (reasoning and measurements: docs/science.md, "Corridor (§5.4)")
   anneal-260        inner-200's trained swarms trained on for 60 epochs (CONTINUED, `--from`) with lr_anneal =
                     (200, 240): the learning rate falls linearly to 0 by epoch 240, so epochs 240-259 run the
                     policy a frozen swarm runs (round 9); its history is inner-200's 200 epochs and its own 60
+  freeze-260        anneal-260 with count_freeze = 200: the fictitious-play counts stay as they are from the
+                    anneal's start, so each annealing epoch is one deterministic greedy trajectory that only the TD
+                    updates change, and epochs 240-259 are the frozen epoch (round 10)
 The reference configurations run on the first REFERENCE_SEEDS seeds only in the full version.
 """
 
@@ -67,7 +70,7 @@ EVAL_SHIELD = 0.02
 REFERENCE_SEEDS = 2  # paper and kinswarm-relaxed are references: fewer seeds in the full version
 FOLLOW_SEEDS = 5  # round 2: follow on as many seeds as the bars need
 # besides MAIN: on FOLLOW_SEEDS seeds in the full version
-FULL_SEEDS = ("follow", "settle", "subtree-200", "inner-200", "near-200", "anneal-260")
+FULL_SEEDS = ("follow", "settle", "subtree-200", "inner-200", "near-200", "anneal-260", "freeze-260")
 MAIN = "kinswarm"  # the configuration issue 6's bars are checked on
 
 _PI = math.pi
@@ -96,6 +99,9 @@ G_DIST: dict[str, Any] = {
 #: round 9: lr scaled linearly to 0 over epochs 200-240 and 0 after, so the last 20 training epochs run the policy a
 #: frozen swarm runs (online updates within the epoch had carried the trained swarms; docs/science.md)
 ANNEAL = (200, 240)
+#: round 10: and the fictitious-play counts frozen from the anneal's start: counting on, each greedy epoch at lr 0
+#: was another draw (a frozen epoch is one of them); frozen, the anneal's TD updates polish the trajectory it runs
+FREEZE: dict[str, Any] = {"lr_anneal": ANNEAL, "count_freeze": ANNEAL[0]}
 #: label -> (reward, LearnerSettings overrides, topology)
 CONFIGS: dict[str, tuple[str, dict[str, Any], Path]] = {
     "paper": ("paper", {}, TOPOLOGY),
@@ -114,9 +120,11 @@ CONFIGS: dict[str, tuple[str, dict[str, Any], Path]] = {
     "near-200": ("settle", {**_INNER, **G_DIST}, GUIDED),
     # round 9: inner-200 continued with the learning rate annealed to 0 (CONTINUED)
     "anneal-260": ("settle", {**_INNER, "lr_anneal": ANNEAL}, GUIDED),
+    # round 10: anneal-260 with the counts frozen over the anneal (CONTINUED)
+    "freeze-260": ("settle", {**_INNER, **FREEZE}, GUIDED),
 }
 #: label -> (the configuration whose trained swarm it continues (`--from`), epochs more; the quick version: EPOCHS)
-CONTINUED: dict[str, tuple[str, int]] = {"anneal-260": ("inner-200", 60)}
+CONTINUED: dict[str, tuple[str, int]] = {"anneal-260": ("inner-200", 60), "freeze-260": ("inner-200", 60)}
 
 
 def seed_metrics(
@@ -292,8 +300,10 @@ def run(ctx: Context) -> dict[str, Any]:
         "(`g_dist`, 3 sets over [0, 0.6]) as an 8th state variable of every agent. `anneal-260` trains "
         f"`{base}`'s swarms on for {more} epochs (`--from`) with `lr_anneal = [{ANNEAL[0]}, {ANNEAL[1]}]`: the "
         f"learning rate falls linearly to 0 by epoch {ANNEAL[1]}, so its last {total - ANNEAL[1]} epochs run the "
-        f"policy a frozen swarm runs; its last {TAIL} epochs are epochs {total - TAIL}-{total - 1}. A bar counts as "
-        "met only on the hard set-up with ≥ 5 seeds.",
+        f"policy a frozen swarm runs; its last {TAIL} epochs are epochs {total - TAIL}-{total - 1}. `freeze-260` is "
+        f"`anneal-260` with `count_freeze = {FREEZE['count_freeze']}`: the fictitious-play counts stay as they are "
+        "from the anneal's start, so each annealing epoch is one greedy trajectory that only the TD updates change, "
+        f"and its epochs at lr 0 are the frozen epoch. A bar counts as met only on the hard set-up with ≥ 5 seeds.",
     )
     rows = []
     for label, p in per.items():

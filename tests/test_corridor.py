@@ -563,7 +563,8 @@ def test_quick_corridor_experiment(tmp_path):
         assert isinstance(seed["shield_success"], bool) and seed["shield_collisions"] >= 0
         assert per["bar_training_met"] is False and per["bar_frozen_met"] is False  # one seed never meets a bar
     # a continued configuration trains on from its base configuration's trained swarm (`--from`), annealed
-    cont = res["configs"]["anneal-260"]
-    assert cont["learner"]["lr_anneal"] == [200, 240]
-    cfg = json.loads((out / "runs" / cont["seeds"]["0"]["train_run"] / "config.json").read_text())
-    assert Path(cfg["from_dir"]).name == res["configs"]["inner-200"]["seeds"]["0"]["train_run"]
+    for label, count_freeze in (("anneal-260", None), ("freeze-260", 200)):
+        cont = res["configs"][label]
+        assert cont["learner"]["lr_anneal"] == [200, 240] and cont["learner"].get("count_freeze") == count_freeze
+        cfg = json.loads((out / "runs" / cont["seeds"]["0"]["train_run"] / "config.json").read_text())
+        assert Path(cfg["from_dir"]).name == res["configs"]["inner-200"]["seeds"]["0"]["train_run"]
