@@ -27,6 +27,7 @@ def test_settings_validation_and_for_reach():
         (dict(count_freeze=-1), "count_freeze"),
         (dict(count_freeze=2.0), "count_freeze"),
         (dict(count_freeze=True), "count_freeze"),
+        (dict(act_from="start"), "act_from"),
     ]:
         with pytest.raises(ValueError, match=match):
             LearnerSettings(**bad)
@@ -100,6 +101,40 @@ def test_count_freeze_stops_the_counts_not_the_td_updates():
     ln.start_epoch(0)  # (a run --from an earlier epoch) counts again
     ln.step(S0, None, [0])
     np.testing.assert_allclose(ln.counts, [[2, 1, 2]])
+
+
+def test_act_from_epoch_acts_as_frozen_at_the_epoch_start_and_learns_for_the_next():
+    """act_from = "epoch": within an epoch the choices are those of a frozen copy of the learner as the epoch began,
+    while the TD updates (and the counts) go on; the next epoch acts on what they learned."""
+    trained = _trained()
+    rng = np.random.default_rng(9)
+    steps = [(S0 + rng.normal(size=6) * 0.3, float(rng.normal()), [int(rng.integers(3))]) for _ in range(200)]
+
+    def learners(epoch, state):
+        ln = Learner(LearnerSettings(act_from="epoch"), n_visible=1, seed=5)
+        frozen, online = (
+            Learner(LearnerSettings(), n_visible=1, seed=5),
+            Learner(LearnerSettings(), n_visible=1, seed=5),
+        )
+        for x in (ln, frozen, online):
+            x.load_state_dict(state)
+            x.start_epoch(epoch)
+        return ln, frozen, online
+
+    ln, frozen, online = learners(1, trained.state_dict())
+    picks = [
+        [x.step(s, r, v, learn=learn, explore=False) for s, r, v in steps]
+        for x, learn in ((ln, True), (frozen, False), (online, True))
+    ]
+    assert picks[0] == picks[1]  # as frozen at the start of the epoch
+    assert picks[2] != picks[1]  # online updates change the choices within the epoch (what "epoch" prevents)
+    assert ln.rules_used > trained.rules_used and ln.counts.sum() > trained.counts.sum()  # yet it learned
+    learned = ln.state_dict()
+    ln.start_epoch(2)  # the next epoch acts on what was learned
+    _, frozen2, _ = learners(2, learned)
+    assert [ln.step(s, r, v, explore=False) for s, r, v in steps] == [
+        frozen2.step(s, r, v, learn=False, explore=False) for s, r, v in steps
+    ]
 
 
 def test_greedy_ties_random_at_start():

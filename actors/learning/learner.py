@@ -46,6 +46,8 @@ class Learner:
         self._pending: tuple[list[int], list[int], np.ndarray, int] | None = None
         self._own = 0  # a(t) of the pending transition
         self._counting = True  # fictitious play counts in this epoch (count_freeze)
+        # act_from = "epoch": the Q and counts the choices come from, as at the start of the epoch
+        self._acting: tuple[SparseFuzzyQ, np.ndarray] | None = None
 
     # -- epochs ---------------------------------------------------------------------------------
     def start_epoch(self, epoch: int, t: int = 0) -> None:
@@ -63,6 +65,14 @@ class Learner:
         self._counting = not 0 < self.settings.count_freeze <= self.epoch
         self.t = int(t)
         self._pending = None
+        self._snapshot()
+
+    def _snapshot(self) -> None:
+        """act_from = "epoch": keep a copy of Q and the counts to act on until the next epoch starts."""
+        if self.settings.act_from == "epoch":
+            acting = SparseFuzzyQ(self.n_joint)
+            acting.load(*self.q.export())
+            self._acting = (acting, self.counts.copy())
 
     def resync(self, t: int) -> None:
         """The agent missed steps (lost messages, a freeze): the schedule moves to step t, and the pending
@@ -135,6 +145,10 @@ class Learner:
             q_now = self.q.q_list(rows, w)
 
         # (b) JASM: E (Eq. 9), Boltzmann pi (Eq. 8), epsilon-decreasing choice.
+        if self._acting is not None:  # act_from = "epoch": this epoch's updates act from the next one on
+            acting, counts = self._acting
+            q_now = acting.q_list(acting.row_list(rules_list), w)  # Eq. 2
+            P = jasm.probabilities(counts) if self.n_visible else self._no_visible  # Eq. 7
         E = jasm.expected_values(q_now, P, self.n_actions)
         T = jasm.temperature(self.t, st.T_max, st.s)
         pi = jasm.boltzmann(E, T)
@@ -212,3 +226,4 @@ class Learner:
         self.epoch = int(epoch)
         self.t = 0
         self._pending = None
+        self._snapshot()

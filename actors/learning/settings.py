@@ -10,6 +10,8 @@ from .reward import SETTLE_RADIUS
 #: Names of the six state variables S_i = <q_i, theta_i, d_i, g1, g2, g3> (paper §3.3).
 STATE_NAMES: tuple[str, ...] = ("q", "theta", "d", "g1", "g2", "g3")
 BOOTSTRAPS: tuple[str, ...] = ("joint_max", "expected")
+#: Where an agent's choices come from: its Q and counts as now, or as at the start of the epoch (`act_from`).
+ACT_FROM: tuple[str, ...] = ("now", "epoch")
 #: The clearance state variable of a scene with obstacles: the agent's own link's, or its subtree's smallest.
 CLEARANCE_OF: tuple[str, ...] = ("link", "subtree")
 #: g3 as the bearing of the goal from the end effector (signed, the default) or its size only (unsigned).
@@ -60,6 +62,12 @@ class LearnerSettings:
             0 (default): they count in every training epoch. With lr_anneal's `first`, the epochs of the anneal
             run one deterministic greedy trajectory that only the TD updates change, and the epochs at lr 0 are
             the frozen epoch step for step (counting on at lr 0, each epoch was another draw; round 10).
+        act_from: which Q and counts the agent's choices come from. "now" (default, Algorithm 1): as updated at
+            every step, so within an epoch the swarm adapts to its own TD updates. "epoch": as they were at the
+            start of the epoch; the epoch's TD updates (made at every step, as always) act from the next epoch on.
+            Each training epoch then runs the policy a frozen swarm of the previous epoch's end would run (plus
+            exploration), so training is measured on, and learns from, that policy's own trajectories
+            (docs/science.md, round 11).
         n_actions: own actions (0 decrease, 1 keep, 2 increase).
         extra_state, extra_sets, extra_ranges: named state variables appended to S_i (after the scene
             variables below), read from the agent's `sense` (its own Obs.sense and the Down.sense from its
@@ -148,6 +156,7 @@ class LearnerSettings:
     bootstrap: str = "expected"
     count_prior: float = 1.0
     count_freeze: int = 0
+    act_from: str = "now"
     n_actions: int = 3
     clearance_state: bool = False
     clearance_sets: int = 5
@@ -245,6 +254,8 @@ class LearnerSettings:
         freeze = self.count_freeze
         if not (isinstance(freeze, int) and not isinstance(freeze, bool) and freeze >= 0):
             raise ValueError(f"count_freeze must be an epoch (int >= 0; 0 for never), got {self.count_freeze!r}")
+        if self.act_from not in ACT_FROM:
+            raise ValueError(f"act_from must be one of {ACT_FROM}, got {self.act_from!r}")
         if not (isinstance(self.n_actions, int) and self.n_actions >= 1):
             raise ValueError(f"n_actions must be an int >= 1, got {self.n_actions}")
         object.__setattr__(self, "clearance_range", tuple(float(v) for v in self.clearance_range))
