@@ -21,6 +21,7 @@ import dataclasses
 import hashlib
 import hmac
 import math
+import re
 import types
 import typing
 from functools import cache, lru_cache
@@ -36,6 +37,9 @@ MAX_PAYLOAD = 1 << 20  # 1 MiB: nothing in the protocol comes near; a bigger pay
 _ENVELOPE = ("v", "kind", "run", "src")
 MAC_SIZE = 16  # bytes of BLAKE2b digest after the body: 128 bits, far beyond guessing on a live wire
 BAD_MAC = "bad MAC: not signed with this run's key (forged, corrupted, or from another run)"
+#: Every map key of a message is a name: an actor id, a reading (messages.Readings), a trace. Checked on both paths.
+READING_NAME = re.compile(r"[A-Za-z0-9_+./-]{1,64}")
+_is_name = READING_NAME.fullmatch
 
 
 class DecodeError(ValueError):
@@ -141,8 +145,8 @@ def _checker(tp: Any) -> Check:
                 raise DecodeError(f"{where}: expected a map, got {type(value).__name__}")
             out = {}
             for k, v in value.items():
-                if not isinstance(k, str):
-                    raise DecodeError(f"{where}: expected string keys, got {k!r:.40}")
+                if not isinstance(k, str) or not _is_name(k):
+                    raise DecodeError(f"{where}: expected names (letters, digits, _+-./) as keys, got {k!r:.40}")
                 out[k] = check_value(v, f"{where}.{k}")
             return out
 
@@ -188,11 +192,11 @@ def _fast_field(name: str, tp: Any, lines: list[str]) -> bool:
     elif origin is dict and get_args(tp) == (str, float):
         lines.append(f"if type({name}) is not dict: return None")
         lines.append(f"for k, v in {name}.items():")
-        lines.append(f"    if type(k) is not str or not ({finite.format(x='v')}): return None")
+        lines.append(f"    if type(k) is not str or not is_name(k) or not ({finite.format(x='v')}): return None")
     elif origin is dict and get_args(tp)[0] is str and (n := vec_len(get_args(tp)[1])) is not None:
         lines.append(f"if type({name}) is not dict: return None")
         lines.append(f"for k, v in {name}.items():")
-        lines.append("    if type(k) is not str: return None")
+        lines.append("    if type(k) is not str or not is_name(k): return None")
         lines += ["    " + line for line in vec("v", n)]
         lines.append(f"{name} = {{k: tuple(v) for k, v in {name}.items()}}")
     else:
@@ -221,7 +225,7 @@ def _fast(cls: type) -> Any:
     # what the dataclass __init__ does, without its per-field object.__setattr__ (the messages are frozen)
     lines += ["m = new(cls)", "d = m.__dict__", *(f"d[{k!r}] = {k}" for k in hints), "return m"]
     src = "def fast(b, run):\n" + "".join(f"    {line}\n" for line in lines)
-    scope: dict[str, Any] = {"new": object.__new__, "cls": cls}
+    scope: dict[str, Any] = {"new": object.__new__, "cls": cls, "is_name": _is_name}
     exec(compile(src, f"<codec fast path for {cls.__name__}>", "exec"), scope)
     return scope["fast"]
 

@@ -10,57 +10,52 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import ClassVar
 
-SCHEMA_VERSION = 6  # 2: faults, events, status, bye; payloads carry a MAC (codec.py). 3: Up.action is the
+SCHEMA_VERSION = 7  # 2: faults, events, status, bye; payloads carry a MAC (codec.py). 3: Up.action is the
 # sender's action of the step before (sent before it learns), plus a closing Up after an epoch's last step.
-# 4: scenes with obstacles (§5.4): Obs.clearance/collided, Task.clearance/collisions, EpochDone.collisions/clearance;
-# the grasp scene (§5.5): `sense` maps on Obs, Task and Down (contacts, force errors), `traces` on EpochDone
-# 5: several hosts (deploy plans): Setup (the leader's run for the other hosts), Heartbeat
-# 6: Up.clearance, the smallest link clearance of the sender's subtree (LearnerSettings.clearance_of "subtree")
+# 4: scenes with obstacles and the grasp scene: `sense` maps, `traces` on EpochDone. 5: several hosts (deploy
+# plans): Setup, Heartbeat. 6: Up.clearance. 7: every scene reading and task aggregate travels in the one `sense`
+# route (Readings: Obs, Task, Down, Up; the clearance/collided/collisions fields are gone), EpochDone's scene series
+# only in `traces`, and EpochStart.path, the goal of every step when it moves.
 
 Vec2 = tuple[float, float]
 Vec3 = tuple[float, float, float]
+#: Named readings: the one route for what a scene senses (Obs.sense: an agent's own, Task.sense: the task's) and what
+#: a task passes along the tree (Down.sense: context from above, Up.sense: a subtree's aggregate). Keys are names
+#: (READING_NAME in codec.py: letters, digits and ``_ + - . /``, at most 64), values finite floats; which names a
+#: scene or task uses is its own content (docs/tasks.md lists them), the route and its checks are the protocol's.
+Readings = dict[str, float]
 
 
 @dataclass(frozen=True)
 class Obs:
-    """sim -> agent: its own encoder reading q_i after the joint actions of step-1.
-
-    In a scene with obstacles also what the agent perceives locally (paper §5.4): `clearance`, the signed
-    distance of its own link to the nearest obstacle (None: the scene has none), and `collided` = 1 when
-    its own increment of step-1 was refused because the link would have penetrated a wall (else 0)."""
+    """sim -> agent: its own encoder reading q_i after the joint actions of step-1, and what the scene lets it
+    sense locally (e.g. the walls' "clearance" and "collided", a fingertip's contact "fn", "ft", ...)."""
 
     KIND: ClassVar[str] = "obs"
     epoch: int
     step: int
     q: float
-    clearance: float | None = None
-    collided: int = 0
-    # the agent's own named local readings beyond q_i, e.g. a fingertip's contact ("fn", "ft", "margin",
-    # "contact"); empty when the scene gives it none
-    sense: dict[str, float] = field(default_factory=dict)
+    sense: Readings = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
 class Task:
-    """sim -> root: the task observation at the start of the step (the root computes the reward from it)."""
+    """sim -> root: the task observation at the start of the step (the root's task computes the reward from it):
+    the goal of this step, the end-effector tips, and the scene's task readings (e.g. the walls' smallest
+    "clearance" and refused moves "collisions", a grasp's net wrench and contacts)."""
 
     KIND: ClassVar[str] = "task"
     epoch: int
     step: int
     goal: Vec2
     tips: dict[str, Vec3]
-    # scenes with obstacles: the smallest link clearance (None: no obstacles), and how many joints' increments
-    # of step-1 were refused as penetrating (the collisions of Eq. 11)
-    clearance: float | None = None
-    collisions: int = 0
-    # named task observations of the scene, e.g. a grasp's "net_fx", "net_fy", "net_torque" and per
-    # fingertip "fn/<leaf>", "ft/<leaf>", "margin/<leaf>", "contact/<leaf>"; empty for reaching
-    sense: dict[str, float] = field(default_factory=dict)
+    sense: Readings = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
 class Down:
-    """parent -> child (top-down pass): the child's base frame, the goal, the reward r(step-1)."""
+    """parent -> child (top-down pass): the child's base frame, the goal, the reward r(step-1), and the task's
+    context from above (e.g. a grasp finger's "fine")."""
 
     KIND: ClassVar[str] = "down"
     epoch: int
@@ -68,8 +63,7 @@ class Down:
     base: Vec3
     goal: Vec2
     reward: float | None
-    # named context from above for the child's state, e.g. a grasp agent's "force_error" for one finger
-    sense: dict[str, float] = field(default_factory=dict)
+    sense: Readings = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -80,16 +74,14 @@ class Up:
     `action` is the index in the agent's action set (0 decrease, 1 keep, 2 increase); -1 when the child
     took none at step - 1 (a compound agent, the epoch's first step, a step it missed). After the last step
     of an epoch the child sends one more, with `step` = the epoch's length and that last step's action.
-
-    In a scene with obstacles `clearance` is the smallest signed clearance at `step` of the child's own link and
-    every link below it (None: no obstacles, or none of those links' clearances known)."""
+    `sense`: the task's aggregate of the child's subtree (e.g. the corridor's smallest "clearance" below)."""
 
     KIND: ClassVar[str] = "up"
     epoch: int
     step: int
     tips: dict[str, Vec3]
     action: int
-    clearance: float | None = None
+    sense: Readings = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -104,12 +96,14 @@ class Cmd:
 
 @dataclass(frozen=True)
 class EpochStart:
-    """supervisor -> sim (ctl/epoch): run one epoch of `steps` lockstep steps towards `goal`."""
+    """supervisor -> sim (ctl/epoch): run one epoch of `steps` lockstep steps towards `goal`; when the goal moves
+    (a task's goal path), `path` holds the goal of every step (path[t]; `goal` is path[0])."""
 
     KIND: ClassVar[str] = "epoch"
     epoch: int
     steps: int
     goal: Vec2
+    path: list[Vec2] = field(default_factory=list)
 
 
 @dataclass(frozen=True)
@@ -126,11 +120,9 @@ class EpochDone:
     missed_cmds: int
     seconds: float
     max_step_seconds: float  # the longest step: a missing cmd makes it as long as the deadline, never longer
-    # scenes with obstacles (else empty): per step, the joints whose increment was refused, and the smallest
-    # link clearance after the step's joint actions
-    collisions: list[int] = field(default_factory=list)
-    clearance: list[float] = field(default_factory=list)
-    traces: dict[str, list[float]] = field(default_factory=dict)  # per-step series of a scene (grasp forces)
+    # per-step series of the scene, e.g. the walls' "collisions" (refused moves) and "clearance" (the smallest),
+    # a grasp's forces
+    traces: dict[str, list[float]] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -248,8 +240,7 @@ class Setup:
 
     KIND: ClassVar[str] = "setup"
     plan: str
-    config: str  # the leader's RunConfig as JSON (paths are the leader's; each host rewrites its own)
-    topology: str  # the topology TOML text
+    config: str  # the leader's RunConfig as JSON, robot, scene and task inline (paths are the leader's)
     scenario: str  # the scenario TOML text, "" when the run has none
 
 

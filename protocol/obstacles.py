@@ -1,15 +1,15 @@
-"""Static obstacles of a scene (paper §5.4): boxes in the robot's plane, declared in the topology file.
+"""Static obstacles of a walls scene (paper §5.4): boxes in the robot's plane, declared in the run file.
 
 ```toml
-[[obstacle]]
+[[scene.obstacle]]
 id = "upper"                    # optional, [A-Za-z0-9_-]+, unique (default "obstacle<i>")
 center = [4.5, 4.4]             # x, y of the box centre in the world
 half_extents = [1.5, 2.0]       # half width along the box's x, half height along its y (> 0)
 angle_deg = 0.0                 # optional rotation of the box about z
 ```
 
-Walls are solid: the simulator refuses a joint increment that would make a link penetrate one (sim/obstacles.py).
-Parsed by `parse_topology` into `Topology.obstacles`; errors name the file and the field.
+Walls are solid: the simulator refuses a joint increment that would make a link penetrate one (sim/scenes/walls.py).
+Parsed by `scene.parse_scene` into `SceneSpec.obstacles`; errors name the file and the field.
 """
 
 from __future__ import annotations
@@ -18,6 +18,8 @@ import math
 import re
 from dataclasses import dataclass
 from typing import Any
+
+from .spec import SpecError, number, vector
 
 _ID_RE = re.compile(r"^[A-Za-z0-9_-]{1,64}$")
 _KEYS = {"id", "center", "half_extents", "angle_deg"}
@@ -51,47 +53,43 @@ class ObstacleSpec:
         return outside + min(max(qx, qy), 0.0)
 
 
-def parse_obstacles(rows: Any, source: str) -> tuple[ObstacleSpec, ...]:
-    """The `[[obstacle]]` tables of a topology file (absent: no obstacles)."""
-    from .topology import TopologyError  # here, not at the top: topology.py imports this module
+def parse_obstacles(rows: Any, source: str, where: str = "scene.obstacle") -> tuple[ObstacleSpec, ...]:
+    """The `[[scene.obstacle]]` tables of a run file (absent: no obstacles)."""
 
-    def num(where: str, v: Any) -> float:
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-            raise TopologyError(source, where, f"expected a finite number, got {v!r}")
-        return float(v)
+    def num(at: str, v: Any) -> float:
+        return number(source, at, v)
 
-    def pair(where: str, v: Any) -> tuple[float, float]:
-        if not isinstance(v, list) or len(v) != 2:
-            raise TopologyError(source, where, f"expected a list of 2 numbers, got {v!r}")
-        return (num(f"{where}[0]", v[0]), num(f"{where}[1]", v[1]))
+    def pair(at: str, v: Any) -> tuple[float, float]:
+        x, y = vector(source, at, v, 2)
+        return (x, y)
 
     if rows is None:
         return ()
     if not isinstance(rows, list):
-        raise TopologyError(source, "obstacle", "expected [[obstacle]] tables (an array of tables)")
+        raise SpecError(source, where, "expected [[scene.obstacle]] tables (an array of tables)")
     out: list[ObstacleSpec] = []
     seen: set[str] = set()
     for i, row in enumerate(rows):
-        at = f"obstacle[{i}]"
+        at = f"{where}[{i}]"
         if not isinstance(row, dict):
-            raise TopologyError(source, at, "must be a table")
+            raise SpecError(source, at, "must be a table")
         bad = set(row) - _KEYS
         if bad:
             expected = ", ".join(sorted(_KEYS))
-            raise TopologyError(source, f"{at}.{sorted(bad)[0]}", f"unknown field (expected {expected})")
+            raise SpecError(source, f"{at}.{sorted(bad)[0]}", f"unknown field (expected {expected})")
         oid = row.get("id", f"obstacle{i}")
         if not isinstance(oid, str) or not _ID_RE.match(oid):
-            raise TopologyError(source, f"{at}.id", f"expected letters, digits, '_' or '-', got {oid!r}")
+            raise SpecError(source, f"{at}.id", f"expected letters, digits, '_' or '-', got {oid!r}")
         if oid in seen:
-            raise TopologyError(source, f"{at}.id", f"duplicate obstacle id {oid!r}")
+            raise SpecError(source, f"{at}.id", f"duplicate obstacle id {oid!r}")
         seen.add(oid)
         for key in ("center", "half_extents"):
             if key not in row:
-                raise TopologyError(source, f"{at}.{key}", "missing (a box needs center and half_extents)")
+                raise SpecError(source, f"{at}.{key}", "missing (a box needs center and half_extents)")
         center = pair(f"{at}.center", row["center"])
         half = pair(f"{at}.half_extents", row["half_extents"])
         if not (half[0] > 0 and half[1] > 0):
-            raise TopologyError(source, f"{at}.half_extents", f"both must be > 0, got {list(half)}")
+            raise SpecError(source, f"{at}.half_extents", f"both must be > 0, got {list(half)}")
         angle = num(f"{at}.angle_deg", row.get("angle_deg", 0.0))
         out.append(ObstacleSpec(id=oid, center=center, half_extents=half, angle=math.radians(angle)))
     return tuple(out)

@@ -1,0 +1,38 @@
+"""What every spec parser of a run file shares: the one error type, naming the file, the field and the fault, and
+the checks of numbers and vectors."""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+
+class SpecError(ValueError):
+    """A run file (or a part of it: robot, scene, task, ...) that does not fit; str(e) is one line:
+    `<file>: <field>: <what is wrong>`."""
+
+    def __init__(self, source: str, where: str, what: str) -> None:
+        super().__init__(f"{source}: {where}: {what}")
+        self.source, self.where, self.what = source, where, what
+
+
+def number(src: str, where: str, v: Any) -> float:
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+        raise SpecError(src, where, f"expected a finite number, got {v!r}")
+    return float(v)
+
+
+def vector(src: str, where: str, v: Any, n: int) -> tuple[float, ...]:
+    if not isinstance(v, (list, tuple)) or len(v) != n:
+        raise SpecError(src, where, f"expected a list of {n} numbers, got {v!r}")
+    return tuple(number(src, f"{where}[{i}]", x) for i, x in enumerate(v))
+
+
+def table(src: str, where: str, v: Any, known: set[str] | frozenset[str]) -> dict[str, Any]:
+    """`v` as a table whose keys are all in `known` (the first unknown one is named, with what is known)."""
+    if not isinstance(v, dict):
+        raise SpecError(src, where, f"must be a table, got {v!r:.60}")
+    bad = sorted(set(v) - set(known))
+    if bad:
+        raise SpecError(src, f"{where}.{bad[0]}", f"unknown field (expected {', '.join(sorted(known))})")
+    return v
