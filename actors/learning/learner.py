@@ -9,7 +9,7 @@ import numpy as np
 from . import jasm
 from .fuzzy import FuzzyPartition
 from .qlearning import SparseFuzzyQ
-from .settings import LearnerSettings
+from .settings import N_ACTIONS, LearnerSettings
 
 STATE_DICT_VERSION = 1
 
@@ -29,7 +29,7 @@ class Learner:
             raise ValueError(f"n_visible must be an int >= 0, got {n_visible!r}")
         self.settings = settings
         self.n_visible = int(n_visible)
-        self.n_actions = settings.n_actions
+        self.n_actions = N_ACTIONS
         self.n_joint = self.n_actions ** (1 + self.n_visible)
         self.rng = np.random.default_rng(seed)
         self.fuzzy = FuzzyPartition(settings)
@@ -46,8 +46,6 @@ class Learner:
         self._pending: tuple[list[int], list[int], np.ndarray, int] | None = None
         self._own = 0  # a(t) of the pending transition
         self._counting = True  # fictitious play counts in this epoch (count_freeze)
-        # act_from = "epoch": the Q and counts the choices come from, as at the start of the epoch
-        self._acting: tuple[SparseFuzzyQ, np.ndarray] | None = None
 
     # -- epochs ---------------------------------------------------------------------------------
     def start_epoch(self, epoch: int, t: int = 0) -> None:
@@ -65,14 +63,6 @@ class Learner:
         self._counting = not 0 < self.settings.count_freeze <= self.epoch
         self.t = int(t)
         self._pending = None
-        self._snapshot()
-
-    def _snapshot(self) -> None:
-        """act_from = "epoch": keep a copy of Q and the counts to act on until the next epoch starts."""
-        if self.settings.act_from == "epoch":
-            acting = SparseFuzzyQ(self.n_joint)
-            acting.load(*self.q.export())
-            self._acting = (acting, self.counts.copy())
 
     def resync(self, t: int) -> None:
         """The agent missed steps (lost messages, a freeze): the schedule moves to step t, and the pending
@@ -87,11 +77,6 @@ class Learner:
         for b in visible_actions:
             idx = idx * self.n_actions + int(b)
         return idx
-
-    def _bootstrap(self, q_next: np.ndarray, P: np.ndarray) -> float:
-        if self.settings.bootstrap == "joint_max":
-            return float(q_next.max())  # Eq. 5 as printed: max over joint actions
-        return float(jasm.expected_values(q_next, P, self.n_actions).max())  # max_a E(s', a), Eq. 9
 
     def step(
         self,
@@ -137,7 +122,8 @@ class Learner:
             p_rules, p_rows_list, p_w, p_joint = self._pending
             p_rows = self.q.touch_list(p_rules, p_rows_list)  # creates phi = 0 rows: Q(s, a) below is unchanged
             q_sa = float(p_w @ self.q.phi[p_rows, p_joint])  # Q(s(t-1), a(t-1)), Eq. 2
-            boot = self._bootstrap(q_now, P)
+            # Eq. 5's max over what this agent can choose: max_a E(s', a) (Eq. 9), not over joint actions
+            boot = float(jasm.expected_values(q_now, P, self.n_actions).max())
             delta = self.q.td_delta(q_sa, float(reward), boot, self.lr, st.gamma)  # Eq. 5
             self.q.update_rows(p_rows, p_w, p_joint, delta)  # Eq. 6
             if -1 in rows:  # s(t) may share rules just created for s(t-1)
@@ -145,10 +131,6 @@ class Learner:
             q_now = self.q.q_list(rows, w)
 
         # (b) JASM: E (Eq. 9), Boltzmann pi (Eq. 8), epsilon-decreasing choice.
-        if self._acting is not None:  # act_from = "epoch": this epoch's updates act from the next one on
-            acting, counts = self._acting
-            q_now = acting.q_list(acting.row_list(rules_list), w)  # Eq. 2
-            P = jasm.probabilities(counts) if self.n_visible else self._no_visible  # Eq. 7
         E = jasm.expected_values(q_now, P, self.n_actions)
         T = jasm.temperature(self.t, st.T_max, st.s)
         pi = jasm.boltzmann(E, T)
@@ -226,4 +208,3 @@ class Learner:
         self.epoch = int(epoch)
         self.t = 0
         self._pending = None
-        self._snapshot()

@@ -64,32 +64,9 @@ def goal_along_motion(frame: Sequence[float], tip: Sequence[float], goal: Sequen
     return ((goal[0] - tip[0]) * -ry + (goal[1] - tip[1]) * rx) / r
 
 
-def moves_to_goal(frame: Sequence[float], tip: Sequence[float], goal: Sequence[float], move_rad: float) -> float:
-    """g_moves: the goal's component along the direction this agent's joint moves the tip (g_perp), counted in
-    the tip's displacement by one own move (|joint -> tip| * move_rad) and log-compressed, sign(x) ln(1 + |x|).
-    |x| < 0.5, i.e. |g_moves| < 0.41: one move overshoots by more than it gains. The same for every joint,
-    where g_perp's scale is not: one 1-degree move shifts the tip 0.21 from the base of chain4, 0.05 from a4.
-    Measured at Level-3 (generalisation's protocol, 6 seeds, test sets 0 / 1; 2026-11-22): in place of g_perp
-    (9 sets over +-3.5) 0.314 / 0.312, beside it 0.297 / 0.308, against g_perp alone 0.268 / 0.279. It lowers the
-    error on reached goals (0.098 -> 0.077) but misses more: not in the recommended learner."""
-    r = math.hypot(tip[0] - frame[0], tip[1] - frame[1])
-    if r == 0.0:
-        return 0.0
-    x = goal_along_motion(frame, tip, goal) / (r * move_rad)
-    return math.copysign(math.log1p(abs(x)), x)
-
-
 def own_extras(
-    names: Sequence[str], frame: Sequence[float], tip: Sequence[float], goal: Sequence[float], move_rad: float
+    names: Sequence[str], frame: Sequence[float], tip: Sequence[float], goal: Sequence[float]
 ) -> dict[str, float]:
-    """The extra state variables among `names` that an agent computes itself (the others come from its sense):
-    g_perp (goal_along_motion), g_moves (moves_to_goal) and g_dist, the distance from the tip to the goal (round 8 of
-    the corridor: with sets over a short range it tells 0.1 from 0.4, which g1, g2's sets 2.33 apart hardly do)."""
-    out: dict[str, float] = {}
-    if "g_perp" in names:
-        out["g_perp"] = goal_along_motion(frame, tip, goal)
-    if "g_moves" in names:
-        out["g_moves"] = moves_to_goal(frame, tip, goal, move_rad)
-    if "g_dist" in names:
-        out["g_dist"] = math.hypot(goal[0] - tip[0], goal[1] - tip[1])
-    return out
+    """The extra state variables among `names` that an agent computes from its own geometry: "g_perp"
+    (goal_along_motion). The others come from its task or its readings."""
+    return {"g_perp": goal_along_motion(frame, tip, goal)} if "g_perp" in names else {}

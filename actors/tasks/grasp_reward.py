@@ -1,4 +1,4 @@
-"""The grasp task's rewards (paper §5.5, Eq. 12) and the grasp agent's per-finger credit.
+"""The grasp task's rewards (paper §5.5, Eq. 12) and the grasp agent's per-finger credit (tasks/grasp.py uses them).
 
 The grasp agent (the compound root, no DOF) reads the task observation (the sim's contact readings: the
 net force and torque on the object and every fingertip's contact) and sends each finger its reward with
@@ -34,7 +34,7 @@ shaped   (default) contact goals: the grasp agent turns the balancing forces int
          is within D_fine of its goal; the finger then moves fine_action x the action
          size (a 1 degree step changes fn by more than the balance bound allows).
 
-Numpy only, like the rest of actors/learning.
+Numpy only: pure functions of the task observation, tested on their own (tests/test_grasp.py).
 """
 
 from __future__ import annotations
@@ -45,18 +45,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .reward import REWARD_MODES
-from .settings import LearnerSettings
-
-GRASP_REWARDS: tuple[str, ...] = ("paper", "contact", "global", "force", "shaped")
-
-
-def scene_reward_problem(grasp_scene: bool, reward: str) -> str | None:
-    """Why `reward` does not fit the scene, or None: grasp rewards need an [object], reach ones a chain."""
-    allowed = GRASP_REWARDS if grasp_scene else REWARD_MODES
-    if reward in allowed:
-        return None
-    return f"a {'grasp' if grasp_scene else 'reaching'} scene takes {', '.join(allowed)}"
+GRASP_REWARDS: tuple[str, ...] = ("shaped", "paper", "contact", "global", "force")
 
 
 Vec = tuple[float, float]
@@ -303,7 +292,7 @@ class GraspReward:
         fine_action: float = 1.0,
     ) -> None:
         """kn, kt: the contact stiffnesses (the scene's), to turn forces into displacements; fine_action: the
-        fingers' action scale within D_fine of their goal (LearnerSettings.fine_action), for the k term."""
+        fingers' action scale within D_fine of their goal (the grasp task's fine_action), for the k term."""
         if mode not in GRASP_REWARDS:
             raise ValueError(f"unknown grasp reward {mode!r}; allowed: {', '.join(GRASP_REWARDS)}")
         self.mode, self.grasp, self.center, self.fine_action = mode, dict(grasp), center, fine_action
@@ -390,36 +379,3 @@ class GraspReward:
         if obs.margin[t] < 0.0:
             r -= 1.0  # it slips
         return r
-
-
-#: The grasp fingers' default fine action scale (LearnerSettings.fine_action): 0.1 degree steps near the goal.
-GRASP_FINE_ACTION = 0.1
-
-
-def grasp_learner_settings(
-    finger_length: float, is_tip: bool, fn_max: float, overrides: Mapping[str, object]
-) -> LearnerSettings:
-    """A finger agent's settings in a grasp scene: the reach ranges of one finger (d in [0, L], g in
-    [-2L, 2L]) and the extra state variables of `grasp_state` for its kind (fingertip or not):
-    force_error in [-err_cap, err_cap] and fn in [0, fn_max], 7 sets each; g_perp in [-g_perp, g_perp],
-    7 sets (extra_state/sets/ranges). fine_action defaults to GRASP_FINE_ACTION here (1 elsewhere)."""
-    ov = dict(overrides)
-    gs = str(ov.get("grasp_state", LearnerSettings.grasp_state))
-    extra: list[tuple[str, int, tuple[float, float]]] = []
-    if gs in ("force", "contact"):
-        cap = GraspParams.err_cap
-        extra.append(("force_error", 7, (-cap, cap)))
-    if gs == "contact" and is_tip:
-        extra.append(("fn", 7, (0.0, fn_max)))
-    if gs == "goal":
-        gp = GraspParams.g_perp
-        extra.append(("g_perp", 7, (-gp, gp)))
-    ov.pop("extra_state", None)
-    ov.setdefault("fine_action", GRASP_FINE_ACTION)
-    return LearnerSettings.for_reach(
-        finger_length,
-        extra_state=tuple(n for n, _, _ in extra),
-        extra_sets=tuple(m for _, m, _ in extra),
-        extra_ranges=tuple(r for _, _, r in extra),
-        **ov,
-    )

@@ -1,0 +1,183 @@
+"""Reach (paper §4.2, §5.1-5.3): bring the end effector to a goal. The root turns the distance to the goal into the
+global reward (Eq. 10 and its variants); a goal per epoch (`goals`) is the generalisation protocol (§5.2).
+
+```toml
+[task]
+kind = "reach"
+goal = [4.16, 6.18]       # the goal (x, y); or
+goals = [[1, 2], [3, 4]]  # a goal per epoch, cycled
+reward = "shaped"         # paper | strict | shaped | graded | settle (reach_reward below)
+via = [2.0, 2.0]          # optional: the distance is measured along an approach path through via (path_distance)
+via_width = 0.3
+waypoints = [[8.0, 4.0]]  # optional: sub-goals handed down one after the other (next_waypoint)
+waypoint_radius = 0.5
+settle_radius = 0.3       # reward settle: within this the tip has arrived
+```
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from kinswarm.actors.learning.settings import LearnerSettings
+from kinswarm.protocol.messages import Task
+
+from .base import AgentTask, Head, TaskDef, Vec2, centroid
+
+REWARD_MODES: tuple[str, ...] = ("shaped", "paper", "strict", "graded", "settle")
+#: settle: within this of the goal (at t - 1 and t) the tip has arrived (default: the corridor's success tolerance)
+SETTLE_RADIUS = 0.3
+
+
+@dataclass(frozen=True)
+class ReachSettings:
+    goal: Vec2 | None = None  # the goal (x, y); required unless `goals` is given
+    goals: tuple[Vec2, ...] = ()  # a goal per epoch, cycled (the generalisation protocol, §5.2)
+    reward: str = "shaped"  # Eq. 10 as printed ("paper") or a variant (reach_reward)
+    via: Vec2 | None = None  # measure the goal distance along an approach path through this point
+    via_width: float = 0.0  # ... once the tip is within this of the line via -> goal, straight to the goal
+    waypoints: tuple[Vec2, ...] = ()  # sub-goals, one after the other
+    waypoint_radius: float = 0.0  # ... the next one once the tip is within this
+    settle_radius: float = SETTLE_RADIUS  # reward "settle": within this of the goal the tip has arrived
+
+    def __post_init__(self) -> None:
+        if self.goal is None and not self.goals:
+            raise ValueError("goal: missing (give goal = [x, y], or goals = [[x, y], ...])")
+        for name, pts in (("goal", (self.goal,) if self.goal is not None else ()), ("goals", self.goals)):
+            if not all(math.isfinite(c) for p in pts for c in p):
+                raise ValueError(f"{name}: expected finite numbers")
+        if self.via is not None and not self.via_width > 0:
+            raise ValueError(f"via_width: must be > 0 with via, got {self.via_width}")
+        if self.via is None and self.via_width:
+            raise ValueError("via_width: only with via")
+        if self.waypoints and not self.waypoint_radius > 0:
+            raise ValueError(f"waypoint_radius: must be > 0 with waypoints, got {self.waypoint_radius}")
+        if not self.waypoints and self.waypoint_radius:
+            raise ValueError("waypoint_radius: only with waypoints")
+        if not (math.isfinite(self.settle_radius) and self.settle_radius > 0.0):
+            raise ValueError(f"settle_radius: must be a distance > 0, got {self.settle_radius}")
+
+
+class ReachTask(TaskDef):
+    kind = "reach"
+    scenes = ("free",)
+    Settings = ReachSettings
+    rewards = REWARD_MODES
+
+    def check(self) -> str | None:
+        if self.settings.reward not in self.rewards:
+            return f"reward: {self.settings.reward!r} is not one of {', '.join(self.rewards)}"
+        return None
+
+    def goal(self, epoch: int, steps: int) -> tuple[Vec2, list[Vec2]]:
+        s = self.settings
+        goal = s.goals[epoch % len(s.goals)] if s.goals else s.goal
+        return (float(goal[0]), float(goal[1])), []
+
+    def agent(self, agent: str, settings: LearnerSettings | None) -> AgentTask:
+        return ReachAgent(self.settings, self.topo.subtree_leaves(agent))
+
+
+class ReachAgent(AgentTask):
+    """The root measures D_goal(t) from the task observation and pays R(D(t), D(t-1)) (Eq. 10)."""
+
+    def __init__(self, settings: ReachSettings, leaves: tuple[str, ...]) -> None:
+        self.s, self.leaves = settings, leaves
+        self.D_prev: float | None = None  # D_goal(t-1)
+        self.waypoint = 0  # the current sub-goal of `waypoints` in this epoch
+
+    def start_epoch(self) -> None:
+        self.D_prev, self.waypoint = None, 0
+
+    def head(self, obs: Task) -> Head:
+        s, goal = self.s, obs.goal
+        tip = centroid([obs.tips[leaf] for leaf in self.leaves if leaf in obs.tips])
+        if s.waypoints:  # the swarm aims at the current sub-goal
+            self.waypoint, goal, D = next_waypoint(tip, goal, s.waypoints, self.waypoint, s.waypoint_radius)
+        elif s.via is not None:
+            D = path_distance(tip, goal, s.via, s.via_width)
+        else:
+            D = math.hypot(tip[0] - goal[0], tip[1] - goal[1])
+        reward = None if self.D_prev is None else self.global_reward(D, self.D_prev, obs)
+        self.D_prev = D
+        return Head(goal, reward)
+
+    def global_reward(self, D: float, D_prev: float, obs: Task) -> float:
+        return reach_reward(D, D_prev, self.s.reward, settle_radius=self.s.settle_radius)
+
+
+def reach_reward(
+    D: float,
+    D_prev: float,
+    mode: str,
+    D_min: float = 3.0,
+    c: float = 1.0,
+    k: float = 20.0,
+    settle_radius: float = SETTLE_RADIUS,
+) -> float:
+    """R(t) from the goal distance D = D_goal(t) and D_prev = D_goal(t-1); Delta D = D - D_prev.
+
+    paper (Eq. 10 as printed):
+        D <= D_min and Delta D <= 0  ->  e^(-c D)
+        D >  D_min                   ->  -2
+        D <  D_min and Delta D > 0   ->  -1
+      Eq. 10 leaves D == D_min with Delta D > 0 undefined; we treat it as inside and moving away: -1.
+    strict: as paper, but 0 inside D_min when the arm did not move (|Delta D| < 1e-12), so "keep" is
+      not rewarded like an approach.
+    shaped: strict inside D_min; outside r = -2 + k (D_prev - D), a gradient towards the goal.
+    graded: shaped with the gradient inside D_min too, r = strict + k (D_prev - D). Inside D_min an approach
+      earns e^(-c D) (0.05-0.37 at D = 1-3) against -1 for a step away, so "keep" (0) beat moving wherever the
+      policy was unsure; frozen swarms stopped 1-3 from unseen goals. Measured in docs/science.md ("graded").
+    settle: shaped, but while the tip stays within settle_radius of the goal (at t - 1 and t) it earns e^(-c D)
+      whatever it did. Shaped pays there e^(-c D) for a step in, 0 for "keep" and -1 for a step out, so an arrived
+      chain never learns to keep still; in a corridor its jitter is pushed into the walls.
+    """
+    if mode not in REWARD_MODES:
+        raise ValueError(f"unknown reward mode {mode!r}; allowed modes: {', '.join(REWARD_MODES)}")
+    dD = D - D_prev
+    if mode == "settle" and D <= settle_radius and D_prev <= settle_radius:
+        return math.exp(-c * D)
+    if D > D_min:
+        if mode in ("shaped", "graded", "settle"):
+            return -2.0 + k * (D_prev - D)
+        return -2.0
+    gradient = k * (D_prev - D) if mode == "graded" else 0.0
+    if mode != "paper" and abs(dD) < 1e-12:
+        return 0.0
+    if dD <= 0.0:
+        return math.exp(-c * D) + gradient
+    return -1.0 + gradient
+
+
+def path_distance(tip: Vec2, goal: Vec2, via: Vec2, width: float) -> float:
+    """D_goal measured along an approach path through `via` (e.g. a corridor's axis): straight to the goal once the
+    tip is "past" via -- ahead of it towards the goal and within `width` of the line via -> goal -- else
+    |tip - via| + |via - goal|. This is the task designer's knowledge of the scene in the reward (the agents still
+    sense only their own readings): it turns the corridor's mouth from a dead end of the Euclidean distance into a
+    way point on a path along the corridor's axis."""
+    ux, uy = goal[0] - via[0], goal[1] - via[1]
+    length = math.hypot(ux, uy)
+    dx, dy = tip[0] - via[0], tip[1] - via[1]
+    if length > 0.0:
+        along = (dx * ux + dy * uy) / length
+        across = abs(dx * uy - dy * ux) / length
+        if along >= 0.0 and across <= width:
+            return math.hypot(tip[0] - goal[0], tip[1] - goal[1])
+    return math.hypot(dx, dy) + length
+
+
+def next_waypoint(tip: Vec2, goal: Vec2, waypoints: tuple[Vec2, ...], k: int, radius: float) -> tuple[int, Vec2, float]:
+    """Sub-goals along a path: the root aims the swarm at waypoint k until the tip comes within `radius` of it, then
+    at the next one, and at the goal after the last. Returns (k, the current target, D_goal = |tip - target| + the
+    path's length from the target to the goal), so D_goal falls steadily along the path and barely jumps when k
+    advances. k only grows within an epoch."""
+    while k < len(waypoints) and math.hypot(tip[0] - waypoints[k][0], tip[1] - waypoints[k][1]) <= radius:
+        k += 1
+    points = [*waypoints[k:], goal]
+    rest = sum(math.hypot(b[0] - a[0], b[1] - a[1]) for a, b in zip(points, points[1:], strict=False))
+    target = points[0]
+    return k, target, math.hypot(tip[0] - target[0], tip[1] - target[1]) + rest
+
+
+TASK = ReachTask
