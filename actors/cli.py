@@ -16,53 +16,29 @@ import sys
 import time
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
-from kinswarm.actors.checkpoint import CheckpointError, load_checkpoint
-from kinswarm.actors.config import PLACEMENTS, REWARDS, ConfigError, RunConfig
-from kinswarm.actors.learning.grasp import scene_reward_problem
+from kinswarm.actors.checkpoint import CheckpointError
+from kinswarm.actors.config import DEFAULT_LISTEN, PLACEMENTS, ConfigError, RunConfig
 from kinswarm.actors.plan import Plan, PlanError, load_plan, local_plan
-from kinswarm.actors.runtime import DEFAULT_LISTEN, LEASE_MS, NetSpec, open_session, setup_logging
+from kinswarm.actors.runfile import load_run, write_resolved
+from kinswarm.actors.runtime import LEASE_MS, NetSpec, open_session, setup_logging
 from kinswarm.experiments import BY_NAME, EXPERIMENTS
 from kinswarm.protocol.faults import FAULTS
 from kinswarm.protocol.messages import EpochDone
-from kinswarm.protocol.topology import Topology, TopologyError, load_topology
+from kinswarm.protocol.spec import SpecError
+from kinswarm.protocol.topology import Topology
 
 log = logging.getLogger("kinswarm")
 EXPERIMENT_NAMES = (*EXPERIMENTS, "all", *BY_NAME)
 
 
-def _goal(text: str) -> tuple[float, float]:
+def _goal(text: str) -> str:
     try:
         x, y = (float(v) for v in text.split(","))
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected X,Y (two numbers), got {text!r}") from None
-    return (x, y)
-
-
-def _setting(text: str) -> tuple[str, object]:
-    """--learner NAME=VALUE: a LearnerSettings override; VALUE is JSON (true, 5, -5.0, [0, 1]) or a string."""
-    name, sep, value = text.partition("=")
-    if not sep or not name:
-        raise argparse.ArgumentTypeError(f"expected NAME=VALUE, got {text!r}")
-    try:
-        parsed: object = json.loads(value)
-    except json.JSONDecodeError:
-        parsed = value
-    return name, tuple(parsed) if isinstance(parsed, list) else parsed
-
-
-def _learner(pairs: list[tuple[str, object]], topo: Topology) -> dict[str, object]:
-    """The --learner overrides, checked now (unknown name, bad value) so a bad one fails before anything runs."""
-    from kinswarm.actors.learning.settings import LearnerSettings
-
-    learner = dict(pairs)
-    try:
-        LearnerSettings.for_reach(topo.reach, **learner)
-    except TypeError as e:
-        raise ConfigError(f"--learner: {e} (see LearnerSettings in actors/learning/settings.py)") from None
-    except ValueError as e:
-        raise ConfigError(f"--learner: {e}") from None
-    return {k: list(v) if isinstance(v, tuple) else v for k, v in learner.items()}
+    return f"task.goal=[{x!r}, {y!r}]"
 
 
 def _on_off(text: str) -> bool:
@@ -71,26 +47,66 @@ def _on_off(text: str) -> bool:
     return text == "on"
 
 
+# Shorthands for the most used fields: each is a --set of one field of the run file.
+_SHORTHANDS = {
+    "epochs": "run.epochs",
+    "steps": "run.steps",
+    "seed": "run.seed",
+    "placement": "run.placement",
+    "deadline_ms": "run.deadline_ms",
+    "lease_ms": "run.lease_ms",
+    "scenario": "run.scenario",
+    "reward": "task.reward",
+    "from_dir": "run.from",
+    "learn": "run.learn",
+    "explore": "run.explore",
+    "checkpoint_every": "run.checkpoint_every",
+    "max_restarts": "run.max_restarts",
+}
+
+
+def _sets(a: argparse.Namespace) -> list[str]:
+    """The run file's overrides from the command line: the shorthands, then --set in order (the last one wins)."""
+    out = []
+    for name, key in _SHORTHANDS.items():
+        v = getattr(a, name, None)
+        if v is None:
+            continue
+        if isinstance(v, bool):
+            text = "true" if v else "false"
+        elif isinstance(v, Path):
+            text = json.dumps(str(v))
+        else:
+            text = json.dumps(v) if isinstance(v, str) else repr(v)
+        out.append(f"{key}={text}")
+    if getattr(a, "goal", None):
+        out.append(a.goal)
+    if getattr(a, "successive", False):
+        out.append("run.successive=true")
+    return out + list(getattr(a, "set", None) or [])
+
+
 def _add_common(p: argparse.ArgumentParser) -> None:
-    p.add_argument("topology", type=Path, help="topology TOML (e.g. examples/chain4.toml)")
-    p.add_argument("--epochs", type=int, default=60)
-    p.add_argument("--steps", type=int, default=500, help="steps per epoch")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("run_file", type=Path, metavar="RUN-FILE", help="a run file (e.g. examples/chain4.toml)")
     p.add_argument(
-        "--goal",
-        type=_goal,
-        default=None,
-        help="X,Y (default: the topology's [task] goal); write --goal=-5,7 when X is negative",
+        "--set",
+        action="append",
+        metavar="SECTION.FIELD=VALUE",
+        help="override one field of the run file, repeatable (e.g. --set learner.gamma=0.97, --set task.goal=[4,6])",
     )
-    p.add_argument("--placement", choices=PLACEMENTS, default="process")
+    p.add_argument("--epochs", type=int, default=None, help="= --set run.epochs=N")
+    p.add_argument("--steps", type=int, default=None, help="steps per epoch (= --set run.steps=N)")
+    p.add_argument("--seed", type=int, default=None, help="= --set run.seed=N")
+    p.add_argument("--goal", type=_goal, default=None, help="X,Y (= --set task.goal=[X,Y]); write --goal=-5,7")
+    p.add_argument("--placement", choices=PLACEMENTS, default=None, help="= --set run.placement=...")
     p.add_argument("--run-id", default=None)
-    p.add_argument("--listen", default=DEFAULT_LISTEN, help=f"the supervisor's endpoint (default {DEFAULT_LISTEN})")
+    p.add_argument("--listen", default=None, help=f"the supervisor's endpoint (default {DEFAULT_LISTEN})")
     p.add_argument("--out", type=Path, default=None, help="run directory (default runs/<run-id>)")
-    p.add_argument("--deadline-ms", type=int, default=500, help="per-step deadline; a missing cmd holds")
+    p.add_argument("--deadline-ms", type=int, default=None, help="per-step deadline; a missing cmd holds")
     p.add_argument(
         "--lease-ms",
         type=int,
-        default=LEASE_MS,
+        default=None,
         help=f"how long a silent Zenoh peer still counts as present (default {LEASE_MS}). On an overloaded or "
         "shared machine a starved actor can miss it and count as down for a moment (its joint holds); a longer "
         "lease rides that out, at the price of noticing a frozen actor that much later",
@@ -103,26 +119,20 @@ def _add_common(p: argparse.ArgumentParser) -> None:
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="kinswarm", description="A swarm of per-joint learning agents over Zenoh.")
     sub = p.add_subparsers(dest="command", required=True)
-    run = sub.add_parser("run", help="train (or evaluate) a swarm of agents on a topology")
+    run = sub.add_parser("run", help="train (or evaluate) a swarm of agents: everything it needs is in a run file")
     _add_common(run)
-    run.add_argument("--reward", choices=REWARDS, default="shaped")
+    run.add_argument("--reward", default=None, help="= --set task.reward=...")
     run.add_argument("--from", dest="from_dir", type=Path, default=None, help="start from a run's checkpoints")
-    run.add_argument("--learn", type=_on_off, default=True, metavar="on|off")
-    run.add_argument("--explore", type=_on_off, default=True, metavar="on|off")
+    run.add_argument("--learn", type=_on_off, default=None, metavar="on|off")
+    run.add_argument("--explore", type=_on_off, default=None, metavar="on|off")
     run.add_argument(
         "--successive", action="store_true", help="start each epoch where the last ended (default: initial angles)"
     )
     run.add_argument(
-        "--checkpoint-every", type=int, default=1, help="epochs between checkpoints (0: last only; default 1)"
+        "--checkpoint-every", type=int, default=None, help="epochs between checkpoints (0: last only; default 1)"
     )
-    run.add_argument("--max-restarts", type=int, default=5, help="restarts of one agent within 60 s before giving up")
     run.add_argument(
-        "--learner",
-        type=_setting,
-        action="append",
-        default=[],
-        metavar="NAME=VALUE",
-        help="a LearnerSettings override, repeatable (e.g. --learner clearance_state=true)",
+        "--max-restarts", type=int, default=None, help="restarts of one agent within 60 s before giving up"
     )
     base = sub.add_parser("baseline", help="drive the same simulator with a model-based controller")
     _add_common(base)
@@ -178,10 +188,11 @@ def build_parser() -> argparse.ArgumentParser:
     )
     up.add_argument("plan", type=Path, help="a deploy plan (e.g. deploy/two-hosts.toml)")
     up.add_argument("--host", required=True, help="which of the plan's hosts this is")
-    up.add_argument("--topology", type=Path, default=None, help="leader: overrides the plan's [run] topology")
+    up.add_argument("--run-file", type=Path, default=None, help="leader: instead of the plan's [run] file")
+    up.add_argument("--set", action="append", metavar="SECTION.FIELD=VALUE", help="leader: overrides of the run file")
     for flag, tp in (("--epochs", int), ("--steps", int), ("--seed", int), ("--deadline-ms", int)):
-        up.add_argument(flag, type=tp, default=None, help="leader: overrides the plan's [run] value")
-    up.add_argument("--reward", choices=REWARDS, default=None)
+        up.add_argument(flag, type=tp, default=None, help="leader: overrides the run file's value")
+    up.add_argument("--reward", default=None)
     up.add_argument("--scenario", type=Path, default=None)
     up.add_argument("--run-id", default=None, help="leader: the run id (default <plan>-<time>-<hex>)")
     up.add_argument("--out", type=Path, default=None, help="this host's run directory (default runs/<run-id>)")
@@ -199,17 +210,17 @@ def build_parser() -> argparse.ArgumentParser:
     certs = sub.add_parser("certs", help="write a throwaway CA, certificates and passwords for a plan (trials, tests)")
     certs.add_argument("plan", type=Path)
     certs.add_argument("--out", type=Path, required=True, help="directory (the plan's security.certs)")
-    certs.add_argument("--topology", type=Path, default=None, help="default: the plan's [run] topology")
+    certs.add_argument("--run-file", type=Path, default=None, help="default: the plan's [run] file")
     certs.add_argument("--log-level", default="WARNING")
     return p
 
 
-def _plan_topology(plan: Plan, given: Path | None) -> Path:
-    if given is not None:
-        return given
-    if "topology" not in plan.run:
-        raise PlanError(plan.source, "run.topology", "no topology: give one in [run] or pass --topology")
-    return Path(plan.run["topology"])
+def _plan_run(plan: Plan, given: Path | None, sets: list[str] = (), **kw: Any) -> RunConfig:
+    """The run a plan's leader runs: its [run] file (or `given`) with the plan's and the command line's overrides."""
+    path = given if given is not None else (Path(plan.run_file) if plan.run_file else None)
+    if path is None:
+        raise PlanError(plan.source, "run.file", "no run file: give one in [run] file or pass --run-file")
+    return load_run(path, [*plan.run_sets, *sets], **kw)
 
 
 def _up(a: argparse.Namespace) -> tuple[dict, RunConfig]:
@@ -224,26 +235,10 @@ def _up(a: argparse.Namespace) -> tuple[dict, RunConfig]:
         cfg, topo = follower_config(setup, a.host, plan, a.out)
         print(f"kinswarm: host {a.host} joins run {run} of {plan.leader} -> {cfg.out}", flush=True)
         return run_swarm(cfg, topo, progress=False, plan=plan, host=a.host), cfg
-    r = plan.run
-    ns = argparse.Namespace(
-        topology=_plan_topology(plan, a.topology),
-        epochs=a.epochs if a.epochs is not None else r.get("epochs", 60),
-        steps=a.steps if a.steps is not None else r.get("steps", 500),
-        seed=a.seed if a.seed is not None else r.get("seed", 0),
-        goal=tuple(r["goal"]) if "goal" in r else None,
-        reward=a.reward or r.get("reward", "shaped"),
-        placement="process",
-        run_id=a.run_id or f"{plan.name}-{time.strftime('%Y%m%d-%H%M%S')}-{secrets.token_hex(2)}",
-        listen=plan.hosts[a.host].listen,
-        out=a.out,
-        deadline_ms=a.deadline_ms if a.deadline_ms is not None else r.get("deadline_ms", 500),
-        lease_ms=plan.lease_ms,
-        scenario=a.scenario or (Path(r["scenario"]) if "scenario" in r else None),
-        learn=True,
-        explore=True,
-        checkpoint_every=1,
-    )
-    cfg, topo = _resolve(ns, "agents")
+    run_id = a.run_id or f"{plan.name}-{time.strftime('%Y%m%d-%H%M%S')}-{secrets.token_hex(2)}"
+    sets = [*_sets(a), 'run.placement="process"', f"run.lease_ms={plan.lease_ms}"]
+    cfg = _plan_run(plan, a.run_file, sets, run_id=run_id, out=a.out, listen=plan.hosts[a.host].listen)
+    topo = cfg.topo()
     if len(plan.hosts) > 1:  # the sim holds its steps while one of them is silent
         cfg = dataclasses.replace(cfg, hosts=list(plan.hosts))
     print(f"kinswarm: host {a.host} leads run {cfg.run_id} of plan {plan.name} -> {cfg.out}", flush=True)
@@ -261,54 +256,20 @@ def _deploy_tool(a: argparse.Namespace) -> int:
         return 0
     if a.command == "router":
         plan = load_plan(a.plan) if a.plan else None
-        topo = load_topology(_plan_topology(plan, None)) if plan and plan.security.acl else None
+        topo = _plan_run(plan, None).topo() if plan and plan.security.acl else None
         run_router(a.listen, plan, topo)
         return 0
     plan = load_plan(a.plan)
-    for path in write_certs(plan, load_topology(_plan_topology(plan, a.topology)), a.out):
+    for path in write_certs(plan, _plan_run(plan, a.run_file).topo(), a.out):
         print(path)
     return 0
 
 
-def _resolve(a: argparse.Namespace, controller: str) -> tuple[RunConfig, Topology]:
-    topo = load_topology(a.topology)
-    run_id = a.run_id or f"{topo.name}-{time.strftime('%Y%m%d-%H%M%S')}-{secrets.token_hex(2)}"
-    out = (a.out or Path("runs") / run_id).resolve()
-    from_dir = getattr(a, "from_dir", None)
-    cfg = RunConfig(
-        run_id=run_id,
-        topology=str(a.topology.resolve()),
-        out=str(out),
-        epochs=a.epochs,
-        steps=a.steps,
-        seed=a.seed,
-        goal=a.goal,
-        reward=getattr(a, "reward", "shaped"),
-        placement=a.placement,
-        listen=a.listen,
-        from_dir=str(from_dir.resolve()) if from_dir else None,
-        learn=getattr(a, "learn", False),
-        explore=getattr(a, "explore", False),
-        successive=getattr(a, "successive", False),
-        deadline_ms=a.deadline_ms,
-        lease_ms=a.lease_ms,
-        checkpoint_every=getattr(a, "checkpoint_every", 0),
-        controller=controller,
-        scenario=str(a.scenario.resolve()) if a.scenario else None,
-        max_restarts=getattr(a, "max_restarts", 5),
-        learner=_learner(getattr(a, "learner", []), topo),
-    )
-    cfg.resolved_goal(topo)
-    if (problem := scene_reward_problem(topo.object is not None, cfg.reward)) is not None:
-        raise ConfigError(f"--reward {cfg.reward}: {problem} ({topo.source})")
-    if a.scenario:  # refuse a bad scenario before anything starts
-        from kinswarm.actors.scenario import load_scenario
-
-        load_scenario(a.scenario, topo)
-    if cfg.from_dir:  # refuse a bad checkpoint before anything starts
-        for aid in topo.dof_agents:
-            load_checkpoint(Path(cfg.from_dir) / "agents" / f"{aid}.npz", agent=aid)
-    return cfg, topo
+def _resolve(a: argparse.Namespace, controller: str | None) -> tuple[RunConfig, Topology]:
+    """The run of `kinswarm run|baseline`: its run file with the command line's overrides, every input checked."""
+    sets = _sets(a) + ([f'run.controller="{controller}"'] if controller else [])
+    cfg = load_run(a.run_file, sets, run_id=a.run_id, out=a.out, listen=a.listen)
+    return cfg, cfg.topo()
 
 
 def _write_net(path: Path, spec: NetSpec) -> Path:
@@ -433,6 +394,7 @@ def run_swarm(
     out.mkdir(parents=True, exist_ok=True)
     cfg.write(out / "config.json")
     if host == plan.leader:
+        write_resolved(cfg, out / "run.toml")
         (out / "metrics.jsonl").write_text("")
     return asyncio.run(_supervise(cfg, topo, progress, plan, host, wait_s))
 
@@ -508,10 +470,9 @@ def main(argv: list[str] | None = None) -> int:
                 print(f"kinswarm: host {summary['host']} done ({cfg.run_id})")
                 return 130 if summary.get("interrupted") else 0
         else:
-            controller = "agents" if a.command == "run" else {"pinv": "baseline", "greedy": "greedy"}[a.law]
-            cfg, topo = _resolve(a, controller)
+            cfg, topo = _resolve(a, None if a.command == "run" else a.law)
             summary = run_swarm(cfg, topo, progress=not a.no_progress and sys.stderr.isatty())
-    except (TopologyError, ConfigError, CheckpointError, ScenarioError, ControlError, ValueError, DeployError) as e:
+    except (SpecError, ConfigError, CheckpointError, ScenarioError, ControlError, ValueError, DeployError) as e:
         print(f"kinswarm: error: {e}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:

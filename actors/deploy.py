@@ -1,7 +1,7 @@
 """Several hosts: what `kinswarm up`, `down`, `router` and `certs` do beyond one host's supervisor.
 
 `up` on the leading host resolves the run and serves it (a Setup signed with the plan's digest); `up` on
-every other host fetches it, writes its own copy of the run directory (config, topology, scenario) and
+every other host fetches it, writes its own copy of the run directory (config, scenario) and
 runs its share under its own supervisor. `down` asks the leader to stop (a Stop on ctl/stop); the leader
 tells every host.
 """
@@ -10,23 +10,21 @@ from __future__ import annotations
 
 import asyncio
 import dataclasses
-import json
 import logging
 import os
 import secrets
 import signal
 import subprocess
-import tempfile
 import time
 from pathlib import Path
 
-from kinswarm.actors.config import RunConfig, load_run_config
+from kinswarm.actors.config import RunConfig, config_from_json
 from kinswarm.actors.plan import Plan, PlanError, load_credentials
 from kinswarm.actors.runtime import NetSpec, Node, open_session
 from kinswarm.protocol import codec
 from kinswarm.protocol.keys import Keys
 from kinswarm.protocol.messages import Setup, Stop
-from kinswarm.protocol.topology import Topology, load_topology
+from kinswarm.protocol.topology import Topology
 
 log = logging.getLogger("kinswarm.deploy")
 
@@ -82,37 +80,29 @@ def fetch_setup(plan: Plan, host: str, wait_s: float) -> tuple[str, Setup]:
 
 def follower_config(setup: Setup, host: str, plan: Plan, out: Path | None) -> tuple[RunConfig, Topology]:
     """This host's copy of the leader's run: same settings and key, local paths."""
-    with tempfile.NamedTemporaryFile("w", suffix=".json", delete=False) as f:
-        f.write(setup.config)
-    try:
-        leader_cfg = load_run_config(f.name)
-    finally:
-        os.unlink(f.name)
+    leader_cfg = config_from_json(setup.config, f"the leader's run of plan {plan.name}")
     run_dir = (out or Path("runs") / leader_cfg.run_id).resolve()
     run_dir.mkdir(parents=True, exist_ok=True)
-    topo_path = run_dir / "topology.toml"
-    topo_path.write_text(setup.topology)
     scenario = None
     if setup.scenario:
         scenario = run_dir / "scenario.toml"
         scenario.write_text(setup.scenario)
     cfg = dataclasses.replace(
         leader_cfg,
-        topology=str(topo_path),
         out=str(run_dir),
         scenario=str(scenario) if scenario else None,
         from_dir=None,
         listen=plan.hosts[host].listen,
         placement="process",
     )
-    return cfg, load_topology(topo_path)
+    return cfg, cfg.topo()
 
 
 async def down(plan: Plan, host: str, wait_s: float = 10.0) -> str:
     """Ask the running swarm of `plan` to stop, until its leader has left; returns its run id."""
     run, setup = await asyncio.to_thread(fetch_setup, plan, host, wait_s)
-    key = json.loads(setup.config)["secret"].encode()
-    topo = load_topology_text(setup.topology)
+    leader_cfg = config_from_json(setup.config, f"the leader's run of plan {plan.name}")
+    key, topo = leader_cfg.key, leader_cfg.topo()
     spec = control_net(plan, host, topo)
     if plan.mode == "peer":  # straight to the leader, who tells everyone: a Stop only our own host heard
         spec = spec.with_(connect=tuple(dict.fromkeys((plan.hosts[plan.leader].listen, *spec.connect))))
@@ -132,13 +122,6 @@ async def down(plan: Plan, host: str, wait_s: float = 10.0) -> str:
     finally:
         node.close()
         session.close()
-
-
-def load_topology_text(text: str) -> Topology:
-    with tempfile.TemporaryDirectory() as d:
-        p = Path(d) / "topology.toml"
-        p.write_text(text)
-        return load_topology(p)
 
 
 def run_router(listen: list[str], plan: Plan | None, topo: Topology | None) -> None:

@@ -13,6 +13,7 @@ import math
 from pathlib import Path
 from typing import Any
 
+from kinswarm.protocol.scene import ObjectSpec
 from kinswarm.protocol.topology import Topology
 
 BALANCE = 0.1
@@ -40,23 +41,22 @@ def step_quality(traces: dict[str, list[float]], tips: tuple[str, ...], i: int, 
     }
 
 
-def epoch_quality(row: dict[str, Any], topo: Topology, tail: int = 50) -> dict[str, Any]:
+def epoch_quality(row: dict[str, Any], topo: Topology, obj: ObjectSpec, tail: int = 50) -> dict[str, Any]:
     """The epoch's last step, and the share of good steps among its last `tail` steps."""
-    assert topo.object is not None
-    traces, tips, L = row["traces"], topo.end_effectors, topo.object.char_length
+    traces, tips, L = row["traces"], topo.end_effectors, obj.char_length
     n = len(traces["net_fx"])
     last = step_quality(traces, tips, n - 1, L)
     good_tail = sum(step_quality(traces, tips, i, L)["good"] for i in range(max(0, n - tail), n))
     return {**last, "good_tail_share": good_tail / min(tail, n)}
 
 
-def grasp_summary(rows: list[dict[str, Any]], topo: Topology, last: int = 20) -> dict[str, Any]:
-    q = [epoch_quality(r, topo) for r in rows if "traces" in r]
+def grasp_summary(rows: list[dict[str, Any]], topo: Topology, obj: ObjectSpec, last: int = 20) -> dict[str, Any]:
+    q = [epoch_quality(r, topo, obj) for r in rows if "traces" in r]
     tail = q[-last:]
     return {
         "criterion": (
             f"last step of the epoch: all fingertips touch (fn > 0) inside their friction cones, |F| < "
-            f"{BALANCE} mean fn, |tau| < {BALANCE} mean fn x L (L = {topo.object.char_length if topo.object else 0} "
+            f"{BALANCE} mean fn, |tau| < {BALANCE} mean fn x L (L = {obj.char_length} "
             "length units)"
         ),
         "good": [x["good"] for x in q],
@@ -77,14 +77,15 @@ def _shown(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
     return [rows[i] for i in idx]
 
 
-def write_grasp_plots(run_dir: Path, topo: Topology, rows: list[dict[str, Any]], plt: Any) -> list[Path]:
+def write_grasp_plots(
+    run_dir: Path, topo: Topology, obj: ObjectSpec, rows: list[dict[str, Any]], plt: Any
+) -> list[Path]:
     """grasp.png (the fingers around the object at the end of some epochs, Figs. 24a/29),
     grasp_forces.png (net force and torque over the steps of some epochs, Figs. 26-27),
     grasp_cone.png (each finger's |ft| against mu fn over those epochs, Fig. 28),
     grasp_epochs.png (the last step's net force, torque and mean fn over the epochs)."""
     from kinswarm.actors.report import arm_points
 
-    obj = topo.object
     rows = [r for r in rows if "traces" in r]
     if obj is None or not rows:
         return []
@@ -102,7 +103,7 @@ def write_grasp_plots(run_dir: Path, topo: Topology, rows: list[dict[str, Any]],
             ax.plot(xs, ys, "-o", ms=3, color=f"C{i}")
         for i, (_, g) in enumerate(obj.grasp.items()):
             ax.plot(*g, "*", color=f"C{i}", ms=10, mec="k")
-        q = epoch_quality(r, topo)
+        q = epoch_quality(r, topo, obj)
         ax.set_title(f"epoch {r['epoch']}: |F| {q['net_force']:.2f}, |tau| {q['net_torque']:.2f}", fontsize=8)
         ax.set_aspect("equal")
         ax.set_xlim(-3.3, 3.3)
@@ -146,7 +147,7 @@ def write_grasp_plots(run_dir: Path, topo: Topology, rows: list[dict[str, Any]],
     fig.tight_layout()
     written.append(_save(fig, plt, run_dir / "grasp_cone.png"))
 
-    q = [epoch_quality(r, topo) for r in rows]
+    q = [epoch_quality(r, topo, obj) for r in rows]
     ep = [r["epoch"] for r in rows]
     fig, ax = plt.subplots(figsize=(7, 3.6))
     ax.plot(ep, [x["net_force"] for x in q], label="|net force|")

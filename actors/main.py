@@ -53,9 +53,9 @@ def build_actor(role: str, ident: str, cfg: RunConfig, topo: Topology, node: Nod
 
         agent = Agent(cfg, topo, ident, node)
         if restore:
-            agent.resume(Path(cfg.out) / "agents")
+            agent.memory.resume(Path(cfg.out) / "agents")
         elif cfg.from_dir:
-            agent.restore(Path(cfg.from_dir) / "agents")
+            agent.memory.restore(Path(cfg.from_dir) / "agents")
         return agent
     if role == "sim":  # imported lazily: agent processes never load PyBullet
         from kinswarm.sim.actor import SimActor

@@ -36,7 +36,7 @@ from kinswarm.protocol.topology import Topology
 
 MODES = ("peer", "client")
 SUPERVISOR_PORT = 7447
-_RUN_KEYS = {"topology", "epochs", "steps", "seed", "reward", "deadline_ms", "goal", "scenario"}
+_RUN_KEYS = {"file", "set"}  # [run]: the run file the leader runs, and --set overrides of it
 
 
 class PlanError(ValueError):
@@ -75,7 +75,8 @@ class Plan:
     lease_ms: int = LEASE_MS
     routers: tuple[str, ...] = ()
     security: Security = field(default_factory=Security)
-    run: dict[str, Any] = field(default_factory=dict)  # [run] defaults for the leader's `kinswarm up`
+    run_file: str = ""  # [run] file: the run file the leader's `kinswarm up` runs (absolute)
+    run_sets: tuple[str, ...] = ()  # [run] set: overrides of it, as `--set` takes them
     digest: bytes = b""  # of the file's bytes: hosts must run the same plan
 
     # -- placement -------------------------------------------------------------------------------
@@ -316,12 +317,12 @@ def load_plan(path: str | Path) -> Plan:
         raise PlanError(src, "plan.leader", f"{leader!r} is not one of the hosts ({', '.join(hosts)})")
     run = _table(src, data, "run", required=False)
     _only(src, "run", run, _RUN_KEYS)
-    run = dict(run)
-    for k in ("topology", "scenario"):
-        if k in run:
-            if not isinstance(run[k], str):
-                raise PlanError(src, f"run.{k}", "expected a path")
-            run[k] = str((path.parent / run[k]).resolve())
+    run_file = run.get("file", "")
+    if not isinstance(run_file, str):
+        raise PlanError(src, "run.file", f"expected the path of a run file, got {run_file!r}")
+    sets = run.get("set", [])
+    if not isinstance(sets, list) or not all(isinstance(x, str) for x in sets):
+        raise PlanError(src, "run.set", f'expected a list like ["run.epochs=5"], got {sets!r}')
     return Plan(
         source=src,
         name=name,
@@ -331,7 +332,8 @@ def load_plan(path: str | Path) -> Plan:
         lease_ms=lease,
         routers=tuple(routers),
         security=sec,
-        run=run,
+        run_file=str((path.parent / run_file).resolve()) if run_file else "",
+        run_sets=tuple(sets),
         digest=hashlib.blake2b(raw, digest_size=32).digest(),
     )
 

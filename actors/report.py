@@ -9,7 +9,7 @@ import math
 from pathlib import Path
 from typing import Any
 
-from kinswarm.actors.config import load_run_config
+from kinswarm.actors.config import RunConfig, load_run_config
 from kinswarm.actors.learning.state import joint_frame, link_end
 from kinswarm.protocol.topology import Topology
 
@@ -65,9 +65,9 @@ def write_plots(run_dir: Path) -> list[Path]:
     import matplotlib.pyplot as plt
 
     cfg = load_run_config(run_dir / "config.json")
-    topo = cfg.topo()
-    goal = cfg.resolved_goal(topo)
+    topo, scene = cfg.topo(), cfg.scene_spec
     rows = read_metrics(run_dir)
+    goal = _goal(cfg, rows)
     by_epoch = _events_by_epoch(read_events(run_dir))
     written = []
     if rows:
@@ -89,7 +89,7 @@ def write_plots(run_dir: Path) -> list[Path]:
         ax.set_yscale("log")
         ax.set_xlabel("epoch")
         ax.set_ylabel("end-effector distance to goal")
-        ax.set_title(f"{cfg.run_id}: {topo.name}, {cfg.controller}, reward={cfg.reward}, seed={cfg.seed}")
+        ax.set_title(f"{cfg.run_id}: {topo.name}, {_controller(cfg)}, seed={cfg.seed}")
         ax.legend()
         fig.tight_layout()
         fig.savefig(run_dir / "learning_curve.png", dpi=110)
@@ -118,12 +118,12 @@ def write_plots(run_dir: Path) -> list[Path]:
         plt.close(fig)
         written.append(run_dir / "arm.png")
 
-    if rows and topo.obstacles:  # the chain in its scene (paper Fig. 23)
+    if rows and scene.obstacles:  # the chain among the walls (paper Fig. 23)
         from kinswarm.actors.scene_plot import write_scene_plot
 
-        title = f"{cfg.run_id}: final configurations, reward={cfg.reward}, seed={cfg.seed}"
-        write_scene_plot(run_dir / "corridor.png", topo, goal, rows, title)
-        written.append(run_dir / "corridor.png")
+        title = f"{cfg.run_id}: final configurations, {_controller(cfg)}, seed={cfg.seed}"
+        write_scene_plot(run_dir / "scene.png", topo, scene.obstacles, goal, rows, title)
+        written.append(run_dir / "scene.png")
 
     tracked = [r for r in rows if r.get("errors")]
     with_events = [r for r in tracked if r["epoch"] in by_epoch]
@@ -138,10 +138,10 @@ def write_plots(run_dir: Path) -> list[Path]:
         fig.savefig(run_dir / "tracking.png", dpi=110)
         plt.close(fig)
         written.append(run_dir / "tracking.png")
-    if topo.object is not None:  # a grasp scene (paper §5.5): the fingers, forces, friction cones
+    if scene.object is not None:  # an object to grasp (paper §5.5): the fingers, forces, friction cones
         from kinswarm.actors.grasp_report import write_grasp_plots
 
-        written += write_grasp_plots(run_dir, topo, rows, plt)
+        written += write_grasp_plots(run_dir, topo, scene.object, rows, plt)
     return written
 
 
@@ -176,31 +176,47 @@ def _tracking(ax: Any, row: dict[str, Any], events: list[dict[str, Any]]) -> Non
 
 def write_summary(run_dir: Path, extra: dict[str, Any]) -> dict[str, Any]:
     cfg = load_run_config(run_dir / "config.json")
+    topo, scene = cfg.topo(), cfg.scene_spec
     rows = read_metrics(run_dir)
     sim_seconds = sum(r["seconds"] for r in rows)
     steps = sum(r["steps"] for r in rows)
     summary = {
         "run_id": cfg.run_id,
-        "topology": cfg.topology,
+        "robot": topo.name,
+        "task": cfg.task["kind"],
         "controller": cfg.controller,
         "epochs": len(rows),
         "steps_per_epoch": cfg.steps,
         "seed": cfg.seed,
         "placement": cfg.placement,
-        "reward": cfg.reward,
+        "reward": cfg.task.get("reward"),
         "learn": cfg.learn,
         "explore": cfg.explore,
-        "goal": list(cfg.resolved_goal(cfg.topo())),
+        "goal": list(_goal(cfg, rows)),
         "final_error": [r["final_error"] for r in rows],
         "mean_error": [r["mean_error"] for r in rows],
         "missed_cmds": sum(r["missed_cmds"] for r in rows),
         "steps_per_second": steps / sim_seconds if sim_seconds > 0 else 0.0,
         **extra,
     }
-    topo = cfg.topo()
-    if topo.object is not None:  # a grasp scene: the grasp's quality per epoch
+    if scene.object is not None:  # an object to grasp: the grasp's quality per epoch
         from kinswarm.actors.grasp_report import grasp_summary
 
-        summary["grasp"] = grasp_summary(rows, topo)
+        summary["grasp"] = grasp_summary(rows, topo, scene.object)
     (run_dir / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
     return summary
+
+
+def _goal(cfg: RunConfig, rows: list[dict[str, Any]]) -> tuple[float, float]:
+    """The goal of the run's last epoch (the task's goal schedule)."""
+    from kinswarm.actors.runfile import task_of
+
+    epoch = rows[-1]["epoch"] if rows else 0
+    return task_of(cfg).goal(epoch, cfg.steps)[0]
+
+
+def _controller(cfg: RunConfig) -> str:
+    """What drove the robot: the agents and their reward, or the model-based law."""
+    if cfg.controller != "agents":
+        return f"{cfg.controller} (model-based)"
+    return f"{cfg.task['kind']}, reward {cfg.task.get('reward', '-')}"

@@ -41,7 +41,6 @@ from kinswarm.protocol.faults import ALL, LINK_FAULTS, check_fault, describe
 from kinswarm.protocol.keys import Keys
 from kinswarm.protocol.messages import Fault
 
-DEFAULT_LISTEN = "tcp/127.0.0.1:7447"
 LEASE_MS = 1000
 HANDSHAKE_MS = 2000
 #: a node logs the first rejected message on each of up to this many keys, then every 1000th: a flood on one key

@@ -1,6 +1,5 @@
 """The chain in its scene (paper Fig. 23): obstacles drawn, the final configuration of epochs across training.
-Used by `kinswarm run`/`kinswarm report` (corridor.png) for topologies with obstacles, and by the corridor
-experiment."""
+Used by `kinswarm run`/`kinswarm report` (scene.png) for runs in a walls scene, and by the corridor experiment."""
 
 from __future__ import annotations
 
@@ -9,17 +8,18 @@ from collections.abc import Sequence
 from typing import Any
 
 from kinswarm.actors.report import arm_points
+from kinswarm.protocol.obstacles import ObstacleSpec
 from kinswarm.protocol.topology import Topology
 
 SHOWN_EPOCHS = 8  # corridor.png: at most this many epochs' final configurations
 
 
-def draw_scene(ax: Any, topo: Topology, goal: tuple[float, float] | None) -> None:
+def draw_scene(ax: Any, topo: Topology, obstacles: Sequence[ObstacleSpec], goal: tuple[float, float] | None) -> None:
     """Obstacles as filled polygons, the goal as a star; equal axes around the robot and its scene."""
     from matplotlib.patches import Polygon
 
     xs, ys = [topo.base[0]], [topo.base[1]]
-    for o in topo.obstacles:
+    for o in obstacles:
         corners = o.corners()
         ax.add_patch(Polygon(corners, closed=True, facecolor="0.75", edgecolor="0.35", lw=0.8, zorder=1))
         xs += [c[0] for c in corners]
@@ -51,19 +51,24 @@ def pick_epochs(n: int, shown: int = SHOWN_EPOCHS) -> list[int]:
 
 
 def plot_scene_epochs(
-    ax: Any, topo: Topology, goal: tuple[float, float] | None, rows: Sequence[dict[str, Any]], title: str = ""
+    ax: Any,
+    topo: Topology,
+    obstacles: Sequence[ObstacleSpec],
+    goal: tuple[float, float] | None,
+    rows: Sequence[dict[str, Any]],
+    title: str = "",
 ) -> None:
     """Fig. 23: the start configuration (dotted) and each picked epoch's final configuration, light to dark."""
     import matplotlib as mpl
 
-    draw_scene(ax, topo, goal)
+    draw_scene(ax, topo, obstacles, goal)
     draw_chain(ax, topo, topo.initial_angles(), color="0.5", ls=":", label="start")
     picked = pick_epochs(len(rows))
     cmap = mpl.colormaps["viridis"]
     for i, n in enumerate(picked):
         r = rows[n]
         angles = {a: math.radians(v) for a, v in r["final_angles_deg"].items()}
-        hits = sum(r.get("collisions", [])[-100:])
+        hits = round(sum(r.get("traces", {}).get("collisions", [])[-100:]))
         label = f"epoch {r['epoch']}: error {r['final_error']:.2f}, {hits} coll. in last 100"
         draw_chain(ax, topo, angles, color=cmap(0.15 + 0.8 * i / max(len(picked) - 1, 1)), label=label)
     ax.legend(loc="upper left", fontsize=6.5)
@@ -72,7 +77,12 @@ def plot_scene_epochs(
 
 
 def write_scene_plot(
-    path: Any, topo: Topology, goal: tuple[float, float] | None, rows: Sequence[dict], title: str
+    path: Any,
+    topo: Topology,
+    obstacles: Sequence[ObstacleSpec],
+    goal: tuple[float, float] | None,
+    rows: Sequence[dict],
+    title: str,
 ) -> None:
     import matplotlib
 
@@ -80,7 +90,7 @@ def write_scene_plot(
     import matplotlib.pyplot as plt
 
     fig, ax = plt.subplots(figsize=(6.5, 6.0))
-    plot_scene_epochs(ax, topo, goal, rows, title)
+    plot_scene_epochs(ax, topo, obstacles, goal, rows, title)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)

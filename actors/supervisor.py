@@ -32,6 +32,7 @@ import zenoh
 from kinswarm.actors.config import RunConfig
 from kinswarm.actors.main import build_actor
 from kinswarm.actors.plan import Plan, local_plan
+from kinswarm.actors.runfile import task_of
 from kinswarm.actors.runtime import Node
 from kinswarm.protocol import codec
 from kinswarm.protocol.faults import (
@@ -273,6 +274,7 @@ class Supervisor:
         self.out = Path(cfg.out)
         self.on_epoch = on_epoch
         self.expected = actors_of(cfg, topo)
+        self.task = task_of(cfg)  # the goal of each epoch
         # Several hosts: this supervisor spawns and restarts its host's share; the leader also trains.
         self.plan = plan if plan is not None else local_plan(cfg.listen, cfg.lease_ms)
         self.host = host if host is not None else self.plan.leader
@@ -408,7 +410,7 @@ class Supervisor:
         """The leader answers the other hosts' `kinswarm up`: the resolved run, signed with the plan's digest."""
         cfg, plan = self.cfg, self.plan
         scenario = Path(cfg.scenario).read_text() if cfg.scenario else ""
-        msg = Setup(plan=plan.name, config=cfg.to_json(), topology=Path(cfg.topology).read_text(), scenario=scenario)
+        msg = Setup(plan=plan.name, config=cfg.to_json(), scenario=scenario)
         key = self.keys.setup(plan.name)
         payload = codec.encode(msg, cfg.run_id, "supervisor/main", plan.digest)
 
@@ -726,8 +728,8 @@ class Supervisor:
     async def _run_epoch(self, epoch: int) -> EpochDone:
         assert self.node is not None
         self.epoch = epoch
-        goal = self.cfg.resolved_goal(self.topo)
-        self._epoch_start = EpochStart(epoch=epoch, steps=self.cfg.steps, goal=goal)
+        goal, path = self.task.goal(epoch, self.cfg.steps)
+        self._epoch_start = EpochStart(epoch=epoch, steps=self.cfg.steps, goal=goal, path=path)
         while self.missing:  # not into a partition: the other side would miss the start
             with contextlib.suppress(_NoMessage):
                 await self._expect(Saved, lambda m: False, timeout=0.2, stretch=False)
@@ -791,9 +793,7 @@ class Supervisor:
             "final_angles_deg": {a: round(math.degrees(q), 4) for a, q in d.final_angles.items()},
             "errors": [round(e, 5) for e in d.errors],
         }
-        if d.collisions or d.clearance:  # scenes with obstacles: refused increments, smallest clearance per step
-            row["collisions"], row["clearance"] = d.collisions, d.clearance
-        if d.traces:  # a scene's per-step series (grasp forces)
+        if d.traces:  # the scene's per-step series (refused moves and clearance among walls, a grasp's forces)
             row["traces"] = d.traces
         self.metrics_file.write(json.dumps(row) + "\n")
         self.metrics_file.flush()

@@ -1,15 +1,11 @@
-"""Runs for the experiments: `kinswarm run`'s machinery (the same Supervisor, actors and wire, `single`
-placement), plus two things the experiments need and `kinswarm run` does not offer:
+"""Runs for the experiments: `kinswarm run`'s machinery (the same Supervisor, actors and wire, `single` placement),
+plus an observer of the step messages (`sim/task`, `sim/obs/*`) for the end-effector path and the joint effort
+(optimality), subscribed on the run's session before any actor exists, so nothing is missed.
 
-- a goal per epoch (generalisation trains on several goals in one run): a Supervisor subclass that
-  sends each epoch's `EpochStart` with the next goal of a list; agents and sim are untouched (the goal
-  reaches them on the wire, as always);
-- an observer of the step messages (`sim/task`, `sim/obs/*`) for the end-effector path and the joint
-  effort (optimality), subscribed on the run's session before any actor exists, so nothing is missed.
-
-Each run is described by a `Spec`, lives in its own directory with `spec.json`, and is reused when that
-directory already holds a finished run of the same spec, or of the same spec with more epochs (the first
-epochs of a longer run are bit-identical to a shorter run: lockstep and seeded RNGs).
+Each run is a `Spec`: a run file and overrides of its fields, resolved by the one loader (actors/runfile.py). It
+lives in its own directory with `spec.json`, and is reused when that directory already holds a finished run of the
+same resolved run, or of the same run with more epochs (the first epochs of a longer run are bit-identical to a
+shorter run: lockstep and seeded RNGs).
 """
 
 from __future__ import annotations
@@ -29,13 +25,15 @@ from typing import Any
 
 import numpy as np
 from kinswarm.actors.config import RunConfig
+from kinswarm.actors.learning.settings import LearnerSettings
 from kinswarm.actors.report import read_metrics, write_summary
+from kinswarm.actors.runfile import read_run_file, resolve, write_resolved
 from kinswarm.actors.runtime import open_session
 from kinswarm.actors.supervisor import RunResult, SinglePlacement, Supervisor
 from kinswarm.protocol import codec
 from kinswarm.protocol.keys import Keys
-from kinswarm.protocol.messages import EpochDone, Obs, Task
-from kinswarm.protocol.topology import Topology, load_topology
+from kinswarm.protocol.messages import Obs, Task
+from kinswarm.protocol.topology import Topology
 
 ROOT = Path(__file__).resolve().parent.parent
 CHAIN4 = ROOT / "examples" / "chain4.toml"
@@ -49,17 +47,20 @@ Goal = tuple[float, float]
 
 @dataclass(frozen=True)
 class Spec:
-    """One swarm run. `goals`: a goal per epoch, cycled (None: the topology's goal); `observe`: record
-    every step's tips and joint angles (trace.npz)."""
+    """One swarm run: `file`, a run file, with these fields set over it. `goals`: a goal per epoch, cycled (None: the
+    file's); `learner`, `task`, `scene`: (field, value) overrides of those tables; `observe`: record every step's
+    tips and joint angles (trace.npz)."""
 
     name: str
     seed: int = 0
     epochs: int = 60
     steps: int = 500
-    reward: str = "shaped"
-    learner: tuple[tuple[str, Any], ...] = ()  # LearnerSettings overrides, as sorted (name, value) pairs
+    reward: str | None = None  # None: the file's
+    learner: tuple[tuple[str, Any], ...] = ()
+    task: tuple[tuple[str, Any], ...] = ()
+    scene: tuple[tuple[str, Any], ...] = ()
     goals: tuple[Goal, ...] | None = None
-    topology: str = str(CHAIN4)
+    file: str = str(CHAIN4)
     from_dir: str | None = None
     learn: bool = True
     explore: bool = True
@@ -71,50 +72,68 @@ class Spec:
     # Not part of the identity: it changes nothing in the run.
     checkpoint: bool = False
 
-    def identity(self, with_epochs: bool = True, portable: bool = True) -> str:
-        """The run's hash. Portable: files by content and `from_dir` by its run's directory name, so a cache
-        serves any checkout and any --out (until 2026-11-22 absolute paths were hashed; find_cached still
-        recognises those runs)."""
-        d = dataclasses.asdict(self)
-        d.pop("name")
-        d.pop("checkpoint")
-        if portable:
-            d["topology"] = _content(self.topology)
-            if self.scenario is not None:
-                d["scenario"] = _content(self.scenario)
-            if self.from_dir is not None:
-                d["from_dir"] = Path(self.from_dir).name  # itself "<name>-<identity>": portable
-        if not d["successive"]:  # added later: the runs cached before it keep their identity
-            d.pop("successive")
+    def overrides(self) -> list[tuple[tuple[str, ...], Any]]:
+        """The fields this spec sets over its run file."""
+        out: list[tuple[tuple[str, ...], Any]] = [
+            (("run", "seed"), self.seed),
+            (("run", "epochs"), self.epochs),
+            (("run", "steps"), self.steps),
+            (("run", "placement"), "single"),
+            (("run", "learn"), self.learn),
+            (("run", "explore"), self.explore),
+            (("run", "successive"), self.successive),
+            (("run", "controller"), self.controller),
+            (("run", "deadline_ms"), DEADLINE_MS),
+            (("run", "checkpoint_every"), 0),  # the last epoch only: what --from needs
+        ]
+        if self.from_dir is not None:
+            out.append((("run", "from"), self.from_dir))
+        if self.scenario is not None:
+            out.append((("run", "scenario"), self.scenario))
+        if self.reward is not None:
+            out.append((("task", "reward"), self.reward))
+        if self.goals:
+            out.append((("task", "goals"), [list(g) for g in self.goals]))
+        for section, pairs in (("learner", self.learner), ("task", self.task), ("scene", self.scene)):
+            out += [((section, k), _listed(v)) for k, v in pairs]
+        return out
+
+    def config(self, out: Path, run_id: str | None = None) -> RunConfig:
+        return resolve(
+            read_run_file(self.file), self.file, self.overrides(), run_id=run_id or "x", out=out, listen=LISTEN
+        )
+
+    def identity(self, with_epochs: bool = True) -> str:
+        """The run's hash: of what it runs (the resolved robot, scene, task, learner and run fields, `from_dir` by its
+        run's directory name), not of where or how it is spelled, so a cache serves any checkout and any --out."""
+        cfg = self.config(Path("."))
+        d = {f: getattr(cfg, f) for f in ("robot", "scene", "task", "learner", *_RUN_FIELDS)}
+        d["learner"] = _normalised(cfg.learner)
+        if self.from_dir is not None:
+            d["from_dir"] = Path(self.from_dir).name  # itself "<name>-<identity>": portable
+        if self.scenario is not None:
+            d["scenario"] = _content(self.scenario)
         if not with_epochs:
             d.pop("epochs")
-        if not d["learn"]:  # frozen runs since 6de7b7e keep the fictitious-play counts too: not the earlier ones
-            d["frozen_counts"] = True
         return hashlib.sha256(json.dumps(d, sort_keys=True, default=list).encode()).hexdigest()[:16]
 
-    def config(self, out: Path) -> RunConfig:
-        goal = self.goals[0] if self.goals else None
-        return RunConfig(
-            run_id=f"x{self.identity()}",
-            topology=self.topology,
-            out=str(out),
-            epochs=self.epochs,
-            steps=self.steps,
-            seed=self.seed,
-            goal=goal,
-            reward=self.reward,
-            placement="single",
-            listen=LISTEN,
-            from_dir=self.from_dir,
-            learn=self.learn,
-            explore=self.explore,
-            successive=self.successive,
-            deadline_ms=DEADLINE_MS,
-            checkpoint_every=0,  # the last epoch only: what --from needs
-            controller=self.controller,
-            learner=dict(self.learner),
-            scenario=self.scenario,
-        )
+
+_RUN_FIELDS = ("epochs", "steps", "seed", "learn", "explore", "successive", "controller", "action_deg", "from_dir")
+
+
+def _listed(v: Any) -> Any:
+    """Override values as a run file holds them: lists for tuples (nested), tables for dataclasses."""
+    if dataclasses.is_dataclass(v) and not isinstance(v, type):
+        return {f.name: _listed(getattr(v, f.name)) for f in dataclasses.fields(v)}
+    if isinstance(v, tuple | list):
+        return [_listed(x) for x in v]
+    return v
+
+
+def _normalised(learner: dict[str, Any]) -> dict[str, Any]:
+    """Learner overrides without those equal to the default, so equal runs share a cache entry."""
+    defaults = LearnerSettings()
+    return {k: v for k, v in learner.items() if k == "ranges" or _listed(getattr(defaults, k)) != v}
 
 
 def _content(path: str) -> str:
@@ -132,21 +151,8 @@ def _content_hash(path: str, mtime_ns: int, size: int) -> str:
 
 
 def learner_overrides(**kw: Any) -> tuple[tuple[str, Any], ...]:
-    """Hashable LearnerSettings overrides (tuples for the sequence-valued ones)."""
+    """Hashable overrides (tuples for the sequence-valued ones)."""
     return tuple(sorted((k, tuple(v) if isinstance(v, list) else v) for k, v in kw.items()))
-
-
-class GoalsSupervisor(Supervisor):
-    """The Supervisor, with epoch e aimed at goals[e % len(goals)]."""
-
-    def __init__(self, *args: Any, goals: tuple[Goal, ...] | None = None, **kw: Any) -> None:
-        super().__init__(*args, **kw)
-        self.goals = goals
-
-    async def _run_epoch(self, epoch: int) -> EpochDone:
-        if self.goals:
-            self.cfg = dataclasses.replace(self.cfg, goal=self.goals[epoch % len(self.goals)])
-        return await super()._run_epoch(epoch)
 
 
 @dataclass
@@ -170,7 +176,7 @@ class RunOutcome:
 
 
 async def _supervise(
-    cfg: RunConfig, topo: Topology, goals: tuple[Goal, ...] | None, observe: bool, record: Sequence[str] = ()
+    cfg: RunConfig, topo: Topology, observe: bool, record: Sequence[str] = ()
 ) -> tuple[RunResult, list[tuple[str, bytes]]]:
     """Run cfg in this process. `observe`: record the task and every Obs (for trace.npz); `record`: key
     expressions to record besides (tests and probes)."""
@@ -184,7 +190,7 @@ async def _supervise(
     keys = Keys(cfg.run_id)
     exprs = [*((keys.task, keys.obs("*")) if observe else ()), *record]
     subs = [session.declare_subscriber(key, keep) for key in exprs]  # before any actor exists: no step missed
-    sup = GoalsSupervisor(cfg, topo, session, SinglePlacement(cfg, topo, session), goals=goals)
+    sup = Supervisor(cfg, topo, session, SinglePlacement(cfg, topo, session))
     try:
         result = await sup.run()
     finally:
@@ -260,15 +266,8 @@ def _index(runs: Path) -> dict[str, tuple[str, int]]:
 
 
 def _identity_of(recorded: dict[str, Any]) -> str:
-    """A finished run's identity without epochs, as spec.json records it; for a run cached when identities hashed
-    absolute paths, today's identity of the spec it records."""
-    stored = recorded.get("identity_wo_epochs", "")
-    names = {f.name for f in dataclasses.fields(Spec)}
-    try:
-        old = Spec(**{k: v for k, v in recorded.items() if k in names})
-    except TypeError:  # not a spec this code knows
-        return stored
-    return old.identity(False) if stored == old.identity(False, portable=False) else stored
+    """A finished run's identity without epochs, as its spec.json records it."""
+    return str(recorded.get("identity_wo_epochs", ""))
 
 
 def run_spec(spec: Spec, runs: Path) -> RunOutcome:
@@ -279,13 +278,12 @@ def run_spec(spec: Spec, runs: Path) -> RunOutcome:
         if out.exists():  # an unfinished earlier attempt
             shutil.rmtree(out)
         out.mkdir(parents=True)
-        cfg = spec.config(out)
-        topo = load_topology(cfg.topology)
+        cfg = spec.config(out, run_id=f"x{spec.identity()}")
+        topo = cfg.topo()
         cfg.write(out / "config.json")
+        write_resolved(cfg, out / "run.toml")
         (out / "metrics.jsonl").write_text("")
-        if spec.goals:
-            (out / "goals.json").write_text(json.dumps([list(g) for g in spec.goals]) + "\n")
-        result, captured = asyncio.run(_supervise(cfg, topo, spec.goals, spec.observe))
+        result, captured = asyncio.run(_supervise(cfg, topo, spec.observe))
         summary = write_summary(
             out,
             {"wall_seconds": result.wall_seconds, "interrupted": result.interrupted, "error": result.error},
@@ -303,7 +301,7 @@ def run_spec(spec: Spec, runs: Path) -> RunOutcome:
 
 
 def chain_topology(n: int, path: Path, link: float | None = None) -> Path:
-    """A planar n-joint chain like examples/chain4.toml (reach 12, start angles 0, 10, 20, ... deg)."""
+    """A run file of a planar n-joint chain like examples/chain4.toml (reach 12, start angles 0, 10, 20, ... deg)."""
     length = 12.0 / n if link is None else link
     lines = [
         f"# A planar {n}-joint chain for the cost experiment (reach {n * length:g}).",
@@ -311,12 +309,12 @@ def chain_topology(n: int, path: Path, link: float | None = None) -> Path:
         f'name = "chain{n}"',
         "base = [0.0, 0.0, 0.0]",
         "",
-        "[defaults]",
+        "[robot.defaults]",
         f"link_length = {length!r}",
         "limits_deg = [-180.0, 180.0]",
     ]
     for i in range(1, n + 1):
-        lines += ["", "[[agent]]", f'id = "a{i}"', f"initial_deg = {10.0 * (i - 1) % 90!r}"]
+        lines += ["", "[[robot.agent]]", f'id = "a{i}"', f"initial_deg = {10.0 * (i - 1) % 90!r}"]
         if i > 1:
             lines.append(f'parent = "a{i - 1}"')
     x = y = h = 0.0
@@ -324,6 +322,6 @@ def chain_topology(n: int, path: Path, link: float | None = None) -> Path:
         h += math.radians(10.0 * i % 90)
         x += length * math.cos(h)
         y += length * math.sin(h)
-    lines += ["", "[task]", f"goal = [{round(0.5 * x, 3)}, {round(0.5 * y + 2.0, 3)}]"]
+    lines += ["", "[task]", 'kind = "reach"', f"goal = [{round(0.5 * x, 3)}, {round(0.5 * y + 2.0, 3)}]"]
     path.write_text("\n".join(lines) + "\n")
     return path

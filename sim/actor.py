@@ -1,9 +1,10 @@
 """The simulator actor: the robot, and the clock of the lockstep.
 
-For each step it publishes the task observation to the root and each agent's encoder reading, then
-waits for a `cmd` from every DOF agent that is alive — or for the step deadline, after which a missing
-command means that joint holds — applies the increments (clipped to the action size and the joint
-limits), and records the end-effector error. At the end of an epoch it publishes `metrics/epoch`.
+For each step it publishes the task observation to the root and each agent's encoder reading (with what the scene
+lets each sense), then waits for a `cmd` from every DOF agent that is alive — or for the step deadline, after which a
+missing command means that joint holds — hands the increments (clipped to the action size and the joint limits) to
+the scene, which moves the robot as it allows, and records the error. At the end of an epoch it publishes
+`metrics/epoch`. What surrounds the robot is the run's scene (sim/scenes/): this file names none.
 
 It is also where joint faults live (DESIGN §5): a locked joint ignores its agent, a disturbed one
 moves at random; the agents are not told. Faults come live on `ctl/fault` or from the run's scenario
@@ -21,7 +22,6 @@ from typing import Any
 
 import numpy as np
 import zenoh
-from kinswarm.actors.agent import learner_settings
 from kinswarm.actors.config import RunConfig
 from kinswarm.actors.runtime import Node
 from kinswarm.actors.scenario import ScenarioEntry, load_scenario
@@ -40,8 +40,7 @@ from kinswarm.protocol.messages import (
     Task,
 )
 from kinswarm.protocol.topology import Topology
-from kinswarm.sim.contact import GraspScene
-from kinswarm.sim.obstacles import Scene
+from kinswarm.sim.scenes import build_scene
 from kinswarm.sim.world import World
 
 # Timers and liveliness changes go through the mailbox under keys no Zenoh key can equal (those start
@@ -63,24 +62,11 @@ class SimActor:
         # Read before the world exists: a bad file fails the actor without leaking a PyBullet client.
         self.scenario = load_scenario(cfg.scenario, topo) if cfg.scenario else None
         self.world = World(topo)
-        # Obstacles (paper §5.4): solid walls, per-link clearance in each agent's obs, collisions to the root
-        self.scene: Scene | None = None
-        self.clearance: dict[str, float] = {}  # per link, after the last step's joint actions
-        self.refused: tuple[str, ...] = ()  # joints whose increment of the last step was refused
-        self.collisions: list[int] = []  # per step of the epoch: how many increments were refused
-        self.min_clearance: list[float] = []  # per step of the epoch: the smallest link clearance
-        if topo.obstacles:
-            try:
-                self.scene = Scene(self.world)
-                self.scene.check_start(topo.source)
-            except BaseException:
-                self.world.close()
-                raise
-        # the agents whose shield (LearnerSettings.shield) needs the look-ahead in their obs
-        self.shielded = frozenset(a for a in topo.dof_agents if learner_settings(cfg, topo, a).shield > 0.0)
-        # a grasp scene (paper §5.5): the object, the fingertips' contacts, the net wrench (sim/contact.py)
-        self.grasp = GraspScene(self.world, topo.object) if topo.object is not None else None
-        self.traces: dict[str, list[float]] = {}
+        try:
+            self.scene = build_scene(self.world, cfg.scene_spec, cfg.action_rad)
+        except BaseException:
+            self.world.close()
+            raise
         self.dof = topo.dof_agents
         self.dof_set = frozenset(self.dof)
         self._obs_first = [a for a in self.dof if a == topo.root]  # the root's reading goes out with the task
@@ -235,12 +221,7 @@ class SimActor:
         if not (self.cfg.successive and e.epoch > 0):
             self.world.reset()  # faults persist, angles do not: a locked joint is locked at its initial angle
         self.tips = self.world.tip_poses()
-        if self.scene is not None:
-            self.clearance, self.refused = self.scene.clearances(), ()
-            self.collisions, self.min_clearance = [], []
-        if self.grasp is not None:
-            self.grasp.reset()
-            self.traces = {}
+        self.scene.reset()
         self.t = 0
         self.errors = []
         self.missed = 0
@@ -381,20 +362,15 @@ class SimActor:
         assert e is not None
         if self._due:
             self._apply_due(e.epoch)
-        k, send = self.keys, self.node.send
+        k, send, scene, t = self.keys, self.node.send, self.scene, self.t
         q = self.world.joint_positions()
         # The root begins once it holds both the task and its own reading: put them back to back, so they
         # reach it in one burst (one wake-up); the others' readings are needed only a hop later.
-        if self.scene is not None:
-            self._publish_scene_step(e, q)
-        elif self.grasp is not None:
-            self._publish_grasp_step(e, q)
-        else:
-            for a in self._obs_first:
-                send(k.obs(a), Obs(epoch=e.epoch, step=self.t, q=q[a]))
-            send(k.task, Task(epoch=e.epoch, step=self.t, goal=e.goal, tips=self.tips))
-            for a in self._obs_after:
-                send(k.obs(a), Obs(epoch=e.epoch, step=self.t, q=q[a]))
+        for a in self._obs_first:
+            send(k.obs(a), Obs(epoch=e.epoch, step=t, q=q[a], sense=scene.agent_sense(a)))
+        send(k.task, Task(epoch=e.epoch, step=t, goal=self.goal(), tips=self.tips, sense=scene.task_sense()))
+        for a in self._obs_after:
+            send(k.obs(a), Obs(epoch=e.epoch, step=t, q=q[a], sense=scene.agent_sense(a)))
         self.cmds = {}
         self.step_started = time.perf_counter()
         # Nobody expected (every agent down): the deadline runs the step rather than the joints racing.
@@ -403,37 +379,6 @@ class SimActor:
         loop = asyncio.get_running_loop()
         self._deadline = loop.call_later(self.cfg.deadline_ms / 1000, self.node.mailbox.push, DEADLINE, token)
 
-    def _publish_scene_step(self, e: EpochStart, q: dict[str, float]) -> None:
-        """_publish_step's messages in a scene with obstacles: each agent's own link clearance and whether its
-        increment of the step before was refused (and a shielded agent's look-ahead); the smallest clearance and
-        the refusals for the root."""
-        k, send, c, refused, scene = self.keys, self.node.send, self.clearance, self.refused, self.scene
-        assert scene is not None
-
-        def obs(a: str) -> Obs:
-            sense: dict[str, float] = {}
-            if a in self.shielded:
-                sense["ahead-"], sense["ahead+"] = scene.ahead(a, self.cfg.action_rad, c)
-            return Obs(epoch=e.epoch, step=self.t, q=q[a], clearance=c.get(a), collided=int(a in refused), sense=sense)
-
-        for a in self._obs_first:
-            send(k.obs(a), obs(a))
-        clear = min(c.values()) if c else None
-        task = Task(epoch=e.epoch, step=self.t, goal=e.goal, tips=self.tips, clearance=clear, collisions=len(refused))
-        send(k.task, task)
-        for a in self._obs_after:
-            send(k.obs(a), obs(a))
-
-    def _move(self, deltas: dict[str, float]) -> dict[str, float]:
-        """The step's increments into the world; through the solid walls' check when there are obstacles."""
-        if self.scene is None:
-            return self.world.apply_increments(deltas)
-        moved = self.scene.move(deltas)
-        self.clearance, self.refused = moved.clearance, moved.refused
-        self.collisions.append(len(moved.refused))
-        self.min_clearance.append(min(moved.clearance.values()) if moved.clearance else 0.0)
-        return moved.applied
-
     def _advance(self) -> None:
         e = self.epoch
         assert e is not None
@@ -441,12 +386,9 @@ class SimActor:
             self._deadline.cancel()
             self._deadline = None
         faulted = bool(self.locked or self.disturbed)
-        q_before = self.world.joint_positions() if self.grasp is not None else None
-        self.applied = self._move(self._increments() if faulted else self.cmds)
-        if q_before is not None:
-            self._grasp_after_move(q_before)
+        self.applied = self.scene.move(self._increments() if faulted else self.cmds)
         self.tips = self.world.tip_poses()
-        self.errors.append(self.error())
+        self.errors.append(self.scene.error(self.tips, self.goal()))
         self.longest_step = max(self.longest_step, time.perf_counter() - self.step_started)
         self.t += 1
         self.total_steps += 1
@@ -470,58 +412,13 @@ class SimActor:
                 missed_cmds=self.missed,
                 seconds=time.perf_counter() - self.started,
                 max_step_seconds=self.longest_step,
-                collisions=list(self.collisions),
-                clearance=[round(v, 5) for v in self.min_clearance],
-                traces=self.traces,
+                traces=self.scene.traces(),
             ),
         )
         self.epoch = None
 
-    def error(self) -> float:
-        """End-effector distance to the goal (the centroid of the end effectors for a tree); in a grasp
-        scene, the fingertips' mean distance to their grasp points."""
-        assert self.epoch is not None
-        if self.grasp is not None:
-            return self.grasp.goal_error(self.tips)
-        tips = list(self.tips.values())
-        x = sum(p[0] for p in tips) / len(tips)
-        y = sum(p[1] for p in tips) / len(tips)
-        return math.hypot(x - self.epoch.goal[0], y - self.epoch.goal[1])
-
-    # -- the grasp scene (paper §5.5) ----------------------------------------------------------------
-    def _publish_grasp_step(self, e: EpochStart, q: dict[str, float]) -> None:
-        """The step's messages with the contact readings: the task observation carries the net wrench and
-        every contact (Task.sense), each fingertip agent its own contact (Obs.sense)."""
-        assert self.grasp is not None
-        k, send, g = self.keys, self.node.send, self.grasp
-        for a in self._obs_first:
-            send(k.obs(a), Obs(epoch=e.epoch, step=self.t, q=q[a]))
-        send(k.task, Task(epoch=e.epoch, step=self.t, goal=e.goal, tips=self.tips, sense=g.task_sense()))
-        for a in self._obs_after:
-            sense = g.tip_sense(a) if a in g.readings else {}
-            send(k.obs(a), Obs(epoch=e.epoch, step=self.t, q=q[a], sense=sense))
-
-    def _grasp_after_move(self, q_before: dict[str, float]) -> None:
-        """The object is solid: a finger whose move sank a link deeper than max_depth goes back (its joints
-        hold this step, counted as blocked); then the contact model advances one time unit."""
-        g = self.grasp
-        assert g is not None
-        deep = g.too_deep()
-        if deep:
-            q = self.world.joint_positions()
-            for leaf in deep:
-                for a in g.fingers[leaf]:
-                    q[a] = q_before[a]
-                    self.applied[a] = 0.0
-            self.world.reset(q)
-            g.blocked += len(deep)
-        g.sense_contacts()
-        fx, fy, tau = g.wrench
-        row = {"net_fx": fx, "net_fy": fy, "net_torque": tau}
-        for leaf, r in g.readings.items():
-            row[f"fn/{leaf}"] = r.fn
-            row[f"ft/{leaf}"] = r.ft
-            row[f"margin/{leaf}"] = r.margin
-            row[f"contact/{leaf}"] = 1.0 if r.contact else 0.0
-        for name, v in row.items():
-            self.traces.setdefault(name, []).append(round(v, 5))
+    def goal(self) -> tuple[float, float]:
+        """The goal of the running step: it moves along the epoch's path, if it has one."""
+        e = self.epoch
+        assert e is not None
+        return e.path[self.t] if e.path else e.goal

@@ -1,7 +1,7 @@
 """The model-based baselines as an actor: one takes the place of the agents on the same wire — reads the
 same encoder readings and task observation, and sends one `cmd` per joint — so learned and
 model-based runs go through the same simulator, deadlines and metrics. Its control law is the run's
-`controller`: "baseline" (the pseudo-inverse) or "greedy" (each joint alone, greedy in the distance)."""
+`controller`: "pinv" (the pseudo-inverse) or "greedy" (each joint alone, greedy in the distance)."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ from kinswarm.protocol.messages import Cmd, Obs, Stop, Task
 from kinswarm.protocol.topology import Topology
 from kinswarm.sim.baseline import greedy_increments, pinv_increments
 
-LAWS = {"baseline": pinv_increments, "greedy": greedy_increments}
+LAWS = {"pinv": pinv_increments, "greedy": greedy_increments}
 
 
 class BaselineController:

@@ -1,4 +1,4 @@
-"""The grasp scene (paper §5.5): a fixed rectangular object and the fingertip contact model (Fig. 25).
+"""The object scene's physics (paper §5.5): a fixed rectangular object and the fingertip contact model (Fig. 25).
 
 The object has "infinite mass": it never moves; what the fingers do to it is summed into a net force and a
 net torque about its centre, the quantities the grasp must drive to zero.
@@ -7,7 +7,7 @@ Contact model, per fingertip, one step = one time unit (dt = 1; the paper's epoc
 
 - penetration depth delta >= 0 into the object, and the contact point p on the object's surface with its
   outward normal n, from PyBullet `getClosestPoints` (exact for these shapes), of what the scene's
-  `[object] contact` names: "link" (the default) the fingertip agent's whole capsule, so a distal link
+  `[scene.object] contact` names: "link" (the default) the fingertip agent's whole capsule, so a distal link
   lying along a face presses with its side or its base; "tip" a sphere of the capsule's radius at the
   fingertip only, a point contact at the fingertip as the paper models it (examples/grasp3.toml);
 - normal force (a linear spring-damper, Fig. 25): fn = max(0, kn delta + cn d(delta)/dt) -- no adhesion;
@@ -34,7 +34,8 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-from kinswarm.protocol.topology import ObjectSpec, Topology
+from kinswarm.protocol.scene import ObjectSpec
+from kinswarm.protocol.topology import Topology
 
 Vec = tuple[float, float]
 

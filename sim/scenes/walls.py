@@ -1,11 +1,15 @@
-"""Static obstacles in the PyBullet world (paper §5.4): solid box walls, per-link signed clearance.
+"""The walls scene (paper §5.4): solid box walls in the PyBullet world, per-link signed clearance.
 
-Each `ObstacleSpec` of the topology becomes a fixed box body (mass 0) in the World's PyBullet client, as tall
+Each `ObstacleSpec` of the scene becomes a fixed box body (mass 0) in the World's PyBullet client, as tall
 in z as it needs to be to meet the planar links. A link's clearance is the signed distance between its
 capsule and the nearest box from `getClosestPoints` (exact for capsules against boxes: positive apart,
 negative in penetration). Walls are solid: `Scene.move` applies the agents' increments, and when the new
 configuration would make a link penetrate a wall it takes back, joint by joint (root first), the increments
 that cause the penetration; those joints hold and are reported as collisions.
+
+What the agents sense (WallsScene): each its own link's "clearance" and "collided" (its move of the step before was
+refused), and with the scene's shield the look-ahead vetoes "shield-" / "shield+" (protocol/scene.py); the root's
+task observation the smallest "clearance" and the refused moves ("collisions"); the metrics per step the same two.
 """
 
 from __future__ import annotations
@@ -13,8 +17,12 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass
 
+from kinswarm.protocol.messages import Readings
 from kinswarm.protocol.obstacles import ObstacleSpec
+from kinswarm.protocol.scene import SceneSpec
 from kinswarm.sim.world import World, pb
+
+from .base import Scene
 
 #: Links further than this from every obstacle report this clearance (the query's search radius).
 MAX_CLEARANCE = 10.0
@@ -39,12 +47,12 @@ class SceneError(ValueError):
     """The scene cannot be used as given (e.g. the start configuration penetrates a wall)."""
 
 
-class Scene:
-    """The obstacles of `world.topo` in `world`'s PyBullet client."""
+class Walls:
+    """Obstacles in `world`'s PyBullet client: clearances, solid moves, the look-ahead."""
 
-    def __init__(self, world: World, obstacles: tuple[ObstacleSpec, ...] | None = None) -> None:
+    def __init__(self, world: World, obstacles: tuple[ObstacleSpec, ...]) -> None:
         self.world = world
-        self.specs = world.topo.obstacles if obstacles is None else obstacles
+        self.specs = obstacles
         cid = world.client
         self.bodies: list[int] = []
         for spec in self.specs:
@@ -82,7 +90,7 @@ class Scene:
         return best
 
     def ahead(self, agent: str, step: float, clearance: Mapping[str, float]) -> tuple[float, float]:
-        """The look-ahead of LearnerSettings.shield: the smallest clearance of the links `agent`'s joint moves
+        """The look-ahead of the scene's shield: the smallest clearance of the links `agent`'s joint moves
         after its move of -step and of +step alone from the present configuration (`clearance`: the present
         clearances). A joint turning by `step` moves no point below it further than radius x |step| (plus the
         links' radius x |step|, well under AHEAD_FAR's slack), so when no such move can come within AHEAD_FAR of a
@@ -144,3 +152,46 @@ class Scene:
         if clearance_now is None:
             clearance_now = self.clearances()
         return Moved(applied, tuple(refused), clearance_now)
+
+
+class WallsScene(Scene):
+    def __init__(self, world: World, spec: SceneSpec, action_rad: float) -> None:
+        super().__init__(world, spec, action_rad)
+        self.walls = Walls(world, spec.obstacles)
+        self.walls.check_start(world.topo.source)
+        self.clearance: dict[str, float] = {}  # per link, after the last step's joint actions
+        self.refused: tuple[str, ...] = ()  # joints whose increment of the last step was refused
+        self.collisions: list[float] = []  # per step of the epoch: how many increments were refused
+        self.min_clearance: list[float] = []  # per step of the epoch: the smallest link clearance
+
+    def reset(self) -> None:
+        self.clearance, self.refused = self.walls.clearances(), ()
+        self.collisions, self.min_clearance = [], []
+
+    def move(self, deltas: Mapping[str, float]) -> dict[str, float]:
+        moved = self.walls.move(deltas)
+        self.clearance, self.refused = moved.clearance, moved.refused
+        self.collisions.append(float(len(moved.refused)))
+        self.min_clearance.append(min(moved.clearance.values()) if moved.clearance else 0.0)
+        return moved.applied
+
+    def agent_sense(self, agent: str) -> Readings:
+        out: Readings = {"collided": 1.0 if agent in self.refused else 0.0}
+        if agent in self.clearance:
+            out["clearance"] = self.clearance[agent]
+        if self.spec.shield > 0.0:
+            ahead = self.walls.ahead(agent, self.action_rad, self.clearance)
+            out["shield-"], out["shield+"] = (1.0 if c < self.spec.shield else 0.0 for c in ahead)
+        return out
+
+    def task_sense(self) -> Readings:
+        out: Readings = {"collisions": float(len(self.refused))}
+        if self.clearance:
+            out["clearance"] = min(self.clearance.values())
+        return out
+
+    def traces(self) -> dict[str, list[float]]:
+        return {"collisions": list(self.collisions), "clearance": [round(v, 5) for v in self.min_clearance]}
+
+
+SCENE = WallsScene

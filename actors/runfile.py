@@ -1,0 +1,331 @@
+"""Run files: the one loader. A TOML run file holds everything a run needs; `kinswarm run FILE`, `kinswarm up` (a
+plan names a run file), the experiments and the Python API all resolve it here, so every default is written once
+(in the dataclass that owns it).
+
+```toml
+[run]                      # RunConfig's fields (actors/config.py); all optional
+epochs = 60
+seed = 0
+placement = "process"      # or "single"
+
+[robot]                    # inline (protocol/topology.py), or: robot = "robots/chain4.toml" (that file's [robot])
+name = "chain4"
+[[robot.agent]]
+id = "a1"
+
+[scene]                    # optional (protocol/scene.py): free | walls | object
+kind = "free"
+
+[task]                     # required: kind = a module of actors/tasks/ and that task's settings
+kind = "reach"
+goal = [4.16, 6.18]
+
+[learner]                  # optional: LearnerSettings overrides (actors/learning/settings.py)
+gamma = 0.9
+```
+
+A recipe that is another with a few changes names it: `base = "corridor7-inner200.toml"` (top level) reads that file
+first and lays this one's tables over it, field by field (a list replaces a list). `--set section.field=VALUE`
+overrides one field before anything is checked (VALUE is a TOML value: 0.97, true, [1, 2], "text"; a bare word is a
+string). Paths in a file are relative to the file; paths given on the command line to the working directory. Every
+problem is one line naming the file, the field and what was expected.
+`write_resolved` writes the resolved run as a run file (`<out>/run.toml`), from which the run can be made again.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import re
+import secrets
+import time
+import tomllib
+from collections.abc import Iterable, Mapping
+from pathlib import Path
+from typing import Any
+
+import msgspec
+import tomli_w
+from kinswarm.actors.config import RUN_KEYS, ConfigError, RunConfig
+from kinswarm.actors.learning.settings import LearnerSettings
+from kinswarm.actors.tasks import kinds, task_class
+from kinswarm.actors.tasks.base import TaskDef
+from kinswarm.protocol.keys import check_id
+from kinswarm.protocol.scene import SceneSpec, parse_scene
+from kinswarm.protocol.spec import SpecError, table
+from kinswarm.protocol.topology import ROBOT_KEYS, Topology, parse_robot
+
+SECTIONS = ("run", "robot", "scene", "task", "learner")
+MAX_BASES = 8  # how deep `base` files may nest
+_PATH_KEYS = ("from", "scenario")  # [run] fields that name files, resolved against where they were written
+_OLD_LAYOUT = {
+    "agent": "[[agent]] tables go under [robot] as [[robot.agent]]",
+    "defaults": "[defaults] goes under [robot] as [robot.defaults]",
+    "obstacle": '[[obstacle]] tables go under [scene] as [[scene.obstacle]] (with [scene] kind = "walls")',
+    "object": '[object] goes under [scene] as [scene.object] (with [scene] kind = "object")',
+}
+
+
+def read_toml(path: str | Path) -> dict[str, Any]:
+    p = Path(path)
+    try:
+        text = p.read_text()
+    except OSError as e:
+        raise SpecError(str(p), "file", f"cannot read: {e.strerror or e}") from None
+    try:
+        return tomllib.loads(text)
+    except tomllib.TOMLDecodeError as e:
+        raise SpecError(str(p), "toml", str(e)) from None
+
+
+def parse_set(text: str) -> tuple[tuple[str, ...], Any]:
+    """`section.field=VALUE` -> (path, value); VALUE is read as TOML, a bare word as a string."""
+    name, sep, raw = text.partition("=")
+    path = tuple(name.strip().split("."))
+    if not sep or len(path) < 2 or not all(re.fullmatch(r"[A-Za-z0-9_-]+", p) for p in path):
+        raise ConfigError(f"--set {text!r}: expected SECTION.FIELD=VALUE, e.g. learner.gamma=0.97")
+    if path[0] not in SECTIONS:
+        raise ConfigError(f"--set {text!r}: no section {path[0]!r} (expected one of {', '.join(SECTIONS)})")
+    try:
+        value = tomllib.loads(f"v = {raw.strip()}")["v"]
+    except tomllib.TOMLDecodeError:
+        value = raw.strip()
+    return path, value
+
+
+def load_run(
+    path: str | Path,
+    sets: Iterable[str] = (),
+    *,
+    run_id: str | None = None,
+    out: str | Path | None = None,
+    listen: str | None = None,
+) -> RunConfig:
+    """Resolve the run file at `path` with `--set` overrides into the run's config."""
+    overrides = [parse_set(s) for s in sets]
+    return resolve(read_run_file(path), str(path), overrides, run_id=run_id, out=out, listen=listen)
+
+
+def read_run_file(path: str | Path, _seen: tuple[Path, ...] = ()) -> dict[str, Any]:
+    """A run file's tables, with the paths it names made absolute and its `base` file (if any) laid under it."""
+    path = Path(path).resolve()
+    if path in _seen or len(_seen) >= MAX_BASES:
+        raise SpecError(str(_seen[-1]), "base", f"{path} is its own base, or bases nest deeper than {MAX_BASES}")
+    data = read_toml(path)
+    base_file = data.pop("base", None)
+    _absolute_paths(data, path.parent)
+    if base_file is None:
+        return data
+    if not isinstance(base_file, str):
+        raise SpecError(str(path), "base", f"expected the path of a run file, got {base_file!r}")
+    return _merge(read_run_file(path.parent / base_file, (*_seen, path)), data)
+
+
+def resolve(
+    data: Mapping[str, Any],
+    source: str = "<memory>",
+    overrides: Iterable[tuple[tuple[str, ...], Any]] = (),
+    *,
+    run_id: str | None = None,
+    out: str | Path | None = None,
+    listen: str | None = None,
+) -> RunConfig:
+    """A run file's content (paths absolute: read_run_file) and overrides -> the RunConfig."""
+    data = _copy(data)
+    for key in data:
+        if key not in SECTIONS:
+            hint = _OLD_LAYOUT.get(key, f"expected the tables {', '.join(SECTIONS)}, and base")
+            raise SpecError(source, key, f"unknown table ({hint})")
+    for keys, value in overrides:  # given on the command line: paths are the working directory's
+        _put(data, keys, _absolute(value, Path.cwd()) if keys[0] == "run" and keys[-1] in _PATH_KEYS else value)
+
+    robot, topo = _robot(data.get("robot"), source)
+    scene = parse_scene(data.get("scene"), topo, source)
+    task = _task(data.get("task"), topo, scene, source)
+    learner = table(source, "learner", data.get("learner", {}), {f.name for f in dataclasses.fields(LearnerSettings)})
+    learner_settings(task, learner, source)  # every agent's, checked now
+    run = table(source, "run", data.get("run", {}), set(RUN_KEYS))
+    fields = {("from_dir" if k == "from" else k): v for k, v in run.items()}
+    run_id = run_id or f"{topo.name}-{time.strftime('%Y%m%d-%H%M%S')}-{secrets.token_hex(2)}"
+    try:
+        check_id("run id", run_id)
+    except ValueError as e:
+        raise ConfigError(f"--run-id: {e}") from None
+    out_dir = Path(out) if out is not None else Path("runs") / run_id
+    extra = {"listen": listen} if listen is not None else {}
+    try:
+        cfg = msgspec.convert(
+            {
+                **fields,
+                **extra,
+                "run_id": run_id,
+                "out": str(out_dir.resolve()),
+                "robot": robot,
+                "scene": {"kind": scene.kind, **{k: v for k, v in (data.get("scene") or {}).items() if k != "kind"}},
+                "task": task_table(task),
+                "learner": learner,
+                "source": source,
+            },
+            RunConfig,
+        )
+    except msgspec.ValidationError as e:
+        raise _spec_error(e, source, "run") from None
+    if cfg.scenario is not None:  # a bad scenario is refused before anything starts
+        from kinswarm.actors.scenario import load_scenario
+
+        load_scenario(cfg.scenario, topo)
+    return cfg
+
+
+def task_of(cfg: RunConfig) -> TaskDef:
+    """The run's task, from its resolved table."""
+    table_ = dict(cfg.task)
+    kind = table_.pop("kind")
+    settings = msgspec.convert(table_, task_class(kind).Settings)
+    return task_class(kind)(settings, cfg.topo(), cfg.scene_spec)
+
+
+def learner_settings(task: TaskDef, learner: Mapping[str, Any], source: str = "<memory>") -> dict[str, LearnerSettings]:
+    """Every DOF agent's learner settings: the [learner] overrides on the task's scale and state variables."""
+    try:
+        typed = msgspec.convert(dict(learner), LearnerSettings)
+    except msgspec.ValidationError as e:
+        raise _spec_error(e, source, "learner") from None
+    given = {k: getattr(typed, k) for k in learner}
+    out = {}
+    for agent in task.topo.dof_agents:
+        try:
+            out[agent] = task.learner(agent, given)
+        except ValueError as e:
+            raise SpecError(source, "learner", str(e)) from None
+    return out
+
+
+def task_table(task: TaskDef) -> dict[str, Any]:
+    """The resolved [task] table: the kind, then every setting (defaults included); None (unset) left out."""
+    values = {f.name: getattr(task.settings, f.name) for f in dataclasses.fields(task.settings)}
+    return {"kind": task.kind, **{k: _plain(v) for k, v in values.items() if v is not None}}
+
+
+def write_resolved(cfg: RunConfig, path: Path) -> Path:
+    """The resolved run as a run file: `kinswarm run` of it makes the same run again (in a new directory)."""
+    run = {k: getattr(cfg, "from_dir" if k == "from" else k) for k in RUN_KEYS}
+    doc = {
+        "run": {k: v for k, v in run.items() if v is not None},
+        "robot": cfg.robot,
+        "scene": cfg.scene,
+        "task": cfg.task,
+        "learner": cfg.learner,
+    }
+    header = f"# The resolved run {cfg.run_id} (from {cfg.source}): `kinswarm run` this file to make it again.\n"
+    path.write_text(header + tomli_w.dumps(_plain(doc)))
+    return path
+
+
+# -- the parts ----------------------------------------------------------------------------------------------------
+def _robot(data: Any, source: str) -> tuple[dict[str, Any], Topology]:
+    if data is None:
+        raise SpecError(source, "robot", 'missing: give a [robot] table or robot = "a robot file"')
+    if isinstance(data, str):  # a robot file (absolute by now): its [robot] table
+        file = Path(data)
+        doc = read_toml(file)
+        if "robot" not in doc or not isinstance(doc["robot"], dict):
+            raise SpecError(str(file), "robot", "a robot file needs a [robot] table")
+        data, source = {"name": file.stem, **doc["robot"]}, str(file)
+    table(source, "robot", data, ROBOT_KEYS)
+    if "name" not in data and source.endswith(".toml"):
+        data = {"name": Path(source).stem, **data}
+    return data, parse_robot(data, source)
+
+
+def _task(data: Any, topo: Topology, scene: SceneSpec, source: str) -> TaskDef:
+    if data is None:
+        raise SpecError(source, "task", f"missing: give a [task] table with kind = one of {', '.join(kinds())}")
+    if not isinstance(data, dict):
+        raise SpecError(source, "task", f"must be a table, got {data!r:.60}")
+    kind = data.get("kind")
+    if kind not in kinds():
+        raise SpecError(source, "task.kind", f"expected one of {', '.join(kinds())}, got {kind!r}")
+    cls = task_class(kind)
+    if scene.kind not in cls.scenes:
+        raise SpecError(
+            source, "scene.kind", f"the {kind} task runs in a {' or '.join(cls.scenes)} scene, not {scene.kind!r}"
+        )
+    fields = {f.name for f in dataclasses.fields(cls.Settings)}
+    settings_table = table(source, "task", {k: v for k, v in data.items() if k != "kind"}, fields)
+    try:
+        settings = msgspec.convert(settings_table, cls.Settings)
+    except msgspec.ValidationError as e:
+        raise _spec_error(e, source, "task") from None
+    task = cls(settings, topo, scene)
+    if (problem := task.check()) is not None:
+        raise SpecError(source, "task", problem)
+    return task
+
+
+def _spec_error(e: msgspec.ValidationError, source: str, section: str) -> SpecError:
+    """msgspec's "Expected `int`, got `str` - at `$.seed`" or a __post_init__'s "field: what" as a SpecError."""
+    text = str(e)
+    m = re.fullmatch(r"(.*) - at `\$\.?(.*)`", text, re.S)
+    if m:
+        what, where = m.group(1), m.group(2).replace("$", "")
+        what = re.sub(r"`(\w+)`", r"\1", what)
+        what = what[0].lower() + what[1:]
+        return SpecError(source, f"{section}.{where}" if where else section, what)
+    field, sep, what = text.partition(": ")
+    if sep and re.fullmatch(r"[a-z_]+", field):
+        return SpecError(source, f"{section}.{'from' if field == 'from_dir' else field}", what)
+    return SpecError(source, section, text)
+
+
+def _absolute_paths(data: dict[str, Any], base: Path) -> None:
+    run = data.get("run")
+    if isinstance(run, dict):
+        for key in _PATH_KEYS:
+            if key in run:
+                run[key] = _absolute(run[key], base)
+    if isinstance(data.get("robot"), str):
+        data["robot"] = _absolute(data["robot"], base)
+
+
+def _merge(under: dict[str, Any], over: Mapping[str, Any]) -> dict[str, Any]:
+    """`over`'s fields laid over `under`'s, table by table (a list or value replaces)."""
+    out = dict(under)
+    for k, v in over.items():
+        out[k] = _merge(out[k], v) if isinstance(v, Mapping) and isinstance(out.get(k), dict) else v
+    return out
+
+
+def _absolute(value: Any, base: Path) -> Any:
+    return str((base / value).resolve()) if isinstance(value, str) and value else value
+
+
+def _put(data: dict[str, Any], keys: tuple[str, ...], value: Any) -> None:
+    node = data
+    for i, k in enumerate(keys[:-1]):
+        nxt = node.setdefault(k, {})
+        if not isinstance(nxt, dict):
+            raise ConfigError(f"--set {'.'.join(keys)}: {'.'.join(keys[: i + 1])} is not a table")
+        node = nxt
+    node[keys[-1]] = value
+
+
+def _copy(v: Any) -> Any:
+    if isinstance(v, Mapping):
+        return {k: _copy(x) for k, x in v.items()}
+    if isinstance(v, list | tuple):
+        return [_copy(x) for x in v]
+    return v
+
+
+def _plain(v: Any) -> Any:
+    """TOML- and JSON-friendly: tuples and dataclasses as lists and tables, None left out of tables."""
+    if dataclasses.is_dataclass(v) and not isinstance(v, type):
+        return {f.name: _plain(getattr(v, f.name)) for f in dataclasses.fields(v)}
+    if isinstance(v, Mapping):
+        return {k: _plain(x) for k, x in v.items() if x is not None}
+    if isinstance(v, list | tuple):
+        return [_plain(x) for x in v]
+    if isinstance(v, float) and not math.isfinite(v):
+        raise ConfigError(f"not a finite number: {v!r}")
+    return v

@@ -1,0 +1,20 @@
+"""Scenes: what surrounds the robot, one module per kind (`[scene] kind` of the run file), each holding a `Scene`
+subclass named SCENE (base.py is the interface)."""
+
+from __future__ import annotations
+
+import importlib
+
+from kinswarm.protocol.scene import SCENE_KINDS, SceneSpec
+from kinswarm.sim.world import World
+
+from .base import Scene
+
+
+def build_scene(world: World, spec: SceneSpec, action_rad: float) -> Scene:
+    if spec.kind not in SCENE_KINDS:
+        raise ValueError(f"unknown scene kind {spec.kind!r}; expected one of {', '.join(SCENE_KINDS)}")
+    return importlib.import_module(f"{__name__}.{spec.kind}").SCENE(world, spec, action_rad)
+
+
+__all__ = ["Scene", "build_scene"]
