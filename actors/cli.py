@@ -23,14 +23,12 @@ from kinswarm.actors.config import DEFAULT_LISTEN, PLACEMENTS, ConfigError, RunC
 from kinswarm.actors.plan import Plan, PlanError, load_plan, local_plan
 from kinswarm.actors.runfile import load_run, write_resolved
 from kinswarm.actors.runtime import LEASE_MS, NetSpec, open_session, setup_logging
-from kinswarm.experiments import BY_NAME, EXPERIMENTS
 from kinswarm.protocol.faults import FAULTS
 from kinswarm.protocol.messages import EpochDone
 from kinswarm.protocol.spec import SpecError
 from kinswarm.protocol.topology import Topology
 
 log = logging.getLogger("kinswarm")
-EXPERIMENT_NAMES = (*EXPERIMENTS, "all", *BY_NAME)
 
 
 def _goal(text: str) -> str:
@@ -116,6 +114,13 @@ def _add_common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--log-level", default="WARNING")
 
 
+def _experiment_names() -> tuple[str, ...]:
+    """The experiments' names, for `kinswarm experiment`: the CLI's one (lazy) door into experiments/."""
+    from kinswarm.experiments import BY_NAME, EXPERIMENTS
+
+    return (*EXPERIMENTS, "all", *BY_NAME)
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="kinswarm", description="A swarm of per-joint learning agents over Zenoh.")
     sub = p.add_subparsers(dest="command", required=True)
@@ -169,7 +174,7 @@ def build_parser() -> argparse.ArgumentParser:
         "placement) and writes DIR/NAME/report.md with figures and a paper-vs-kinswarm table, and "
         "DIR/NAME/results.json.",
     )
-    exp.add_argument("name", choices=EXPERIMENT_NAMES, metavar="NAME", help=", ".join(EXPERIMENT_NAMES))
+    exp.add_argument("name", choices=_experiment_names(), metavar="NAME", help=", ".join(_experiment_names()))
     exp.add_argument("--seeds", type=int, default=3, help="seeds 0..N-1 (default 3)")
     exp.add_argument("--quick", action="store_true", help="a smoke version (seconds, not conclusions)")
     exp.add_argument("--out", type=Path, default=Path("runs/experiments"), help="default runs/experiments")

@@ -174,7 +174,29 @@ def resolve(
         from kinswarm.actors.scenario import load_scenario
 
         load_scenario(cfg.scenario, topo)
+    if cfg.from_dir is not None:  # and checkpoints that do not fit this run's learners
+        check_checkpoints(Path(cfg.from_dir), task, learner, source)
     return cfg
+
+
+def check_checkpoints(run_dir: Path, task: TaskDef, learner: Mapping[str, Any], source: str = "<memory>") -> None:
+    """Every DOF agent's checkpoint in `run_dir` loads into the learner this run gives it (the same state variables
+    and neighbours), or the one line that says whose does not and why."""
+    from kinswarm.actors.checkpoint import CheckpointError, load_checkpoint
+    from kinswarm.actors.learning.learner import Learner
+
+    topo = task.topo
+    settings = learner_settings(task, learner, source)
+    for agent in topo.dof_agents:
+        arrays, _ = load_checkpoint(run_dir / "agents" / f"{agent}.npz", agent=agent)
+        visible = sum(topo.agents[c].has_dof for c in topo.agents[agent].children)
+        try:
+            Learner(settings[agent], visible, 0).load_state_dict(arrays)
+        except ValueError as e:
+            raise CheckpointError(
+                f"run.from {run_dir}: {agent}'s checkpoint does not fit this run's learner ({e}); "
+                "was it trained on another robot, task or [learner]?"
+            ) from None
 
 
 def task_of(cfg: RunConfig) -> TaskDef:

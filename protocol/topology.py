@@ -28,7 +28,9 @@ from __future__ import annotations
 
 import math
 import re
+import tomllib
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 from .spec import SpecError, number, table, vector
@@ -196,3 +198,18 @@ def parse_robot(robot: Any, source: str = "<memory>", where: str = "robot") -> T
         base=(bx, by, math.radians(bh)),
         source=src,
     )
+
+
+def load_robot(path: str | Path) -> Topology:
+    """The robot of a robot file or a run file: its [robot] table (named after the file unless it names itself)."""
+    path = Path(path)
+    try:
+        data = tomllib.loads(path.read_text())
+    except OSError as e:
+        raise SpecError(str(path), "file", f"cannot read: {e.strerror or e}") from None
+    except tomllib.TOMLDecodeError as e:
+        raise SpecError(str(path), "toml", str(e)) from None
+    robot = data.get("robot")
+    if not isinstance(robot, dict):
+        raise SpecError(str(path), "robot", "a robot file needs a [robot] table")
+    return parse_robot({"name": path.stem, **robot}, str(path))

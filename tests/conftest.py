@@ -2,11 +2,16 @@
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import socket
+from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 import pytest
+from kinswarm.actors.config import RunConfig
+from kinswarm.actors.runfile import load_run
 
 ROOT = Path(__file__).resolve().parent.parent
 EXAMPLES = ROOT / "examples"
@@ -21,6 +26,13 @@ LOCKSTEP_DEADLINE_MS = 30_000
 # agents "down" and one step wait out its deadline. The swarm survives that by design; an exact comparison cannot.
 LOCKSTEP_LEASE_MS = 10_000
 LOCKSTEP_ARGS = ["--deadline-ms", str(LOCKSTEP_DEADLINE_MS), "--lease-ms", str(LOCKSTEP_LEASE_MS)]
+
+
+def run_config(file: Path | str, sets: Sequence[str] = (), **fields: Any) -> RunConfig:
+    """The run of a run file as the one loader resolves it (with `--set`-style overrides), then RunConfig fields
+    replaced (out, steps, deadline_ms, ...): how a test makes a config without a command line."""
+    cfg = load_run(file, sets, run_id=fields.pop("run_id", "t"), out=fields.pop("out", None))
+    return dataclasses.replace(cfg, **fields)
 
 
 def free_port() -> int:

@@ -1,4 +1,4 @@
-"""The corridor's body-aware local term ("follow the leader", LearnerSettings.follow_leader): each of the last
+"""The corridor's body-aware local term ("follow the leader", the corridor task's follow_leader): each of the last
 links' agents is rewarded for bringing its own link end towards its place on the corridor's axis."""
 
 from __future__ import annotations
@@ -6,13 +6,11 @@ from __future__ import annotations
 import math
 
 import pytest
-from conftest import EXAMPLES
-from kinswarm.actors.agent import _follow_leader_behind, learner_settings
-from kinswarm.actors.config import RunConfig
-from kinswarm.actors.learning.learner import Learner
-from kinswarm.actors.learning.reward import follow_leader_distance, path_distance
-from kinswarm.actors.learning.settings import LearnerSettings
-from kinswarm.protocol.topology import load_topology
+from conftest import EXAMPLES, run_config
+from kinswarm.actors.runfile import task_of
+from kinswarm.actors.tasks.corridor import _follow_leader_behind, follow_leader_distance
+from kinswarm.actors.tasks.reach import path_distance
+from kinswarm.protocol.spec import SpecError
 
 GUIDED = EXAMPLES / "corridor7-guided.toml"
 GOAL, VIA = (5.5, 2.0), (2.0, 2.0)
@@ -33,20 +31,21 @@ def test_follow_leader_distance_by_hand():
 
 
 def test_follow_leader_settings_and_agents():
-    with pytest.raises(ValueError, match="follow_leader must be >= 0"):
-        LearnerSettings(follow_leader=-1.0)
-    with pytest.raises(ValueError, match="follow_leader_links must be an int >= 1"):
-        LearnerSettings(follow_leader_links=0)
-    topo = load_topology(GUIDED)
-    on = Learner(LearnerSettings(follow_leader=20.0), 1, seed=0)
+    with pytest.raises(SpecError, match="task.follow_leader: must be >= 0"):
+        run_config(GUIDED, ["task.follow_leader=-1.0"])
+    with pytest.raises(SpecError, match="task.follow_leader_links: must be >= 1"):
+        run_config(GUIDED, ["task.follow_leader_links=0"])
+
+    def behind(sets: list[str], *agents: str) -> list[float | None]:
+        task = task_of(run_config(GUIDED, sets))
+        return [_follow_leader_behind(task.topo, a, task.settings) for a in agents]
+
     # the last 4 agents: a7 (the end effector, 0 behind) ... a4 (3 links behind); a1-a3 get no term
-    assert [_follow_leader_behind(topo, a, on) for a in ("a7", "a6", "a5", "a4")] == [0.0, 1.0, 2.0, 3.0]
-    assert [_follow_leader_behind(topo, a, on) for a in ("a3", "a2", "a1")] == [None, None, None]
-    off = Learner(LearnerSettings(), 1, seed=0)
-    assert _follow_leader_behind(topo, "a7", off) is None
-    two = Learner(LearnerSettings(follow_leader=1.0, follow_leader_links=2), 1, seed=0)
-    assert [_follow_leader_behind(topo, a, two) for a in ("a7", "a6", "a5")] == [0.0, 1.0, None]
-    # without [task] via there is no axis: a clear error naming the file
-    cfg = RunConfig(run_id="r", topology=str(EXAMPLES / "corridor7.toml"), out="/tmp/x", learner={"follow_leader": 1.0})
-    with pytest.raises(ValueError, match=r"follow_leader needs the scene's \[task\] via.*corridor7.toml"):
-        learner_settings(cfg, cfg.topo())
+    on = ["task.follow_leader=20.0"]
+    assert behind(on, "a7", "a6", "a5", "a4") == [0.0, 1.0, 2.0, 3.0]
+    assert behind(on, "a3", "a2", "a1") == [None, None, None]
+    assert behind([], "a7") == [None]
+    assert behind(["task.follow_leader=1.0", "task.follow_leader_links=2"], "a7", "a6", "a5") == [0.0, 1.0, None]
+    # without via there is no axis: a clear error naming the file
+    with pytest.raises(SpecError, match=r"corridor7.toml: task.follow_leader: needs via"):
+        run_config(EXAMPLES / "corridor7.toml", ["task.follow_leader=1.0"])

@@ -23,10 +23,10 @@ from kinswarm.actors.cli import run_swarm
 from kinswarm.actors.config import RunConfig
 from kinswarm.actors.plan import PlanError, acl, load_plan, local_plan
 from kinswarm.actors.runtime import NetSpec
-from kinswarm.protocol.topology import load_topology
+from kinswarm.protocol.topology import load_robot
 
 sys.path.insert(0, str(Path(__file__).parent))
-from conftest import LOCKSTEP_DEADLINE_MS, LOCKSTEP_LEASE_MS  # noqa: E402
+from conftest import LOCKSTEP_DEADLINE_MS, LOCKSTEP_LEASE_MS, run_config  # noqa: E402
 from netns import Hosts, NetnsUnavailable  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -48,7 +48,7 @@ TWO = """
 name = "t"
 leader = "brain"
 [run]
-topology = "{topo}"
+file = "{topo}"
 [[host]]
 name = "brain"
 address = "10.0.0.1"
@@ -63,14 +63,14 @@ actors = ["agents"]
 def test_shipped_plans_load_and_place_every_actor() -> None:
     for path in sorted((ROOT / "deploy").glob("*.toml")):
         plan = load_plan(path)
-        where = plan.placement(load_topology(plan.run["topology"]))
+        where = plan.placement(load_robot(plan.run_file))
         assert set(where) == {"sim", "a1", "a2", "a3", "a4"}, path
         assert set(where.values()) <= set(plan.hosts)
 
 
 def test_local_plan_file_is_the_embedded_default() -> None:
     f, built = load_plan(ROOT / "deploy" / "local.toml"), local_plan("tcp/127.0.0.1:7447")
-    topo = load_topology(CHAIN4)
+    topo = load_robot(CHAIN4)
     assert (f.name, f.leader, f.mode, f.lease_ms) == (built.name, built.leader, built.mode, built.lease_ms)
     assert f.placement(topo) == built.placement(topo)
     assert f.net("local", "agent-a1", False, topo) == built.net("local", "agent-a1", False, topo)
@@ -94,13 +94,13 @@ def test_plan_errors_name_the_field(tmp_path: Path, change: tuple[str, str], whe
     text = TWO.format(topo=CHAIN4).replace(*change, 1)
     with pytest.raises(PlanError, match=where.replace("[", r"\[").replace("]", r"\]")) as e:
         plan = load_plan(_plan(tmp_path, text))
-        plan.placement(load_topology(CHAIN4))
+        plan.placement(load_robot(CHAIN4))
     assert "plan.toml" in str(e.value)
 
 
 def test_acl_lets_each_identity_publish_only_its_own_keys(tmp_path: Path) -> None:
     plan = load_plan(_plan(tmp_path, TWO.format(topo=CHAIN4)))
-    rules = {r["id"]: r["key_exprs"] for r in acl(plan, load_topology(CHAIN4))["rules"]}
+    rules = {r["id"]: r["key_exprs"] for r in acl(plan, load_robot(CHAIN4))["rules"]}
     a2 = rules["deny-agent-a2"]
     assert "ks/*/fault/**" in a2 and "ks/*/ctl/**" in a2  # supervisors only
     # a2 talks up to its parent a1, down to its descendants a3, a4, and commands its own joint
@@ -168,11 +168,8 @@ name = "nst"
 leader = "brain"
 {zenoh}{extra}
 [run]
-topology = "{CHAIN4}"
-epochs = {epochs}
-steps = {steps}
-seed = 3
-deadline_ms = {deadline_ms}
+file = "{CHAIN4}"
+set = ["run.epochs={epochs}", "run.steps={steps}", "run.seed=3", "run.deadline_ms={deadline_ms}"]
 [[host]]
 name = "brain"
 address = "{h.address("brain")}"
@@ -216,11 +213,11 @@ def _single(tmp_path: Path, epochs: int, steps: int) -> list[float]:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
-    cfg = RunConfig(
-        run_id="ref", topology=str(CHAIN4), out=str(tmp_path / "single"), epochs=epochs, steps=steps, seed=3,
+    cfg = run_config(
+        CHAIN4, run_id="ref", out=str(tmp_path / "single"), epochs=epochs, steps=steps, seed=3,
         placement="single", listen=f"tcp/127.0.0.1:{port}",
     )  # fmt: skip
-    run_swarm(cfg, load_topology(CHAIN4))
+    run_swarm(cfg, cfg.topo())
     return _final_errors(tmp_path / "single")
 
 
@@ -302,7 +299,7 @@ def test_secured_swarm_refuses_strangers_and_agent_faults(hosts: Hosts, tmp_path
         assert leader.poll() is None and time.monotonic() < deadline, (tmp_path / "brain.log").read_text()[-3000:]
         time.sleep(0.2)
     loaded = load_plan(plan)
-    topo = load_topology(CHAIN4)
+    topo = load_robot(CHAIN4)
     brain = loaded.hosts["brain"].listen
 
     def spec_file(name: str, spec: NetSpec) -> str:

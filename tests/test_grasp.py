@@ -1,5 +1,5 @@
-"""The grasp scene (paper §5.5): object validation, the contact model against hand-computed values,
-the net wrench's signs, the reward variants (actors/learning/grasp.py)."""
+"""The grasp (paper §5.5): the object scene's validation, the contact model against hand-computed values, the net
+wrench's signs, the reward variants (actors/tasks/grasp_reward.py), the grasp task's fingers."""
 
 from __future__ import annotations
 
@@ -7,36 +7,38 @@ import math
 from pathlib import Path
 
 import pytest
-from kinswarm.actors.learning.grasp import (
+from conftest import run_config
+from kinswarm.actors.learning.state import goal_along_motion
+from kinswarm.actors.runfile import task_of
+from kinswarm.actors.tasks.grasp_reward import (
     Contacts,
     GraspParams,
     GraspReward,
     balance_targets,
     contact_goals,
     eq12,
-    grasp_learner_settings,
     grip_forces,
-    scene_reward_problem,
 )
-from kinswarm.actors.learning.state import goal_along_motion
-from kinswarm.protocol.topology import ObjectSpec, TopologyError, load_topology, parse_topology
-from kinswarm.sim.contact import ContactModel, ContactReading, net_wrench
+from kinswarm.protocol.scene import ObjectSpec, parse_scene
+from kinswarm.protocol.spec import SpecError
+from kinswarm.protocol.topology import parse_robot
+from kinswarm.sim.scenes.contact import ContactModel, ContactReading, net_wrench
 
 ROOT = Path(__file__).resolve().parent.parent
 GRASP3 = ROOT / "examples" / "grasp3.toml"
 
+HAND = parse_robot(
+    {
+        "name": "hand",
+        "agent": [
+            {"id": "hand", "compound": True},
+            {"id": "f1", "parent": "hand", "link_length": 1.0},
+            {"id": "f2", "parent": "hand", "link_length": 1.0},
+        ],
+    }
+)
 SCENE = """
-[[agent]]
-id = "hand"
-compound = true
-[[agent]]
-id = "f1"
-parent = "hand"
-link_length = 1.0
-[[agent]]
-id = "f2"
-parent = "hand"
-link_length = 1.0
+kind = "object"
 [object]
 center = [0.0, 0.0]
 half_extents = [1.0, 0.5]
@@ -55,16 +57,17 @@ f2 = [0.3, 0.5]
 def _parse(text: str):
     import tomllib
 
-    return parse_topology(tomllib.loads(text), source="scene.toml")
+    return parse_scene(tomllib.loads(text), HAND, "scene.toml")
 
 
 def test_grasp3_is_13_agents_around_a_compound_hand():
-    t = load_topology(GRASP3)
+    cfg = run_config(GRASP3)
+    t, obj = cfg.topo(), cfg.scene_spec.object
     assert len(t.agents) == 13 and len(t.dof_agents) == 12
     assert t.root == "hand" and t.agents["hand"].compound and not t.agents["hand"].has_dof
     assert t.end_effectors == ("f1_4", "f2_4", "f3_4")
     assert set(t.agents["hand"].children) == {"f1_1", "f2_1", "f3_1"}
-    assert t.object is not None and t.object.mu == 0.5 and set(t.object.grasp) == set(t.end_effectors)
+    assert obj is not None and obj.mu == 0.5 and set(obj.grasp) == set(t.end_effectors)
 
 
 def test_scene_parses():
@@ -87,24 +90,28 @@ def test_scene_parses():
 @pytest.mark.parametrize(
     ("change", "where", "what"),
     [
-        (("[object]\n", "[object]\ncolour = 1\n"), "object.colour", "unknown field"),
-        (("[object]\n", '[object]\ncontact = "palm"\n'), "object.contact", "must be one of link, tip"),
-        (("mu = 0.5\n", ""), "object.mu", "missing"),
-        (("mu = 0.5\n", "mu = -0.1\n"), "object.mu", ">= 0"),
-        (("kn = 10.0\n", "kn = 0.0\n"), "object.kn", "> 0"),
-        (("max_depth = 0.2\n", "max_depth = 'deep'\n"), "object.max_depth", "finite number"),
-        (("half_extents = [1.0, 0.5]\n", "half_extents = [1.0, -0.5]\n"), "object.half_extents", "> 0"),
-        (("center = [0.0, 0.0]\n", "center = [0.0]\n"), "object.center", "list of 2"),
-        (("f2 = [0.3, 0.5]\n", "f2 = [0.3, 0.2]\n"), "object.grasp.f2", "not on the object's boundary"),
-        (("f2 = [0.3, 0.5]\n", "hand = [0.3, 0.5]\n"), "object.grasp.hand", "not an end effector"),
-        (("f2 = [0.3, 0.5]\n", ""), "object.grasp", "no grasp point for end effector(s) f2"),
-        (("[object.grasp]\nf1 = [-1.0, 0.0]\nf2 = [0.3, 0.5]\n", "grasp = 3\n"), "object.grasp", "must be a table"),
+        (("[object]\n", "[object]\ncolour = 1\n"), "scene.object.colour", "unknown field"),
+        (("[object]\n", '[object]\ncontact = "palm"\n'), "scene.object.contact", "must be one of link, tip"),
+        (("mu = 0.5\n", ""), "scene.object.mu", "missing"),
+        (("mu = 0.5\n", "mu = -0.1\n"), "scene.object.mu", ">= 0"),
+        (("kn = 10.0\n", "kn = 0.0\n"), "scene.object.kn", "> 0"),
+        (("max_depth = 0.2\n", "max_depth = 'deep'\n"), "scene.object.max_depth", "finite number"),
+        (("half_extents = [1.0, 0.5]\n", "half_extents = [1.0, -0.5]\n"), "scene.object.half_extents", "> 0"),
+        (("center = [0.0, 0.0]\n", "center = [0.0]\n"), "scene.object.center", "list of 2"),
+        (("f2 = [0.3, 0.5]\n", "f2 = [0.3, 0.2]\n"), "scene.object.grasp.f2", "not on the object's boundary"),
+        (("f2 = [0.3, 0.5]\n", "hand = [0.3, 0.5]\n"), "scene.object.grasp.hand", "not an end effector"),
+        (("f2 = [0.3, 0.5]\n", ""), "scene.object.grasp", "no grasp point for end effector(s) f2"),
+        (
+            ("[object.grasp]\nf1 = [-1.0, 0.0]\nf2 = [0.3, 0.5]\n", "grasp = 3\n"),
+            "scene.object.grasp",
+            "must be a table",
+        ),
     ],
 )
 def test_bad_object_names_file_field_and_fault(change, where, what):
     old, new = change
     assert old in SCENE
-    with pytest.raises(TopologyError) as e:
+    with pytest.raises(SpecError) as e:
         _parse(SCENE.replace(old, new, 1))
     assert e.value.source == "scene.toml" and e.value.where == where and what in e.value.what, str(e.value)
 
@@ -112,8 +119,8 @@ def test_bad_object_names_file_field_and_fault(change, where, what):
 def test_bad_object_file_error_names_the_file(tmp_path):
     p = tmp_path / "bad.toml"
     p.write_text(GRASP3.read_text().replace("mu = 0.5", "mu = true"))
-    with pytest.raises(TopologyError, match=r"bad\.toml: object\.mu: expected a finite number"):
-        load_topology(p)
+    with pytest.raises(SpecError, match=r"bad\.toml: scene\.object\.mu: expected a finite number"):
+        run_config(p)
 
 
 SPEC = _parse(SCENE).object
@@ -271,29 +278,34 @@ def test_force_reward_in_contact_credits_a_fingers_own_move():
     assert r2 is not None and r3 is None and r2["b"] < r2["c"] - 0.99
 
 
-def test_reward_names_fit_the_scene():
-    assert scene_reward_problem(True, "shaped") is None and scene_reward_problem(False, "strict") is None
-    assert "grasp scene takes" in (scene_reward_problem(True, "strict") or "")
-    assert "reaching scene takes" in (scene_reward_problem(False, "contact") or "")
+def test_reward_names_fit_the_task():
+    assert run_config(GRASP3, ['task.reward="contact"']).task["reward"] == "contact"
+    with pytest.raises(SpecError, match="task: reward: 'strict' is not one of shaped, paper, contact, global, force"):
+        run_config(GRASP3, ['task.reward="strict"'])
+    with pytest.raises(SpecError, match="task: reward: 'contact' is not one of shaped, paper, strict"):
+        run_config(ROOT / "examples" / "chain4.toml", ['task.reward="contact"'])
     with pytest.raises(ValueError, match="unknown grasp reward"):
         GraspReward("strict", GRASP, (0.0, 0.0), (1.0, 0.5))
 
 
-def test_state_of_each_kind_of_agent():
-    tip = grasp_learner_settings(3.2, True, 6.6, {"grasp_state": "contact"})
-    inner = grasp_learner_settings(3.2, False, 6.6, {"grasp_state": "contact"})
-    assert tip.state_names == ("q", "theta", "d", "g1", "g2", "g3", "force_error", "fn")
-    assert inner.state_names == ("q", "theta", "d", "g1", "g2", "g3", "force_error")
-    assert tip.state_ranges[-1] == (0.0, 6.6) and tip.state_ranges[2] == (0.0, 3.2) and len(tip.state_sets) == 8
-    assert grasp_learner_settings(3.2, True, 6.6, {"grasp_state": "reach"}).state_names[-1] == "g3"
-    assert grasp_learner_settings(3.2, True, 6.6, {"grasp_state": "force"}).extra_state == ("force_error",)
-    default = grasp_learner_settings(3.2, False, 6.6, {})  # goal: S_i + g_perp, fine sets over +-0.05
-    assert default.state_names[-1] == "g_perp" and default.state_ranges[-1] == (-0.05, 0.05)
-    assert default.fine_action == 0.1 and grasp_learner_settings(3.2, False, 6.6, {"fine_action": 1.0}).fine_action == 1
-    with pytest.raises(ValueError, match="fine_action"):
-        grasp_learner_settings(3.2, True, 6.6, {"fine_action": 0.0})
-    with pytest.raises(ValueError, match="grasp_state"):
-        grasp_learner_settings(3.2, True, 6.6, {"grasp_state": "telepathy"})
+def test_state_of_the_finger_agents():
+    """Every finger agent: S_i on one finger's scale plus g_perp (7 fine sets over +-0.05), computed from its own
+    geometry; fine steps (fine_action, 0.1 by default) while the grasp agent says "fine"."""
+    task = task_of(run_config(GRASP3))
+    st = task.learner("f2_3", {})
+    assert st.state_names[-1] == "g_perp" and st.state_ranges[-1] == (-0.05, 0.05) and st.state_sets[-1] == 7
+    assert st.state_ranges[2] == (0.0, pytest.approx(3.2)) and len(st.state_sets) == 7
+    finger = task.agent("f2_3", st)
+    from kinswarm.actors.tasks.base import StepView
+
+    view = StepView(0, 1, (0.0, 0.0, 0.0), (0.8, 0.0, 0.0), (2.0, 0.0), (2.0, 0.5), {"fine": 1.0}, {}, None)
+    assert finger.state(view) == [goal_along_motion(view.frame, view.tip, view.goal)]
+    assert finger.scale(view) == 0.1 and finger.scale(StepView(**{**view.__dict__, "sense": {}})) == 1.0
+    assert task_of(run_config(GRASP3, ["task.fine_action=1.0"])).agent("f2_3", st).scale(view) == 1.0
+    with pytest.raises(SpecError, match="task.fine_action: must be in"):
+        run_config(GRASP3, ["task.fine_action=0.0"])
+    with pytest.raises(SpecError, match="task.grasp_state: unknown field"):
+        run_config(GRASP3, ['task.grasp_state="force"'])
 
 
 def _wrench_of(fn: dict, ft: dict, points: dict, normals: dict) -> tuple[float, float, float]:
@@ -419,11 +431,12 @@ def test_fingertips_at_their_contact_goals_balance_the_real_object(contact):
     import dataclasses
 
     from kinswarm.actors.grasp_report import BALANCE
-    from kinswarm.sim.contact import GraspScene
+    from kinswarm.sim.scenes.contact import GraspScene
     from kinswarm.sim.world import World
 
-    topo = load_topology(GRASP3)
-    obj = dataclasses.replace(topo.object, contact=contact)
+    cfg = run_config(GRASP3)
+    topo = cfg.topo()
+    obj = dataclasses.replace(cfg.scene_spec.object, contact=contact)
     world = World(topo)
     try:
         scene = GraspScene(world, obj)
@@ -474,17 +487,18 @@ def test_tip_contact_is_the_fingertip_sphere_only():
     with its tip sticking out touches in "link" mode only."""
     import dataclasses
 
-    from kinswarm.sim.contact import GraspScene
+    from kinswarm.sim.scenes.contact import GraspScene
     from kinswarm.sim.world import World
 
-    topo = load_topology(GRASP3)
+    cfg = run_config(GRASP3)
+    topo, obj = cfg.topo(), cfg.scene_spec.object
     world = World(topo)
     try:
         q = world.joint_positions()
-        q = _ik(world, GraspScene(world, topo.object).fingers, q, "f1_4", (-1.03, 0.1))  # 0.07 deep
+        q = _ik(world, GraspScene(world, obj).fingers, q, "f1_4", (-1.03, 0.1))  # 0.07 deep
         readings = {}
         for contact in ("link", "tip"):
-            scene = GraspScene(world, dataclasses.replace(topo.object, contact=contact))
+            scene = GraspScene(world, dataclasses.replace(obj, contact=contact))
             scene.reset()
             readings[contact] = scene.readings["f1_4"]
         tip = readings["tip"]
@@ -495,9 +509,9 @@ def test_tip_contact_is_the_fingertip_sphere_only():
         # its fingertip is 0.57 off the face
         h = math.radians(135.0)
         tip_xy = (-1.05 + 0.8 * math.cos(h), 0.8 * math.sin(h))
-        q = _ik(world, GraspScene(world, topo.object).fingers, q, "f1_4", tip_xy, heading=h)
+        q = _ik(world, GraspScene(world, obj).fingers, q, "f1_4", tip_xy, heading=h)
         for contact in ("link", "tip"):
-            scene = GraspScene(world, dataclasses.replace(topo.object, contact=contact))
+            scene = GraspScene(world, dataclasses.replace(obj, contact=contact))
             scene.reset()
             readings[contact] = scene.readings["f1_4"]
         assert readings["link"].contact and readings["link"].depth == pytest.approx(0.05, abs=1e-4)

@@ -14,8 +14,8 @@ from kinswarm.actors.learning import (
     agent_state,
     joint_frame,
     link_end,
-    reach_reward,
 )
+from kinswarm.actors.tasks.reach import reach_reward
 
 LINK, N, STEP = 3.0, 4, math.radians(1.0)
 

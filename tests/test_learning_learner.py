@@ -12,7 +12,6 @@ def test_settings_validation_and_for_reach():
     st = LearnerSettings.for_reach(6.0, lr=0.2)
     assert st.ranges[2] == (0.0, 6.0) and st.ranges[3] == (-12.0, 12.0) and st.lr == 0.2
     for bad, match in [
-        (dict(bootstrap="nope"), "bootstrap"),
         (dict(T_max=1.0), "T_max"),
         (dict(n_sets=(3, 3)), "n_sets"),
         (dict(top_k=8), "top_k"),
@@ -27,7 +26,11 @@ def test_settings_validation_and_for_reach():
         (dict(count_freeze=-1), "count_freeze"),
         (dict(count_freeze=2.0), "count_freeze"),
         (dict(count_freeze=True), "count_freeze"),
-        (dict(act_from="start"), "act_from"),
+        (dict(extra_state=[{"name": "x", "sets": 0, "range": [0, 1]}]), "sets must be an int >= 1"),
+        (dict(extra_state=[{"name": "x", "sets": 3, "range": [1, 0]}]), "lo < hi"),
+        (dict(extra_state=[{"name": "x", "sets": 3}]), "missing .range."),
+        (dict(extra_state=[{"name": "q", "sets": 3, "range": [0, 1]}]), "names must differ"),
+        (dict(extra_state=[{"name": "x", "sets": 3, "range": [0, 1], "colour": 1}]), "unknown field 'colour'"),
     ]:
         with pytest.raises(ValueError, match=match):
             LearnerSettings(**bad)
@@ -36,7 +39,7 @@ def test_settings_validation_and_for_reach():
 
 
 def test_td_update_through_step_hand_computed():
-    st = LearnerSettings(bootstrap="joint_max", lr=0.5)
+    st = LearnerSettings(lr=0.5)
     ln = Learner(st, n_visible=0, seed=0)
     ln.start_epoch(0)
     a0 = ln.step(S0, None, [])
@@ -103,38 +106,21 @@ def test_count_freeze_stops_the_counts_not_the_td_updates():
     np.testing.assert_allclose(ln.counts, [[2, 1, 2]])
 
 
-def test_act_from_epoch_acts_as_frozen_at_the_epoch_start_and_learns_for_the_next():
-    """act_from = "epoch": within an epoch the choices are those of a frozen copy of the learner as the epoch began,
-    while the TD updates (and the counts) go on; the next epoch acts on what they learned."""
-    trained = _trained()
-    rng = np.random.default_rng(9)
-    steps = [(S0 + rng.normal(size=6) * 0.3, float(rng.normal()), [int(rng.integers(3))]) for _ in range(200)]
+@pytest.mark.parametrize("probe", ["act_from", "bootstrap", "tabu_memory", "grasp_state", "shield", "fine_action"])
+def test_options_measured_and_not_kept_or_moved_to_a_task_are_gone(probe):
+    """The learner is the paper's: probes that were measured and not kept, and task settings, are not accepted."""
+    with pytest.raises(TypeError, match=probe):
+        LearnerSettings(**{probe: 1})
+    assert len(LearnerSettings.__dataclass_fields__) <= 20
 
-    def learners(epoch, state):
-        ln = Learner(LearnerSettings(act_from="epoch"), n_visible=1, seed=5)
-        frozen, online = (
-            Learner(LearnerSettings(), n_visible=1, seed=5),
-            Learner(LearnerSettings(), n_visible=1, seed=5),
-        )
-        for x in (ln, frozen, online):
-            x.load_state_dict(state)
-            x.start_epoch(epoch)
-        return ln, frozen, online
 
-    ln, frozen, online = learners(1, trained.state_dict())
-    picks = [
-        [x.step(s, r, v, learn=learn, explore=False) for s, r, v in steps]
-        for x, learn in ((ln, True), (frozen, False), (online, True))
-    ]
-    assert picks[0] == picks[1]  # as frozen at the start of the epoch
-    assert picks[2] != picks[1]  # online updates change the choices within the epoch (what "epoch" prevents)
-    assert ln.rules_used > trained.rules_used and ln.counts.sum() > trained.counts.sum()  # yet it learned
-    learned = ln.state_dict()
-    ln.start_epoch(2)  # the next epoch acts on what was learned
-    _, frozen2, _ = learners(2, learned)
-    assert [ln.step(s, r, v, explore=False) for s, r, v in steps] == [
-        frozen2.step(s, r, v, learn=False, explore=False) for s, r, v in steps
-    ]
+def test_extra_state_variables_extend_the_state_in_order():
+    from kinswarm.actors.learning.settings import StateVariable
+
+    st = LearnerSettings(extra_state=[{"name": "g_perp", "sets": 7, "range": [-1.5, 1.5]}])
+    assert st.extra_state == (StateVariable("g_perp", 7, (-1.5, 1.5)),)
+    task = st.with_task_state((StateVariable("clearance", 5, (0.0, 1.0)),))
+    assert task.state_names[6:] == ("clearance", "g_perp") and task.state_sets[6:] == (5, 7)
 
 
 def test_greedy_ties_random_at_start():

@@ -3,7 +3,7 @@
 import math
 
 import pytest
-from kinswarm.actors.learning import reach_reward
+from kinswarm.actors.tasks.reach import reach_reward
 
 
 @pytest.mark.parametrize("mode", ["paper", "strict", "shaped", "settle"])
@@ -53,5 +53,5 @@ def test_settle_pays_an_arrived_tip_whatever_it_does():
 
 
 def test_unknown_mode():
-    with pytest.raises(ValueError, match="paper, strict, shaped, graded"):
+    with pytest.raises(ValueError, match="allowed modes: shaped, paper, strict, graded, settle"):
         reach_reward(1.0, 1.0, "bogus")

@@ -4,7 +4,7 @@ import math
 
 import numpy as np
 import pytest
-from kinswarm.actors.learning import agent_state, joint_frame, link_end, moves_to_goal
+from kinswarm.actors.learning import agent_state, joint_frame, link_end
 from kinswarm.actors.learning.state import goal_along_motion, own_extras
 
 
@@ -57,27 +57,11 @@ def test_g3_unsigned_needs_a_range_from_zero():
     assert LearnerSettings(g3="unsigned", ranges=(*r[:5], (0.0, math.pi))).g3 == "unsigned"
 
 
-def test_moves_to_goal_counts_the_goal_in_own_moves():
-    """g_perp over the tip's shift by one own move, log-compressed: the same number for every joint."""
-    one = math.radians(1.0)
-    near, far = (0.0, 0.0, 0.0), (0.0, 0.0, 0.7)  # joint frames; tips 3 and 12 away
-    assert moves_to_goal(near, (3.0, 0.0), (3.0, 3.0 * one), one) == pytest.approx(math.log(2.0))  # one move ahead
-    assert moves_to_goal(far, (0.0, 12.0), (12.0 * one, 12.0), one) == pytest.approx(-math.log(2.0))  # one behind
-    assert moves_to_goal(near, (3.0, 0.0), (3.5, 0.0), one) == 0.0  # straight out: no move of mine helps
-    assert moves_to_goal(near, (0.0, 0.0), (1.0, 1.0), one) == 0.0  # tip on the joint
-    x = 0.1 / (3.0 * one)
-    assert moves_to_goal(near, (3.0, 0.0), (2.0, 0.1), one) == pytest.approx(math.log1p(x))
-
-
 def test_own_extras_computes_only_what_is_named():
-    """g_dist is the tip's distance to the goal; each variable is computed only when the settings name it."""
-    one = math.radians(1.0)
+    """g_perp is the only variable an agent computes from its own geometry; the others come from its task or
+    readings."""
     frame, tip, goal = (0.0, 0.0, 0.0), (3.0, 0.0), (3.3, 0.4)
-    assert own_extras(("g_dist",), frame, tip, goal, one) == {"g_dist": pytest.approx(0.5)}
-    both = own_extras(("force_error", "g_perp", "g_moves", "g_dist"), frame, tip, goal, one)
-    assert both == {
-        "g_perp": pytest.approx(goal_along_motion(frame, tip, goal)),
-        "g_moves": pytest.approx(moves_to_goal(frame, tip, goal, one)),
-        "g_dist": pytest.approx(0.5),
+    assert own_extras(("force_error", "g_perp"), frame, tip, goal) == {
+        "g_perp": pytest.approx(goal_along_motion(frame, tip, goal))
     }
-    assert own_extras(("force_error",), frame, tip, goal, one) == {}  # the sense's, not the agent's
+    assert own_extras(("force_error",), frame, tip, goal) == {}  # a reading's, not the agent's

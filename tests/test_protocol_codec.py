@@ -32,13 +32,16 @@ OTHER_KEY = b"fedcba9876543210fedcba9876543210"
 
 SAMPLES = [
     Obs(epoch=1, step=2, q=0.5),
+    Obs(epoch=1, step=2, q=0.5, sense={"clearance": 0.25, "collided": 1.0, "shield+": 0.0}),
     Task(epoch=0, step=7, goal=(4.16, 6.18), tips={"a4": (1.0, 2.0, 0.3)}),
+    Task(epoch=0, step=7, goal=(4.16, 6.18), tips={"a4": (1.0, 2.0, 0.3)}, sense={"fn/f1_4": 2.0, "net_fx": -0.1}),
     Down(epoch=3, step=4, base=(1.0, 2.0, 0.5), goal=(4.0, 6.0), reward=-1.5),
     Down(epoch=3, step=0, base=(0.0, 0.0, 0.0), goal=(4.0, 6.0), reward=None),
     Up(epoch=1, step=9, tips={"l2": (1.0, 1.0, 0.0), "r2": (-1.0, 1.0, 3.0)}, action=2),
-    Up(epoch=1, step=9, tips={"a7": (5.5, 2.0, 0.0)}, action=0, clearance=0.125),
+    Up(epoch=1, step=9, tips={"a7": (5.5, 2.0, 0.0)}, action=0, sense={"clearance": 0.125}),
     Cmd(epoch=1, step=9, delta=-0.0174),
     EpochStart(epoch=5, steps=500, goal=(1.0, 2.0)),
+    EpochStart(epoch=5, steps=3, goal=(1.0, 2.0), path=[(1.0, 2.0), (1.5, 2.0), (2.0, 2.0)]),
     EpochDone(
         epoch=5,
         steps=2,
@@ -71,7 +74,7 @@ SAMPLES = [
         restarts={"sim": 0, "a1": 2},
         faults={"sim": [], "a1": ["drop rate=0.05"]},
     ),
-    Setup(plan="two-hosts", config="{}", topology="[robot]", scenario=""),
+    Setup(plan="two-hosts", config="{}", scenario=""),
     Heartbeat(host="brain", seq=7, leader=1),
 ]
 
@@ -173,7 +176,7 @@ def test_sender_reads_the_claimed_src_past_the_mac():
 
 
 def test_nested_field_errors_name_the_path():
-    good = codec.encode(SAMPLES[4], "r", "x", KEY)
+    good = codec.encode(SAMPLES[6], "r", "x", KEY)
     body = msgpack.unpackb(good[: -codec.MAC_SIZE])
     body["tips"]["r2"] = [1.0, "x", 0.0]
     with pytest.raises(codec.DecodeError, match=r"tips\.r2\[1\]: expected a number"):
@@ -181,6 +184,19 @@ def test_nested_field_errors_name_the_path():
     body["tips"]["r2"] = [1.0, 0.0]
     with pytest.raises(codec.DecodeError, match="tips.r2: expected a list of 3"):
         codec.decode(codec.sign(msgpack.packb(body), KEY), Up, "r", KEY)
+
+
+@pytest.mark.parametrize("name", ["", "a b", "x" * 65, "é", "a*b", "$x"])
+def test_reading_names_are_checked_on_both_paths(name, monkeypatch):
+    """Scene readings travel by one route, validated: a map key that is not a name is refused, fast path or not."""
+    body = msgpack.unpackb(codec.encode(SAMPLES[1], "run1", "sim", KEY)[: -codec.MAC_SIZE])
+    body["sense"][name] = 1.0
+    payload = codec.sign(msgpack.packb(body), KEY)
+    with pytest.raises(codec.DecodeError, match="expected names"):
+        codec.decode(payload, Obs, "run1", KEY)
+    monkeypatch.setattr(codec, "_fast", lambda cls: None)
+    with pytest.raises(codec.DecodeError, match="expected names"):
+        codec.decode(payload, Obs, "run1", KEY)
 
 
 def test_ints_on_the_wire_are_accepted_as_floats():
@@ -226,9 +242,14 @@ def _variants():
                 yield type(msg), {**body, name: [*value[:-1], math.inf]}
             if isinstance(value, dict):
                 for k, v in value.items():
-                    yield type(msg), {**body, name: {**value, k: [*v[:-1], 7]}}
-                    yield type(msg), {**body, name: {**value, k: v[:-1]}}
-                    yield type(msg), {**body, name: {**value, k: [*v[:-1], math.nan]}}
+                    if isinstance(v, list):  # tips
+                        yield type(msg), {**body, name: {**value, k: [*v[:-1], 7]}}
+                        yield type(msg), {**body, name: {**value, k: v[:-1]}}
+                        yield type(msg), {**body, name: {**value, k: [*v[:-1], math.nan]}}
+                    else:  # readings
+                        for bad in (7, math.nan, "x", None, [1.0]):
+                            yield type(msg), {**body, name: {**value, k: bad}}
+                        yield type(msg), {**body, name: {**value, "bad name": v}}
                     yield type(msg), {**body, name: {1: v}}
                 yield type(msg), {**body, name: {}}
         yield type(msg), {k: v for k, v in body.items() if k != list(body)[-1]}  # a field missing

@@ -6,14 +6,14 @@ import json
 import math
 from pathlib import Path
 
-from kinswarm.actors.config import RunConfig
+from conftest import run_config
 from kinswarm.actors.report import _events_by_epoch, read_events, write_plots
 
 
 def make_run(tmp_path: Path, chain4: Path, *, errors: bool, events: list[dict] | None) -> Path:
     run = tmp_path / "run"
     run.mkdir()
-    RunConfig(run_id="r", topology=str(chain4), out=str(run), steps=100).write(run / "config.json")
+    run_config(chain4, run_id="r", out=str(run), steps=100).write(run / "config.json")
     rows = []
     for epoch in range(6):
         errs = [3.0 * math.exp(-s / (20 + epoch)) + 0.05 for s in range(100)]

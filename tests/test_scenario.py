@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 from kinswarm.actors.scenario import ScenarioError, load_scenario
-from kinswarm.protocol.topology import load_topology
+from kinswarm.protocol.topology import load_robot
 from test_sim_kinematics import compound_tree
 
 SCENARIOS = Path(__file__).resolve().parents[1] / "scenarios"
@@ -14,7 +14,7 @@ SCENARIOS = Path(__file__).resolve().parents[1] / "scenarios"
 
 @pytest.fixture
 def topo(chain4):
-    return load_topology(chain4)
+    return load_robot(chain4)
 
 
 def timeline(path: Path, topo) -> list[tuple[int | None, int, str, list[str], int | None]]:

@@ -13,6 +13,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from conftest import run_config
 from kinswarm.actors.config import RunConfig
 from kinswarm.actors.runtime import Mailbox, Node, open_session
 from kinswarm.protocol.keys import Keys
@@ -63,9 +64,9 @@ def _close_worlds() -> Any:
 
 
 def make_sim(tmp_path: Path, chain4: Path, *, seed: int = 0, scenario: str | None = None, **kw: Any) -> SimActor:
-    cfg = RunConfig(
+    cfg = run_config(
+        chain4,
         run_id="t",
-        topology=str(chain4),
         out=str(tmp_path),
         seed=seed,
         scenario=scenario,
@@ -335,7 +336,7 @@ class TestController:
 
 @pytest.mark.timeout(60)
 def test_sim_in_a_zenoh_session(tmp_path, chain4, endpoint):
-    cfg = RunConfig(run_id="zt", topology=str(chain4), out=str(tmp_path), steps=40, deadline_ms=5000)
+    cfg = run_config(chain4, run_id="zt", out=str(tmp_path), steps=40, deadline_ms=5000)
 
     async def body() -> None:
         session = open_session(listen=[endpoint])

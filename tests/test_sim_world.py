@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from kinswarm.protocol.topology import Topology, load_topology
+from kinswarm.protocol.topology import Topology, load_robot
 from kinswarm.sim import kinematics
 from kinswarm.sim.urdf import write_urdf
 from kinswarm.sim.world import World, pb  # world imports pybullet with its banner silenced
@@ -33,7 +33,7 @@ def assert_tips_match(world: World, topo: Topology) -> None:
 
 @pytest.mark.parametrize("name", ["chain4.toml", "tree5.toml", "compound"])
 def test_tip_poses_match_kinematics_random(name: str, tmp_path: Path) -> None:
-    topo = compound_tree() if name == "compound" else load_topology(EXAMPLES / name)
+    topo = compound_tree() if name == "compound" else load_robot(EXAMPLES / name)
     rng = np.random.default_rng(0)
     with World(topo, urdf_dir=tmp_path) as world:
         assert_tips_match(world, topo)
@@ -46,7 +46,7 @@ def test_tip_poses_match_kinematics_random(name: str, tmp_path: Path) -> None:
 
 
 def test_increments_match_kinematics() -> None:
-    topo = load_topology(EXAMPLES / "tree5.toml")
+    topo = load_robot(EXAMPLES / "tree5.toml")
     rng = np.random.default_rng(1)
     with World(topo) as world:
         for _ in range(50):
@@ -56,7 +56,7 @@ def test_increments_match_kinematics() -> None:
 
 
 def test_reset_defaults_to_initial_and_validates() -> None:
-    topo = load_topology(EXAMPLES / "chain4.toml")
+    topo = load_robot(EXAMPLES / "chain4.toml")
     with World(topo) as world:
         world.apply_increments({"a1": 0.3})
         world.reset()
@@ -68,7 +68,7 @@ def test_reset_defaults_to_initial_and_validates() -> None:
 
 
 def test_limits_clip_and_report_applied(tmp_path: Path) -> None:
-    topo = load_topology(EXAMPLES / "chain4.toml")
+    topo = load_robot(EXAMPLES / "chain4.toml")
     with World(topo) as world:
         lo, hi = topo.agents["a1"].limits
         world.reset({**topo.initial_angles(), "a1": hi - math.radians(0.5)})
@@ -85,7 +85,7 @@ def test_limits_clip_and_report_applied(tmp_path: Path) -> None:
 
 
 def test_missing_increments_hold_and_unknown_rejected() -> None:
-    topo = load_topology(EXAMPLES / "chain4.toml")
+    topo = load_robot(EXAMPLES / "chain4.toml")
     with World(topo) as world:
         before = world.joint_positions()
         applied = world.apply_increments({"a3": 0.01})
@@ -112,8 +112,8 @@ def test_compound_agent_is_fixed() -> None:
 
 
 def test_two_worlds_do_not_interfere() -> None:
-    chain = load_topology(EXAMPLES / "chain4.toml")
-    tree = load_topology(EXAMPLES / "tree5.toml")
+    chain = load_robot(EXAMPLES / "chain4.toml")
+    tree = load_robot(EXAMPLES / "tree5.toml")
     with World(chain) as w1, World(chain) as w2, World(tree) as w3:
         assert len({w1.client, w2.client, w3.client}) == 3
         assert w1.urdf_path != w2.urdf_path
@@ -131,7 +131,7 @@ def test_two_worlds_do_not_interfere() -> None:
 
 
 def test_urdf_names_unique(tmp_path: Path) -> None:
-    topo = load_topology(EXAMPLES / "chain4.toml")
+    topo = load_robot(EXAMPLES / "chain4.toml")
     paths = {write_urdf(topo, tmp_path) for _ in range(20)}
     assert len(paths) == 20
 

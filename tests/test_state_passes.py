@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 from kinswarm.actors.learning.state import agent_state, joint_frame, link_end
-from kinswarm.protocol.topology import load_topology
+from kinswarm.protocol.topology import load_robot
 from kinswarm.sim import kinematics
 
 
@@ -32,7 +32,7 @@ def passes(topo, angles, goal):
 
 @pytest.mark.parametrize("name", ["chain4", "tree5"])
 def test_passes_match_closed_form(name, chain4, tree5):
-    topo = load_topology({"chain4": chain4, "tree5": tree5}[name])
+    topo = load_robot({"chain4": chain4, "tree5": tree5}[name])
     rng = np.random.default_rng(7)
     for _ in range(100):
         angles = {a: rng.uniform(*topo.agents[a].limits) for a in topo.dof_agents}

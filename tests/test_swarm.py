@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import os
@@ -14,11 +15,10 @@ from pathlib import Path
 
 import pytest
 import zenoh
-from conftest import LOCKSTEP_ARGS, free_port, swarm_pids
+from conftest import EXAMPLES, LOCKSTEP_ARGS, free_port, run_config, swarm_pids
 from kinswarm.actors.cli import main as cli_main
-from kinswarm.actors.config import RunConfig
 from kinswarm.actors.runtime import open_session
-from kinswarm.protocol.topology import load_topology
+from kinswarm.protocol.topology import load_robot
 from kinswarm.sim import kinematics
 from kinswarm.sim.baseline import greedy_increments
 
@@ -334,7 +334,7 @@ def test_baseline_reaches_the_goal(tmp_path, chain4, endpoint):
             str(tmp_path / "b"),
         ]
     )
-    assert s["controller"] == "baseline"
+    assert s["controller"] == "pinv"
     assert s["final_error"][0] < 0.01
     assert (tmp_path / "b" / "arm.png").is_file()
 
@@ -344,22 +344,22 @@ def test_greedy_reference_drives_the_world_as_the_model_says(tmp_path, chain4, e
     args = ["baseline", str(chain4), "--law", "greedy", "--placement", "single", "--epochs", "1"]
     s = run([*args, "--steps", "150", "--listen", endpoint, "--out", str(tmp_path / "g")])
     assert s["controller"] == "greedy"
-    topo = load_topology(chain4)
+    topo, goal = load_robot(chain4), (4.16, 6.18)
     q = topo.initial_angles()
     for _ in range(150):
-        dq = greedy_increments(topo, q, topo.goal)
+        dq = greedy_increments(topo, q, goal)
         q = {a: q[a] + dq[a] for a in q}
     ((x, y, _),) = kinematics.tips(topo, q).values()
-    assert s["final_error"][0] == pytest.approx(math.dist((x, y), topo.goal), abs=1e-6)
+    assert s["final_error"][0] == pytest.approx(math.dist((x, y), goal), abs=1e-6)
     assert s["final_error"][0] < 1.0
 
 
-def test_bad_topology_is_a_clear_error(tmp_path, capsys):
+def test_bad_robot_is_a_clear_error(tmp_path, capsys):
     p = tmp_path / "t.toml"
-    p.write_text('[[agent]]\nid = "a"\nlink_length = 0\n')
+    p.write_text('[robot]\n[[robot.agent]]\nid = "a"\nlink_length = 0\n[task]\nkind = "reach"\ngoal = [1, 1]\n')
     assert cli_main(["run", str(p), "--no-progress"]) == 2
     err = capsys.readouterr().err
-    assert "t.toml" in err and "agent[0].link_length" in err
+    assert "t.toml" in err and "robot.agent[0].link_length" in err and "Traceback" not in err
 
 
 @pytest.mark.parametrize(("lease", "why"), [("50", "lease_ms: expected an integer >= 100"), ("90000", "at most 60000")])
@@ -372,11 +372,11 @@ def test_bad_lease_is_a_clear_error(tmp_path, chain4, capsys, lease, why):
 def test_config_round_trip(tmp_path):
     from kinswarm.actors.config import ConfigError, load_run_config
 
-    cfg = RunConfig(run_id="x", topology="/t.toml", out=str(tmp_path), goal=(1.0, 2.0))
+    cfg = run_config(EXAMPLES / "chain4.toml", run_id="x", out=str(tmp_path))
     cfg.write(tmp_path / "c.json")
     assert load_run_config(tmp_path / "c.json") == cfg
-    with pytest.raises(ConfigError, match="reward"):
-        RunConfig(run_id="x", topology="/t", out="/o", reward="bogus")
+    with pytest.raises(ConfigError, match="placement"):
+        dataclasses.replace(cfg, placement="bogus")
 
 
 def test_successive_epochs_start_where_the_last_ended(tmp_path, chain4, endpoint):

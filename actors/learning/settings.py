@@ -183,10 +183,11 @@ def _variable(v: object) -> StateVariable:
     if isinstance(v, StateVariable):
         return v
     if isinstance(v, dict):
-        unknown = set(v) - {"name", "sets", "range"}
-        if unknown:
-            raise ValueError(f"extra state variable: unknown field {sorted(unknown)[0]!r} (name, sets, range)")
-        return StateVariable(str(v.get("name", "")), v.get("sets", 0), tuple(v.get("range", (0.0, 0.0))))  # type: ignore[arg-type]
+        unknown, missing = set(v) - {"name", "sets", "range"}, {"name", "sets", "range"} - set(v)
+        if unknown or missing:
+            what = f"unknown field {sorted(unknown)[0]!r}" if unknown else f"missing {sorted(missing)[0]!r}"
+            raise ValueError(f"extra state variable: {what} (it takes name, sets, range)")
+        return StateVariable(v["name"], v["sets"], v["range"])
     if isinstance(v, (list, tuple)) and len(v) == 3:
         return StateVariable(v[0], v[1], tuple(v[2]))  # type: ignore[arg-type]
     raise ValueError(f"extra state variable: expected {{name, sets, range}}, got {v!r}")

@@ -1,0 +1,155 @@
+"""Run files (actors/runfile.py): the one loader. Overrides, layered files, paths, the resolved file that makes the
+run again, and one clear line for every bad input."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+
+import pytest
+from conftest import EXAMPLES, ROOT, free_port, run_config
+from kinswarm.actors.checkpoint import CheckpointError
+from kinswarm.actors.cli import main as cli_main
+from kinswarm.actors.config import ConfigError
+from kinswarm.actors.runfile import load_run, parse_set, read_run_file, task_of
+from kinswarm.protocol.spec import SpecError
+
+CHAIN4 = EXAMPLES / "chain4.toml"
+
+
+def test_defaults_are_written_once_and_resolved_in_full():
+    cfg = load_run(CHAIN4, run_id="r")
+    assert (cfg.epochs, cfg.steps, cfg.seed, cfg.placement) == (60, 500, 0, "process")
+    assert cfg.task == {
+        "kind": "reach",
+        "goal": [4.16, 6.18],
+        "goals": [],
+        "reward": "shaped",
+        "via_width": 0.0,
+    }.copy() | {k: cfg.task[k] for k in ("waypoints", "waypoint_radius", "settle_radius")}
+    assert cfg.scene == {"kind": "free"} and cfg.learner == {} and cfg.robot["name"] == "chain4"
+
+
+@pytest.mark.parametrize(
+    ("text", "path", "value"),
+    [
+        ("learner.gamma=0.97", ("learner", "gamma"), 0.97),
+        ("task.goal=[4, 6]", ("task", "goal"), [4, 6]),
+        ("task.reward=settle", ("task", "reward"), "settle"),  # a bare word is a string
+        ('task.reward="settle"', ("task", "reward"), "settle"),
+        ("run.learn=false", ("run", "learn"), False),
+        ("scene.obstacle=[]", ("scene", "obstacle"), []),
+    ],
+)
+def test_set_values_are_toml(text, path, value):
+    assert parse_set(text) == (path, value)
+
+
+@pytest.mark.parametrize(
+    ("text", "why"),
+    [("gamma=0.9", "SECTION.FIELD=VALUE"), ("learner.gamma", "SECTION.FIELD=VALUE"), ("lerner.gamma=1", "lerner")],
+)
+def test_bad_set_is_one_line(text, why):
+    with pytest.raises(ConfigError, match=why):
+        parse_set(text)
+
+
+@pytest.mark.parametrize(
+    ("sets", "where", "what"),
+    [
+        (["learner.gamma=1.5"], "learner", "gamma must be in [0, 1]"),
+        (['learner.gamma="x"'], "learner.gamma", "expected float, got str"),
+        (["learner.act_from=1"], "learner.act_from", "unknown field"),  # a probe measured and not kept
+        (["learner.tabu_memory=0.1"], "learner.tabu_memory", "unknown field"),
+        (["learner.clearance_state=true"], "learner.clearance_state", "unknown field"),  # the corridor task's now
+        (["task.kind=walk"], "task.kind", "expected one of"),
+        (["task.goal=[1]"], "task.goal", "expected array of length 2"),
+        (["task.colour=1"], "task.colour", "unknown field"),
+        (["run.epochs=0"], "run.epochs", "expected an integer >= 1"),
+        (["run.seed=-1"], "run.seed", "expected an integer >= 0"),
+        (['run.placement="cloud"'], "run.placement", "not one of process, single"),
+        (["run.epochz=3"], "run.epochz", "unknown field"),
+        (["run.lease_ms=50"], "run.lease_ms", "expected an integer >= 100"),
+    ],
+)
+def test_every_field_is_checked_and_named(sets, where, what):
+    with pytest.raises((SpecError, ConfigError)) as e:
+        run_config(CHAIN4, sets)
+    text = str(e.value)
+    assert text.startswith(str(CHAIN4)) or where.startswith("run"), text
+    assert where in text and what in text and "\n" not in text
+
+
+def test_old_topology_files_get_a_hint(tmp_path):
+    p = tmp_path / "old.toml"
+    p.write_text('[robot]\nname = "x"\n[[agent]]\nid = "a"\nlink_length = 1.0\n[task]\ngoal = [1, 1]\n')
+    with pytest.raises(SpecError, match=r"old.toml: agent: unknown table \(\[\[agent\]\] tables go under \[robot\]"):
+        load_run(p)
+
+
+def test_a_file_laid_over_its_base(tmp_path):
+    """`base`: the recipe's second stage is the first with a few fields changed; lists replace, tables merge."""
+    stage2 = read_run_file(EXAMPLES / "corridor7-freeze260.toml")
+    stage1 = read_run_file(EXAMPLES / "corridor7-inner200.toml")
+    guided = read_run_file(EXAMPLES / "corridor7-guided.toml")
+    assert stage2["task"] == stage1["task"] and stage2["robot"] == stage1["robot"] == guided["robot"]
+    assert stage1["task"]["via"] == guided["task"]["via"] and stage1["task"]["reward"] == "settle"
+    assert stage2["learner"] == {**stage1["learner"], "lr_anneal": [200, 240], "count_freeze": 200}
+    assert (stage1["run"]["epochs"], stage2["run"]["epochs"]) == (200, 60)
+    assert stage2["run"]["from"] == str((ROOT / "runs" / "corridor7-inner200").resolve())  # relative to its file
+    with pytest.raises(CheckpointError, match="corridor7-inner200/agents/a1.npz: no such checkpoint"):
+        load_run(EXAMPLES / "corridor7-freeze260.toml")  # the second stage before the first: said before anything
+    looped = tmp_path / "loop.toml"
+    looped.write_text('base = "loop.toml"\n')
+    with pytest.raises(SpecError, match="its own base"):
+        load_run(looped)
+
+
+def test_a_robot_file_and_paths_relative_to_the_file(tmp_path, monkeypatch):
+    (tmp_path / "sub").mkdir()
+    run = tmp_path / "sub" / "run.toml"
+    run.write_text(
+        f'robot = "{CHAIN4}"\n[task]\nkind = "reach"\ngoal = [1.0, 2.0]\n[run]\nscenario = "s.toml"\nepochs = 2\n'
+    )
+    (tmp_path / "sub" / "s.toml").write_text('name = "s"\n[[event]]\nstep = 0\nfault = "lock"\ntarget = "a2"\n')
+    monkeypatch.chdir(tmp_path)
+    cfg = load_run(run, run_id="r")
+    assert cfg.topo().name == "chain4" and cfg.scenario == str(tmp_path / "sub" / "s.toml")
+    (tmp_path / "s2.toml").write_text('name = "s2"\n[[event]]\nstep = 0\nfault = "lock"\ntarget = "a3"\n')
+    assert load_run(run, ['run.scenario="s2.toml"'], run_id="r").scenario == str(tmp_path / "s2.toml")  # the cwd's
+
+
+@pytest.mark.timeout(120)
+def test_the_resolved_file_makes_the_same_run_again(tmp_path):
+    """`<run>/run.toml` holds everything: `kinswarm run` of it gives the same numbers as the original command."""
+    args = ["--epochs", "2", "--steps", "60", "--placement", "single", "--no-progress"]
+    sets = ["--set", "learner.gamma=0.95", "--set", "task.goal=[5.0, 5.0]", "--seed", "4"]
+    first, again = tmp_path / "first", tmp_path / "again"
+    port = f"tcp/127.0.0.1:{free_port()}"
+    assert cli_main(["run", str(CHAIN4), *args, *sets, "--out", str(first), "--listen", port]) == 0
+    assert cli_main(["run", str(first / "run.toml"), "--out", str(again), "--listen", port, "--no-progress"]) == 0
+    a, b = (json.loads((d / "summary.json").read_text()) for d in (first, again))
+    assert a["final_error"] == b["final_error"] and a["goal"] == [5.0, 5.0]
+    ca, cb = (load_run(d / "run.toml", run_id="r") for d in (first, again))
+    assert dataclasses.replace(ca, source="", secret=cb.secret) == dataclasses.replace(cb, source="")
+
+
+def test_the_tasks_goal_schedule():
+    task = task_of(run_config(CHAIN4, ["task.goals=[[1.0, 2.0], [3.0, 4.0]]"]))
+    assert [task.goal(e, 10) for e in range(3)] == [((1.0, 2.0), []), ((3.0, 4.0), []), ((1.0, 2.0), [])]
+    assert task_of(run_config(CHAIN4)).goal(7, 10) == ((4.16, 6.18), [])
+
+
+def test_bad_inputs_reach_the_user_as_one_line(tmp_path, capsys):
+    out = tmp_path / "x"
+    for args in (
+        ["run", str(tmp_path / "nope.toml")],
+        ["run", str(CHAIN4), "--set", "learner.gamma=2"],
+        ["run", str(CHAIN4), "--set", "gamma"],
+        ["run", str(CHAIN4), "--from", str(tmp_path)],
+        ["baseline", str(CHAIN4), "--set", "task.kind=grasp"],
+    ):
+        assert cli_main([*args, "--out", str(out), "--no-progress"]) == 2, args
+        err = capsys.readouterr().err.strip()
+        assert err.startswith("kinswarm: error: ") and "\n" not in err and "Traceback" not in err, err
+        assert not out.exists()
