@@ -38,8 +38,8 @@ def start_split(h: Hosts, tmp: Path, epochs: int, steps: int, seed: int) -> subp
     the leader's process (log: tmp/b.log)."""
     plan = tmp / "plan.toml"
     plan.write_text(
-        f'[plan]\nname = "bench"\nleader = "brain"\n[run]\ntopology = "{ROOT / "examples" / "chain4.toml"}"\n'
-        f"epochs = {epochs}\nsteps = {steps}\nseed = {seed}\n"
+        f'[plan]\nname = "bench"\nleader = "brain"\n[run]\nfile = "{ROOT / "examples" / "chain4.toml"}"\n'
+        f'set = ["run.epochs={epochs}", "run.steps={steps}", "run.seed={seed}"]\n'
         f'[[host]]\nname = "brain"\naddress = "{h.address("brain")}"\nactors = ["sim", "a1"]\n'
         f'[[host]]\nname = "limbs"\naddress = "{h.address("limbs")}"\nactors = ["agents"]\n'
     )

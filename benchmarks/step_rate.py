@@ -20,7 +20,8 @@ import sys
 import tempfile
 from pathlib import Path
 
-from kinswarm.actors.cli import _resolve, build_parser, run_swarm
+from kinswarm.actors.cli import _resolve, build_parser
+from kinswarm.actors.launch import run_swarm
 
 ROOT = Path(__file__).resolve().parent.parent
 FLOOR = ROOT.parent / "shared" / "tools" / "wire_floor.py"

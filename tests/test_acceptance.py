@@ -9,7 +9,8 @@ from pathlib import Path
 
 import pytest
 from conftest import free_port
-from kinswarm.actors.cli import _resolve, build_parser, run_swarm
+from kinswarm.actors.cli import _resolve, build_parser
+from kinswarm.actors.launch import run_swarm
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(1800)]
 

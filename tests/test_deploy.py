@@ -19,8 +19,8 @@ import time
 from pathlib import Path
 
 import pytest
-from kinswarm.actors.cli import run_swarm
 from kinswarm.actors.config import RunConfig
+from kinswarm.actors.launch import run_swarm
 from kinswarm.actors.plan import PlanError, acl, load_plan, local_plan
 from kinswarm.actors.runtime import NetSpec
 from kinswarm.protocol.topology import load_robot

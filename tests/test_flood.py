@@ -24,8 +24,9 @@ import msgpack
 import pytest
 import zenoh
 from conftest import LOCKSTEP_ARGS, free_port
-from kinswarm.actors.cli import _resolve, build_parser, run_swarm
+from kinswarm.actors.cli import _resolve, build_parser
 from kinswarm.actors.config import RunConfig
+from kinswarm.actors.launch import run_swarm
 from kinswarm.actors.runtime import open_session
 from kinswarm.actors.supervisor import Supervisor
 from kinswarm.protocol import codec

@@ -1,38 +1,16 @@
-"""The runtime shell every actor runs in: one Zenoh session factory, an asyncio mailbox, publishers
-with BLOCK congestion control, readiness (every publisher matched before the liveliness token goes up),
-and clean shutdown.
-
-Zenoh callbacks run on a zenoh-owned thread. They only append `(key, bytes)` to a deque and wake the
-event loop once per burst (`call_soon_threadsafe` per message caps a subscriber near 85k msg/s; one
-wake-up per burst is an order of magnitude cheaper). Everything else happens on the loop.
-
-Local delivery (the `single` placement): step messages (keys under `sim/` and `a/`) that a Node sends
-are handed straight to the Nodes of the same session that listen on them — still encoded, signed and
-decoded by the receiver like any other message, and still faulted — instead of a round trip through
-Zenoh's local routing, whose delivery threads run the subscriber callback, take the GIL from the event
-loop and wake it through its self-pipe (measured: ~2/3 of a single-placement step). Zenoh still carries
-every such message to the other sessions (other processes, observers, `kinswarm` tools) and to
-non-Node subscribers of the same session; a Node's step subscriptions hear only other sessions through
-Zenoh (`allowed_origin=REMOTE`), so nothing arrives twice.
-
-Link faults (DESIGN §5, `Node.apply_fault`): drop, delay, duplicate and corrupt act on a node's step
-links only — what it sends and receives under `sim/` and `a/` — never on ctl/, rep/, metrics/, fault/ or
-liveliness, so a faulted swarm stays controllable. With none active, sending and receiving cost one
-attribute check more than without the feature; with some active, received step messages are handed to
-the loop one by one and faulted there, so the RNG, counters and timers are only ever touched on the loop.
-"""
+"""A Node: one actor's presence on the wire. Publishers with BLOCK congestion control, subscriptions into its
+mailbox, readiness (every publisher matched before the liveliness token goes up), decoding with the reasons logged,
+link faults, and clean shutdown. The package's doc (__init__.py) says how messages reach the loop."""
 
 from __future__ import annotations
 
 import asyncio
-import collections
 import dataclasses
-import json
 import logging
 import random
 import time
 from collections.abc import Callable, Iterable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any, TypeVar
 
 import zenoh
@@ -41,178 +19,12 @@ from kinswarm.protocol.faults import ALL, LINK_FAULTS, check_fault, describe
 from kinswarm.protocol.keys import Keys
 from kinswarm.protocol.messages import Fault
 
-LEASE_MS = 1000
-HANDSHAKE_MS = 2000
+from .mailbox import _BUSES, Mailbox, _bus
+
 #: a node logs the first rejected message on each of up to this many keys, then every 1000th: a flood on one key
 #: cannot hide a bad message on another, and the log stays bounded
 LOGGED_KEYS = 100
 M = TypeVar("M")
-
-
-@dataclass(frozen=True)
-class NetSpec:
-    """Everything a process needs to join a swarm's Zenoh network: the one input of the session factory.
-    Written by a host's supervisor for the actors it spawns (`<run>/net/<host>.json`, owner-only: it may
-    hold a password), built from a deploy plan (actors/plan.py) or, for one host, from `--listen`."""
-
-    mode: str = "peer"  # peer | client (of a router) | router
-    listen: tuple[str, ...] = ()
-    connect: tuple[str, ...] = ()
-    lease_ms: int = LEASE_MS
-    must_connect: bool = False  # fail at once if no connect endpoint answers, instead of retrying forever
-    # TLS (endpoints tls/...): paths of the CA, and of this process's certificate and key (its identity)
-    ca: str = ""
-    cert: str = ""
-    key: str = ""
-    mtls: bool = False
-    # user/password authentication: this process's credentials, and the dictionary that checks others'
-    user: str = ""
-    password: str = field(default="", repr=False)
-    dictionary: str = ""
-    acl: dict[str, Any] | None = None  # Zenoh's access_control section, applied to what this process receives
-    close_blocked_ms: int = 0  # several hosts: close a link a BLOCK put waited on this long (0: Zenoh's 5 s)
-
-    def to_json(self) -> str:
-        return json.dumps(dataclasses.asdict(self), indent=2)
-
-    @classmethod
-    def from_json(cls, text: str) -> NetSpec:
-        data = json.loads(text)
-        for k in ("listen", "connect"):
-            data[k] = tuple(data.get(k, ()))
-        return cls(**data)
-
-    def with_(self, **changes: Any) -> NetSpec:
-        return dataclasses.replace(self, **changes)
-
-
-def zenoh_config(spec: NetSpec) -> zenoh.Config:
-    """The one place a Zenoh config is built. Multicast scouting is off: peers find each other only
-    through the endpoints given (and gossip among themselves), never across the network by accident."""
-    c = zenoh.Config()
-
-    def put(key: str, value: Any) -> None:
-        c.insert_json5(key, json.dumps(value))
-
-    put("mode", spec.mode)
-    put("listen/endpoints", list(spec.listen))
-    put("connect/endpoints", list(spec.connect))
-    put("scouting/multicast/enabled", False)
-    put("transport/link/tx/lease", spec.lease_ms)
-    # Re-dial a lost configured endpoint at least once a lease (Zenoh's default backs off to 4 s): a host
-    # back from a cut rejoined 2.1-2.5 s after its link returned with the default, 0.9-1.1 s with this.
-    retry = {"period_init_ms": max(spec.lease_ms // 4, 50), "period_max_ms": spec.lease_ms, "period_increase_factor": 2}
-    put("connect/retry", retry)
-    if spec.close_blocked_ms:
-        # Several hosts: a BLOCK put towards a cut-off host waits this long (Zenoh's default: 5 s) before the
-        # link is closed and its sender freed. On one host a receiver stalled by load must not lose its link.
-        put("transport/link/tx/queue/congestion_control/block/wait_before_close", spec.close_blocked_ms * 1000)
-    # A handshake with a frozen (SIGSTOPped) peer never completes; the 10 s default then also held up
-    # every new session's close (`kinswarm status` took 10 s during a freeze, 0.5 s with 2 s here).
-    put("transport/unicast/open_timeout", HANDSHAKE_MS)
-    put("transport/unicast/accept_timeout", HANDSHAKE_MS)
-    if spec.must_connect:  # an actor whose supervisor is unreachable fails instead of retrying forever
-        put("connect/timeout_ms", 10000)
-        put("connect/exit_on_failure", True)
-    if spec.ca:
-        put("transport/link/tls/root_ca_certificate", spec.ca)
-        if spec.cert:
-            put("transport/link/tls/listen_certificate", spec.cert)
-            put("transport/link/tls/listen_private_key", spec.key)
-        if spec.mtls:
-            put("transport/link/tls/enable_mtls", True)
-            put("transport/link/tls/connect_certificate", spec.cert)
-            put("transport/link/tls/connect_private_key", spec.key)
-    if spec.user:
-        put("transport/auth/usrpwd/user", spec.user)
-        put("transport/auth/usrpwd/password", spec.password)
-    if spec.dictionary:
-        put("transport/auth/usrpwd/dictionary_file", spec.dictionary)
-    if spec.acl is not None:
-        put("access_control", spec.acl)
-    return c
-
-
-def open_session(spec: NetSpec | None = None, **kw: Any) -> zenoh.Session:
-    """The one session factory: `open_session(spec)`, or `open_session(listen=[...], connect=[...])` for the
-    fields of a NetSpec (tests and one-host tools)."""
-    if spec is None:
-        kw = {k: tuple(v) if k in ("listen", "connect") else v for k, v in kw.items()}
-        spec = NetSpec(**kw)
-    return zenoh.open(zenoh_config(spec))
-
-
-class Mailbox:
-    """Thread-safe inbox: zenoh threads push, the event loop pops; one wake-up per burst."""
-
-    def __init__(self, loop: asyncio.AbstractEventLoop) -> None:
-        self._loop = loop
-        self._items: collections.deque[tuple[str, bytes]] = collections.deque()
-        self._ready = asyncio.Event()
-
-    def push(self, key: str, payload: bytes) -> None:  # zenoh thread
-        was_empty = not self._items
-        self._items.append((key, payload))
-        if was_empty:
-            try:
-                self._loop.call_soon_threadsafe(self._ready.set)
-            except RuntimeError:  # loop closed during shutdown: nobody is listening any more
-                pass
-
-    def push_local(self, key: str, payload: bytes) -> None:  # the loop's own thread: no self-pipe write
-        was_empty = not self._items
-        self._items.append((key, payload))
-        if was_empty:
-            self._ready.set()
-
-    async def get(self) -> tuple[str, bytes]:
-        while not self._items:
-            self._ready.clear()
-            if self._items:  # pushed between the check and the clear
-                break
-            await self._ready.wait()
-        return self._items.popleft()
-
-    def __len__(self) -> int:
-        return len(self._items)
-
-
-class LocalBus:
-    """The step subscriptions of the Nodes sharing one session, for local delivery (see the module doc)."""
-
-    def __init__(self) -> None:
-        self.nodes = 0  # open Nodes on the session; the bus goes with the last
-        self._listeners: list[tuple[zenoh.KeyExpr, Node]] = []
-        self._routes: dict[str, tuple[Node, ...]] = {}  # key -> its listeners, one entry per matching listen
-
-    def add(self, key_expr: str, node: Node) -> None:
-        self._listeners.append((zenoh.KeyExpr(key_expr), node))
-        self._routes.clear()
-
-    def remove(self, node: Node) -> None:
-        self._listeners = [(e, n) for e, n in self._listeners if n is not node]
-        self._routes.clear()
-
-    def __bool__(self) -> bool:
-        return bool(self._listeners)
-
-    def route(self, key: str) -> tuple[Node, ...]:
-        nodes = self._routes.get(key)
-        if nodes is None:
-            k = zenoh.KeyExpr(key)
-            nodes = self._routes[key] = tuple(n for e, n in self._listeners if e.intersects(k))
-        return nodes
-
-
-_BUSES: dict[int, tuple[zenoh.Session, LocalBus]] = {}  # by id(session); the entry keeps the session alive
-
-
-def _bus(session: zenoh.Session) -> LocalBus:
-    entry = _BUSES.get(id(session))
-    if entry is None or entry[0] is not session:
-        entry = _BUSES[id(session)] = (session, LocalBus())
-    entry[1].nodes += 1
-    return entry[1]
 
 
 LINK_COUNTS = ("dropped", "delayed", "duplicated", "corrupted")

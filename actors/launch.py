@@ -1,0 +1,147 @@
+"""Launching one run: the supervisor's session, its placement, the progress bar, Ctrl-C handled once, and the run
+directory's records (config.json, run.toml, metrics, summary, plots). `kinswarm run`, `baseline` and `up` and the
+Python API all come through `run_swarm`."""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import os
+import signal
+import sys
+from collections.abc import Iterator
+from pathlib import Path
+
+from kinswarm.actors.config import ConfigError, RunConfig
+from kinswarm.actors.plan import Plan, local_plan
+from kinswarm.actors.runfile import write_resolved
+from kinswarm.actors.runtime import NetSpec, open_session
+from kinswarm.protocol.messages import EpochDone
+from kinswarm.protocol.topology import Topology
+
+
+def write_net(path: Path, spec: NetSpec) -> Path:
+    """Owner-only: a NetSpec may carry a password."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
+    with os.fdopen(fd, "w") as f:
+        f.write(spec.to_json() + "\n")
+    return path
+
+
+@contextlib.contextmanager
+def _signals_stop_once() -> Iterator[None]:
+    """Ctrl-C or SIGTERM cancels the running task once; the supervisor then stops the swarm and the
+    summary is written. More signals until then only say so: a second Ctrl-C cancelling the shutdown
+    would leave the actors without their Stop and the run without its summary."""
+    task, loop = asyncio.current_task(), asyncio.get_running_loop()
+    assert task is not None
+    signals = 0
+
+    def on_signal() -> None:
+        nonlocal signals
+        signals += 1
+        if signals == 1:
+            task.cancel()
+        elif signals == 2:
+            print("kinswarm: stopping the swarm and writing its summary, please wait", file=sys.stderr)
+
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        loop.add_signal_handler(sig, on_signal)
+    try:
+        yield
+    finally:
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            loop.remove_signal_handler(sig)
+
+
+async def _supervise(
+    cfg: RunConfig, topo: Topology, progress: bool, plan: Plan, host: str, wait_s: float = 600.0
+) -> dict:
+    from kinswarm.actors.deploy import control_net
+    from kinswarm.actors.report import write_plots, write_summary
+    from kinswarm.actors.supervisor import ProcessPlacement, SinglePlacement, Supervisor
+
+    out = Path(cfg.out)
+    lead = host == plan.leader
+    sup_id = "main" if lead else host
+    spec = plan.net(host, plan.identity("supervisor", "", host), supervisor=True, topo=topo)
+    try:
+        session = open_session(spec)
+    except Exception as e:
+        where = ", ".join(spec.listen) or ", ".join(spec.connect)
+        hint = "pass --listen tcp/127.0.0.1:PORT" if plan.name == "local" else "check the plan's endpoints"
+        raise ConfigError(
+            f"cannot open the supervisor's session on {where} ({e}); is another run using it? {hint}"
+        ) from None
+    write_net(out / "net" / "cli.json", control_net(plan, host, topo))  # for `kinswarm fault/status`
+
+    def nets(role: str, ident: str) -> Path:
+        identity = plan.identity(role, ident, host)
+        path = out / "net" / f"{identity}.json"
+        return path if path.exists() else write_net(path, plan.net(host, identity, supervisor=False, topo=topo))
+
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=cfg.epochs, unit="epoch", desc=cfg.run_id, dynamic_ncols=True) if lead else None
+
+    def on_epoch(d: EpochDone) -> None:
+        if bar is not None:
+            bar.set_postfix(
+                final=f"{d.final_error:.3f}", mean=f"{d.mean_error:.3f}", steps_s=f"{d.steps / d.seconds:.0f}"
+            )
+            bar.update(1)
+
+    placement: ProcessPlacement | SinglePlacement
+    if cfg.placement == "single":
+        placement = SinglePlacement(cfg, topo, session)
+    else:
+        placement = ProcessPlacement(out / "config.json", nets, out / "logs", supervisor=sup_id)
+    sup = Supervisor(cfg, topo, session, placement, on_epoch=on_epoch, plan=plan, host=host)
+    sup.hosts_wait_s = wait_s
+    with _signals_stop_once():
+        try:
+            result = await sup.run()
+        finally:
+            if bar is not None:
+                bar.close()
+            session.close()
+        if not lead:
+            return {"host": host, "error": result.error, "interrupted": result.interrupted, "restarts": result.restarts}
+        summary = write_summary(
+            out,
+            {
+                "wall_seconds": result.wall_seconds,
+                "interrupted": result.interrupted,
+                "error": result.error,
+                "rejected_messages": result.rejected,
+                "rejected_by_actor": result.rejected_by,
+                "restarts": result.restarts,
+                "tokens_lost": result.tokens_lost,
+            },
+        )
+        write_plots(out)
+    return summary
+
+
+def run_swarm(
+    cfg: RunConfig,
+    topo: Topology,
+    progress: bool = False,
+    plan: Plan | None = None,
+    host: str | None = None,
+    wait_s: float = 600.0,
+) -> dict:
+    """Run one swarm (or, with a deploy plan, one host's share of it) to the end and return its summary
+    (used by the CLI, experiments and tests). Without a plan: the one-host plan (`kinswarm run`)."""
+    plan = plan if plan is not None else local_plan(cfg.listen, cfg.lease_ms)
+    host = host if host is not None else plan.leader
+    out = Path(cfg.out)
+    out.mkdir(parents=True, exist_ok=True)
+    cfg.write(out / "config.json")
+    if host == plan.leader:
+        write_resolved(cfg, out / "run.toml")
+        (out / "metrics.jsonl").write_text("")
+    return asyncio.run(_supervise(cfg, topo, progress, plan, host, wait_s))

@@ -1,0 +1,41 @@
+"""The runtime shell every actor runs in: one Zenoh session factory, an asyncio mailbox, publishers
+with BLOCK congestion control, readiness (every publisher matched before the liveliness token goes up),
+and clean shutdown.
+
+Zenoh callbacks run on a zenoh-owned thread. They only append `(key, bytes)` to a deque and wake the
+event loop once per burst (`call_soon_threadsafe` per message caps a subscriber near 85k msg/s; one
+wake-up per burst is an order of magnitude cheaper). Everything else happens on the loop.
+
+Local delivery (the `single` placement): step messages (keys under `sim/` and `a/`) that a Node sends
+are handed straight to the Nodes of the same session that listen on them — still encoded, signed and
+decoded by the receiver like any other message, and still faulted — instead of a round trip through
+Zenoh's local routing, whose delivery threads run the subscriber callback, take the GIL from the event
+loop and wake it through its self-pipe (measured: ~2/3 of a single-placement step). Zenoh still carries
+every such message to the other sessions (other processes, observers, `kinswarm` tools) and to
+non-Node subscribers of the same session; a Node's step subscriptions hear only other sessions through
+Zenoh (`allowed_origin=REMOTE`), so nothing arrives twice.
+
+Link faults (DESIGN §5, `Node.apply_fault`): drop, delay, duplicate and corrupt act on a node's step
+links only — what it sends and receives under `sim/` and `a/` — never on ctl/, rep/, metrics/, fault/ or
+liveliness, so a faulted swarm stays controllable. With none active, sending and receiving cost one
+attribute check more than without the feature; with some active, received step messages are handed to
+the loop one by one and faulted there, so the RNG, counters and timers are only ever touched on the loop.
+"""
+
+from .mailbox import LocalBus, Mailbox
+from .net import HANDSHAKE_MS, LEASE_MS, NetSpec, open_session, zenoh_config
+from .node import LINK_COUNTS, LinkFault, Node, setup_logging
+
+__all__ = [
+    "HANDSHAKE_MS",
+    "LEASE_MS",
+    "LINK_COUNTS",
+    "LinkFault",
+    "LocalBus",
+    "Mailbox",
+    "NetSpec",
+    "Node",
+    "open_session",
+    "setup_logging",
+    "zenoh_config",
+]
