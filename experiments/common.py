@@ -21,7 +21,7 @@ from typing import Any
 
 from kinswarm.actors.learning.settings import LearnerSettings
 
-from .swarm import RunOutcome, Spec, learner_overrides, run_spec
+from .swarm import RunOutcome, Spec, json_default, learner_overrides, run_spec
 
 PLACEMENT_NOTE = (
     "All swarm runs use `kinswarm run`'s machinery — the same supervisor, agent and simulator actors "
@@ -219,7 +219,7 @@ class Report:
             f"{_rel(ctx.out.parent)}` redoes only this experiment, reusing every finished run there",
         ]
         body = "\n\n".join(["\n".join(head), *self.parts])
-        body += "\n\n## Settings\n\n```json\n" + json.dumps(settings_used, indent=1, default=list) + "\n```\n"
+        body += "\n\n## Settings\n\n```json\n" + json.dumps(settings_used, indent=1, default=json_default) + "\n```\n"
         (ctx.out / "report.md").write_text(body)
         res = {
             "experiment": ctx.name,
@@ -232,7 +232,7 @@ class Report:
             "settings": settings_used,
             **self.results,
         }
-        (ctx.out / "results.json").write_text(json.dumps(_clean(res), indent=1, default=list) + "\n")
+        (ctx.out / "results.json").write_text(json.dumps(_clean(res), indent=1, default=json_default) + "\n")
         return ctx.out / "report.md"
 
 

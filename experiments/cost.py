@@ -23,7 +23,7 @@ import numpy as np
 from kinswarm.actors.checkpoint import load_checkpoint
 from kinswarm.actors.learning.fuzzy import FuzzyPartition
 from kinswarm.actors.learning.learner import Learner
-from kinswarm.actors.learning.settings import LearnerSettings
+from kinswarm.actors.learning.settings import N_ACTIONS, LearnerSettings
 
 from .common import Context, Report, mean_std, plt_module, pm, run_specs
 from .swarm import Spec, chain_topology
@@ -54,7 +54,7 @@ class CentralisedFuzzyQ:
 
     def __init__(self, n: int, settings: LearnerSettings, seed: int = 0) -> None:
         self.n, self.st = n, settings
-        self.n_actions = settings.n_actions**n
+        self.n_actions = N_ACTIONS**n
         self.part = FuzzyPartition(settings)  # one agent's sets; the centralised state repeats them n times
         self.n_sets = np.tile(np.asarray(settings.n_sets, dtype=np.uint64), n)
         self.index: dict[int, int] = {}
@@ -173,7 +173,7 @@ def run(ctx: Context) -> dict[str, Any]:
     topo_dir.mkdir(parents=True, exist_ok=True)
     topos = {n: str(chain_topology(n, topo_dir / f"chain{n}.toml").resolve()) for n in ns}
     specs = {
-        (n, seed): Spec(f"cost-chain{n}", seed=seed, epochs=1, steps=swarm_steps, topology=topos[n])
+        (n, seed): Spec(f"cost-chain{n}", seed=seed, epochs=1, steps=swarm_steps, file=str(topos[n]))
         for n in ns
         for seed in ctx.seed_list
     }

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from kinswarm.actors.learning.settings import LearnerSettings
+from kinswarm.actors.learning.settings import LearnerSettings, StateVariable
 
 from .common import Context, Report, frac_within, mean_std, plt_module, pm, run_specs, settings
 from .goals import HALF, TEST_SIZE, halton, quadtree, training_order
@@ -49,7 +49,7 @@ COARSE_TEXT = "n_sets (2, 8, 6, 5, 5, 5) with q over ±1000 rad (q out of the st
 # tip (agent.py, state.goal_along_motion), with 7 fine sets over ±1.5: g1 and g2 (5 sets over ±24) cannot tell a
 # tip 0.6 from the goal from one at the goal, so frozen swarms stopped short or overshot. Measured on Level-3 (2
 # epochs per goal, seeds 0-2, 100 test goals): mean 0.446 -> 0.243, within 0.5 85 % -> 92 %.
-G_PERP = {"extra_state": ("g_perp",), "extra_sets": (7,), "extra_ranges": ((-1.5, 1.5),)}
+G_PERP = {"extra_state": (StateVariable("g_perp", 7, (-1.5, 1.5)),)}
 G_PERP_TEXT = f"{COARSE_TEXT}, plus g_perp (7 sets over ±1.5) as a 7th state variable"
 # And g3 unsigned (LearnerSettings.g3): a goal straight behind the tip - an arm too long for a goal near it - fell
 # on both ends of g3's range (+pi, -pi), which share no set; frozen swarms stopped there, error 3.5-4.4 (seed 0,
@@ -95,7 +95,7 @@ REWARD = "graded"
 # each: deterministic). "greedy" is each joint alone moving to bring the tip nearest (sim/baseline.py): a per-joint
 # policy greedy in the distance, which is what the shaped reward pays for. Not a bound on learning (the swarm's
 # median beats it).
-REFERENCES = {"pseudo-inverse": "baseline", "greedy per joint": "greedy"}
+REFERENCES = {"pseudo-inverse": "pinv", "greedy per joint": "greedy"}
 
 
 @dataclass(frozen=True)
@@ -106,6 +106,9 @@ class Training:
     learner: tuple
     main: bool = True  # part of the level sweep (else a comparison)
     successive: bool = False  # tested the paper's way: each test goal from where the last one ended (same training)
+    train_successive: bool = (
+        False  # trained so too: each epoch from where the last ended (research: successive_training)
+    )
     min_seeds: int = 0  # at least this many seeds (the full run only)
     reward: str = REWARD
 
@@ -194,13 +197,14 @@ def train_and_test(ctx: Context, trainings: list[Training], second_level: int, w
         for seed in seeds_of(t):
             goals = training_order(quadtree(level), math.ceil(epochs / 4**level), seed)[:epochs]
             train_specs[(label, seed)] = Spec(
-                f"gen-train-L{level}-e{epochs}{t.suffix}",
+                f"gen-train-L{level}-e{epochs}{t.suffix}{'-succ' if t.train_successive else ''}",
                 seed=seed,
                 epochs=epochs,
                 steps=train_steps,
                 goals=goals,
                 learner=t.learner,
                 reward=t.reward,
+                successive=t.train_successive,
                 checkpoint=True,
             )
     trained = dict(zip(train_specs, run_specs(ctx, [*train_specs.values()], "train"), strict=True))

@@ -17,11 +17,10 @@ import math
 from typing import Any
 
 from kinswarm.actors.grasp_report import BALANCE, epoch_quality, write_grasp_plots
-from kinswarm.actors.learning.grasp import GraspParams
-from kinswarm.protocol.topology import load_topology
+from kinswarm.actors.tasks.grasp_reward import GraspParams
 
 from .common import Context, Report, plt_module, run_specs
-from .swarm import ROOT, RunOutcome, Spec
+from .swarm import ROOT, RunOutcome, Spec, resolved
 
 GRASP3 = ROOT / "examples" / "grasp3.toml"
 CONTACT = {"tip": "a sphere of the link radius at each fingertip presses", "link": "the distal link's capsule presses"}
@@ -29,8 +28,8 @@ BAR = 0.8  # share of the last 20 epochs
 LAST = 20
 
 
-def _score(o: RunOutcome, topo: Any) -> dict[str, Any]:
-    q = [epoch_quality(r, topo) for r in o.rows]
+def _score(o: RunOutcome, topo: Any, obj: Any) -> dict[str, Any]:
+    q = [epoch_quality(r, topo, obj) for r in o.rows]
     tail = q[-LAST:]
     share = lambda key: sum(x[key] for x in tail) / len(tail)  # noqa: E731
     return {
@@ -64,7 +63,8 @@ def frozen_spec(trained: RunOutcome, name: str) -> Spec:
         seed=t.seed,
         reward=t.reward,
         learner=t.learner,
-        topology=t.topology,
+        task=t.task,
+        file=t.file,
         epochs=1,
         steps=t.steps,
         from_dir=str(trained.out),
@@ -74,9 +74,11 @@ def frozen_spec(trained: RunOutcome, name: str) -> Spec:
 
 
 def run(ctx: Context) -> dict[str, Any]:
-    topo = load_topology(GRASP3)
+    cfg = resolved(GRASP3)
+    topo, obj = cfg.topo(), cfg.scene_spec.object
+    assert obj is not None
     epochs, steps = (3, 60) if ctx.quick else (30, 400)
-    base = {"topology": str(GRASP3), "epochs": epochs, "steps": steps}
+    base = {"file": str(GRASP3), "epochs": epochs, "steps": steps}
     specs = [
         Spec(name=f"grasp-shaped-s{s}", seed=s, reward="shaped", checkpoint=True, **base)  # type: ignore[arg-type]
         for s in ctx.seed_list
@@ -84,7 +86,7 @@ def run(ctx: Context) -> dict[str, Any]:
     variants = ("paper", "contact", "global", "force")
     specs += [Spec(name=f"grasp-{v}-s0", seed=0, reward=v, **base) for v in variants]  # type: ignore[arg-type]
     outcomes = run_specs(ctx, specs, desc="grasp")
-    scores = [_score(o, topo) for o in outcomes]
+    scores = [_score(o, topo, obj) for o in outcomes]
     # the trained swarms frozen (`--learn off --explore off`): one epoch from the start configuration
     frozen_specs = [
         frozen_spec(o, f"grasp-shaped-frozen-s{o.spec.seed}") for o in outcomes if o.spec.reward == "shaped"
@@ -93,16 +95,14 @@ def run(ctx: Context) -> dict[str, Any]:
     # epoch add to the frozen policy
     replay_specs = [dataclasses.replace(f, name=f"grasp-shaped-greedy-s{f.seed}", learn=True) for f in frozen_specs]
     frozen = run_specs(ctx, frozen_specs + replay_specs, desc="grasp frozen")
-    frozen_q = {o.spec.seed: epoch_quality(o.rows[-1], topo) for o in frozen if not o.spec.learn}
-    greedy_q = {o.spec.seed: epoch_quality(o.rows[-1], topo) for o in frozen if o.spec.learn}
+    frozen_q = {o.spec.seed: epoch_quality(o.rows[-1], topo, obj) for o in frozen if not o.spec.learn}
+    greedy_q = {o.spec.seed: epoch_quality(o.rows[-1], topo, obj) for o in frozen if o.spec.learn}
     rep = Report(ctx, "Three-finger grasp by 13 nested agents", "5.5 (Figs. 24-29)")
-    obj = topo.object
-    assert obj is not None
     rep.text(
         "A compound grasp agent (no DOF) over three 4-joint fingers around a fixed rectangle (examples/grasp3.toml:"
         " finger 1 opposes fingers 2 and 3; balanced with pure normal forces at fn1 = fn2 + fn3, fn2 = fn3). "
         f"Contacts: Fig. 25's spring-dampers (kn = {obj.kn:g}, kt = {obj.kt:g}, cn = {obj.cn:g}, ct = {obj.ct:g}, "
-        f"mu = {obj.mu:g}, sim/contact.py), contact = {obj.contact} ({CONTACT[obj.contact]}). "
+        f"mu = {obj.mu:g}, sim/scenes/contact.py), contact = {obj.contact} ({CONTACT[obj.contact]}). "
         f"Training: {epochs} epochs x {steps} steps (paper: 200 x 500), 1 degree per action (`shaped`: 0.1 degree "
         f"within {GraspParams.D_fine} of the contact goal).",
         "",
@@ -114,7 +114,7 @@ def run(ctx: Context) -> dict[str, Any]:
         "",
         f"**Good grasp** at an epoch's last step: all fingertips touch (fn > 0) inside their friction cones, |F| < "
         f"{BALANCE} x mean fn (force units) and |tau| < {BALANCE} x mean fn x L, L = "
-        f"{topo.object.char_length if topo.object else 0} (force x length units). The issue's bar: good in >= "
+        f"{obj.char_length} (force x length units). The issue's bar: good in >= "
         f"{BAR:.0%} of the last {LAST} epochs, in every one of 5 seeds.",
     )
     rows = []
@@ -187,7 +187,7 @@ def run(ctx: Context) -> dict[str, Any]:
     )
     plt = plt_module()
     first = next(o for o in outcomes if o.spec.reward == "shaped")
-    for path in write_grasp_plots(ctx.out, topo, first.rows, plt):
+    for path in write_grasp_plots(ctx.out, topo, obj, first.rows, plt):
         caption = {
             "grasp.png": "Figs. 24a/29: the fingers at the end of four epochs (shaped, seed 0)",
             "grasp_forces.png": "Figs. 26-27: |net force| and |net torque| over the steps of four epochs, with the "
@@ -198,7 +198,7 @@ def run(ctx: Context) -> dict[str, Any]:
         rep.figure(path.name, caption)
     fig, ax = plt.subplots(figsize=(7, 3.6))
     for o in outcomes:
-        q = [epoch_quality(r, topo) for r in o.rows]
+        q = [epoch_quality(r, topo, obj) for r in o.rows]
         rel = [x["net_force"] / x["mean_fn"] if x["mean_fn"] > 0 else math.nan for x in q]
         ax.plot(rel, label=f"{o.spec.reward} s{o.spec.seed}", lw=1)
     ax.axhline(BALANCE, color="k", ls="--", lw=0.8)

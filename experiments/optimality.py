@@ -14,10 +14,9 @@ from typing import Any
 
 import numpy as np
 from kinswarm.actors.report import arm_points
-from kinswarm.protocol.topology import load_topology
 
 from .common import Context, Report, band, mean_std, plt_module, pm, run_specs, settings
-from .swarm import CHAIN4, RunOutcome, Spec
+from .swarm import CHAIN4, RunOutcome, Spec, robot_and_goal
 
 PAPER_LS_DEG = (0.0, 24.1, 53.7, 59.8)  # §5.1: the LS-optimal angles Q_1..Q_4
 PAPER_PINV_EFFORT = 4.48  # rad, §5.1 (Fig. 8's reference)
@@ -58,15 +57,13 @@ def run(ctx: Context) -> dict[str, Any]:
     s_values = S_QUICK if ctx.quick else S_FULL
     epochs, steps = (3, 100) if ctx.quick else (EPOCHS, 500)
     early = min(EARLY, epochs)
-    topo = load_topology(CHAIN4)
-    goal = topo.goal
-    assert goal is not None
+    topo, goal = robot_and_goal(CHAIN4)
     train = {
         (s, seed): Spec(f"opt-s{s}", seed=seed, epochs=epochs, steps=steps, learner=settings(s=s), checkpoint=True)
         for s in s_values
         for seed in ctx.seed_list
     }
-    pinv = Spec("pinv", seed=0, epochs=1, steps=steps, controller="baseline", observe=True)
+    pinv = Spec("pinv", seed=0, epochs=1, steps=steps, controller="pinv", observe=True)
     trained = dict(zip(train, run_specs(ctx, [*train.values()], "train"), strict=True))
     evals = {
         k: Spec(

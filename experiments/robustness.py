@@ -17,11 +17,10 @@ from typing import Any
 import numpy as np
 from kinswarm.actors.scenario import load_scenario
 from kinswarm.protocol.faults import describe
-from kinswarm.protocol.topology import load_topology
 
 from .common import DEFAULTS, Context, Report, frac_within, mean_std, plt_module, pm, run_specs, settings
 from .optimality import EPOCHS as OPT_EPOCHS
-from .swarm import CHAIN4, ROOT, RunOutcome, Spec
+from .swarm import CHAIN4, ROOT, RunOutcome, Spec, robot_and_goal
 
 SCENARIOS = ("paper-recovery", "paper-fail-disturb-fail", "paper-locked")
 CONDITIONS = ("frozen", "learning", "scratch", "baseline")
@@ -54,7 +53,7 @@ def run(ctx: Context) -> dict[str, Any]:
             specs[(sc, "frozen", seed)] = Spec(f"rob-{sc}-frozen", from_dir=t, learn=False, explore=False, **common)
             specs[(sc, "learning", seed)] = Spec(f"rob-{sc}-learning", from_dir=t, **common)
             specs[(sc, "scratch", seed)] = Spec(f"rob-{sc}-scratch", **common)
-            specs[(sc, "baseline", seed)] = Spec(f"rob-{sc}-baseline", controller="baseline", **common)
+            specs[(sc, "baseline", seed)] = Spec(f"rob-{sc}-baseline", controller="pinv", **common)
     outs = dict(zip(specs, run_specs(ctx, [*specs.values()], "trials"), strict=True))
 
     tail = min(TAIL, steps // 2)
@@ -70,7 +69,7 @@ def run(ctx: Context) -> dict[str, Any]:
                 f"swing_last_{tail}": [max(e[-tail:]) - min(e[-tail:]) for e in errs],
                 "mean_error": [float(np.mean(e)) for e in errs],
             }
-    topo = load_topology(CHAIN4)
+    topo = robot_and_goal(CHAIN4)[0]
     faults = {sc: _fault_times(ROOT / "scenarios" / f"{sc}.toml", topo) for sc in SCENARIOS}
     rep = Report(ctx, "Robustness: the paper's fault timelines", "5.3, Figs. 13-22")
     rep.results.update(

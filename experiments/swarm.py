@@ -115,10 +115,19 @@ class Spec:
             d["scenario"] = _content(self.scenario)
         if not with_epochs:
             d.pop("epochs")
-        return hashlib.sha256(json.dumps(d, sort_keys=True, default=list).encode()).hexdigest()[:16]
+        return hashlib.sha256(json.dumps(d, sort_keys=True, default=json_default).encode()).hexdigest()[:16]
 
 
 _RUN_FIELDS = ("epochs", "steps", "seed", "learn", "explore", "successive", "controller", "action_deg", "from_dir")
+
+
+def json_default(o: Any) -> Any:
+    """json.dumps's default for what settings hold: dataclasses (StateVariable) as tables, the rest as lists."""
+    if dataclasses.is_dataclass(o) and not isinstance(o, type):
+        return dataclasses.asdict(o)
+    if isinstance(o, Path):
+        return str(o.relative_to(ROOT)) if o.is_relative_to(ROOT) else str(o)
+    return list(o)
 
 
 def _listed(v: Any) -> Any:
@@ -134,6 +143,20 @@ def _normalised(learner: dict[str, Any]) -> dict[str, Any]:
     """Learner overrides without those equal to the default, so equal runs share a cache entry."""
     defaults = LearnerSettings()
     return {k: v for k, v in learner.items() if k == "ranges" or _listed(getattr(defaults, k)) != v}
+
+
+def resolved(file: str | Path) -> RunConfig:
+    """A run file as the loader resolves it, for its robot, scene and task (nothing runs: a run it continues need
+    not exist yet)."""
+    return resolve(read_run_file(file), str(file), [(("run", "from"), None)], run_id="x", out=Path("."), listen=LISTEN)
+
+
+def robot_and_goal(file: str | Path) -> tuple[Topology, Goal]:
+    """A run file's robot and its task's goal (of the first epoch)."""
+    from kinswarm.actors.runfile import task_of
+
+    cfg = resolved(file)
+    return cfg.topo(), task_of(cfg).goal(0, cfg.steps)[0]
 
 
 def _content(path: str) -> str:
@@ -293,7 +316,7 @@ def run_spec(spec: Spec, runs: Path) -> RunOutcome:
         if spec.observe:
             _write_trace(out / "trace.npz", cfg, topo, captured)
         record = {**dataclasses.asdict(spec), "identity_wo_epochs": spec.identity(with_epochs=False)}
-        (out / "spec.json").write_text(json.dumps(record, indent=1, default=list) + "\n")  # last: marks it done
+        (out / "spec.json").write_text(json.dumps(record, indent=1, default=json_default) + "\n")  # last: marks it done
         cached = out
     summary = json.loads((cached / "summary.json").read_text())
     rows = read_metrics(cached)[: spec.epochs]

@@ -105,7 +105,7 @@ if __name__ == "__main__":
     runs = Path(sys.argv[1])
     with worker_pool(2) as pool:
         for seed in range(4):
-            pool.submit(_run_one, (Spec("long", seed=seed, epochs=100, steps=500, topology=str(CHAIN4)), str(runs)))
+            pool.submit(_run_one, (Spec("long", seed=seed, epochs=100, steps=500, file=str(CHAIN4)), str(runs)))
         while len(pool._processes) < 2 or sum(1 for m in runs.glob("*/metrics.jsonl") if m.stat().st_size) < 2:
             time.sleep(0.1)  # both workers are in a run: an epoch has ended in each
         print(*pool._processes, flush=True)
@@ -194,50 +194,101 @@ def test_run_cache_reuses_a_longer_run(tmp_path, monkeypatch):
     assert short.out == long.out and short.out.is_absolute() and short.final_errors == long.final_errors[:1]
     own = run_spec(Spec("c", epochs=1, steps=40, goals=goals, checkpoint=True), runs)
     assert own.out != long.out and own.final_errors == short.final_errors  # bit-identical, as promised
-    assert json.loads((long.out / "goals.json").read_text()) == [list(g) for g in goals]
+    assert json.loads((long.out / "config.json").read_text())["task"]["goals"] == [list(g) for g in goals]
     assert long.rows[1]["final_error"] != long.rows[0]["final_error"]  # a different goal per epoch
 
 
 @pytest.mark.timeout(90)
-def test_run_cache_serves_another_checkout_and_older_caches(tmp_path):
-    """A cached run is known by its files' content, not their paths: a copied checkout (another topology path) with
-    a copied cache (another --out) reuses it, a frozen evaluation `--from` it too; so does a cache written when
-    identities hashed absolute paths. An edited topology file is not served."""
+def test_run_cache_serves_another_checkout(tmp_path):
+    """A cached run is known by what it runs (the resolved robot, scene, task and learner), not by its files' paths:
+    a copied checkout (another run-file path) with a copied cache (another --out) reuses it, a frozen evaluation
+    `--from` it too. An edited run file is not served."""
     a = tmp_path / "a"
     a.mkdir()
     (a / "chain4.toml").write_text(CHAIN4.read_text())
     one = tmp_path / "one" / "runs"
 
-    def specs(topo: Path, from_dir: Path | None) -> tuple[Spec, Spec]:
-        train = Spec("c", epochs=1, steps=20, topology=str(topo), checkpoint=True)
-        frozen = Spec("f", epochs=1, steps=20, topology=str(topo), learn=False, explore=False, from_dir=str(from_dir))
+    def specs(file: Path, from_dir: Path | None) -> tuple[Spec, Spec]:
+        train = Spec("c", epochs=1, steps=20, file=str(file), checkpoint=True)
+        frozen = Spec("f", epochs=1, steps=20, file=str(file), learn=False, explore=False, from_dir=str(from_dir))
         return train, frozen
 
     train = run_spec(specs(a / "chain4.toml", None)[0], one)
     frozen = run_spec(specs(a / "chain4.toml", train.out)[1], one)
 
     shutil.copytree(a, tmp_path / "b")
-    topo_b = tmp_path / "b" / "chain4.toml"
+    file_b = tmp_path / "b" / "chain4.toml"
     shutil.copytree(one, tmp_path / "two" / "runs")
     two = tmp_path / "two" / "runs"
-    t2 = find_cached(specs(topo_b, None)[0], two)
+    t2 = find_cached(specs(file_b, None)[0], two)
     assert t2 == (two / train.out.name).resolve()
-    assert find_cached(specs(topo_b, t2)[1], two) == (two / frozen.out.name).resolve()
+    assert find_cached(specs(file_b, t2)[1], two) == (two / frozen.out.name).resolve()
 
-    shutil.copytree(two, tmp_path / "old" / "runs")  # as written before: identities of absolute paths
-    old = tmp_path / "old" / "runs"
-    for d in (train.out.name, frozen.out.name):
-        rec = json.loads((old / d / "spec.json").read_text())
-        fields = {k: v for k, v in rec.items() if k in Spec.__dataclass_fields__}
-        rec["identity_wo_epochs"] = Spec(**fields).identity(False, portable=False)
-        assert rec["identity_wo_epochs"] != Spec(**fields).identity(False)
-        (old / d / "spec.json").write_text(json.dumps(rec))
-    t3 = find_cached(specs(topo_b, None)[0], old)
-    assert t3 == (old / train.out.name).resolve()
-    assert find_cached(specs(topo_b, t3)[1], old) == (old / frozen.out.name).resolve()
+    file_b.write_text(file_b.read_text().replace("initial_deg = 10.0", "initial_deg = 11.0", 1))
+    assert find_cached(specs(file_b, None)[0], two) is None
 
-    topo_b.write_text(topo_b.read_text().replace("initial_deg = 10.0", "initial_deg = 11.0", 1))
-    assert find_cached(specs(topo_b, None)[0], two) is None
+
+@pytest.mark.timeout(180)
+def test_quick_corridor_experiment(tmp_path):
+    out = tmp_path / "x"
+    assert kinswarm(["experiment", "corridor", "--quick", "--seeds", "1", "--out", str(out)]) == 0
+    d = out / "corridor"
+    report = (d / "report.md").read_text()
+    assert "kinswarm experiment corridor" in report and "seeds:" in report and "single" in report
+    assert "| " in report and "paper" in report.lower() and "quick" in report
+    for fig in ("corridor.png", "frozen.png", "learning.png"):
+        assert (d / fig).stat().st_size > 1000, fig
+        assert f"]({fig})" in report
+    res = json.loads((d / "results.json").read_text())
+    assert res["experiment"] == "corridor" and res["quick"] is True and res["steps"] == 100
+    assert set(res["configs"]) == {"paper", "inner-200", "freeze-260"}
+    for per in res["configs"].values():
+        seed = per["seeds"]["0"]
+        assert 0.0 <= seed["success_last"] <= 1.0 and seed["frozen_collisions"] >= 0
+        assert 0.0 <= seed["strict_last"] <= seed["success_last"]  # no collision at all: within the last 100 too
+        assert seed["frozen_min_clearance"] >= -1e-5  # solid walls in the frozen run too
+        assert isinstance(seed["frozen_success"], bool) and isinstance(seed["tabu_success"], bool)
+        assert isinstance(seed["shield_success"], bool) and seed["shield_collisions"] >= 0
+        assert per["bar_training_met"] is False and per["bar_frozen_met"] is False  # one seed never meets a bar
+    # the recipe's second stage trains on from the first stage's trained swarm (`--from`)
+    cont = res["configs"]["freeze-260"]
+    assert cont["continues"] == "inner-200" and cont["file"] == "examples/corridor7-freeze260.toml"
+    cfg = json.loads((out / "runs" / cont["seeds"]["0"]["train_run"] / "config.json").read_text())
+    assert Path(cfg["from_dir"]).name == res["configs"]["inner-200"]["seeds"]["0"]["train_run"]
+    assert cfg["learner"]["lr_anneal"] == [200, 240] and cfg["learner"]["count_freeze"] == 200
+
+
+@pytest.mark.timeout(240)
+def test_quick_grasp_experiment(tmp_path):
+    from kinswarm.experiments import run_experiment
+
+    res = run_experiment("grasp", seeds=1, quick=True, out=tmp_path)["grasp"]
+    out = tmp_path / "grasp"
+    for f in ("report.md", "results.json", "grasp.png", "grasp_forces.png", "grasp_cone.png", "grasp_balance.png"):
+        assert (out / f).is_file(), f
+    scores = res["scores"]
+    assert [s["reward"] for s in scores] == ["shaped", "paper", "contact", "global", "force"]
+    for s in scores:
+        assert s["epochs"] == 3 and 0.0 <= s["good_share_last"] <= 1.0
+        assert s["meets_bar"] == (s["good_share_last"] >= 0.8)
+    results = json.loads((out / "results.json").read_text())
+    assert results["quick"] and results["bar"] == {"share": 0.8, "last": 20, "balance": 0.1}
+    # the trained swarm replayed frozen (--learn off --explore off) and greedy but learning (--learn on)
+    for replay in ("frozen", "greedy_learning"):
+        q = results[replay]["0"]
+        assert set(q) >= {"good", "net_force", "net_torque", "mean_fn"} and q["net_force"] >= 0.0
+    assert "frozen (`--learn off --explore off`) it ends good in" in (out / "report.md").read_text()
+
+
+@pytest.mark.research
+@pytest.mark.timeout(600)
+@pytest.mark.parametrize("name", ["corridor_rounds", "successive_training", "grasp_epsilon_decay"])
+def test_research_runs(tmp_path, name):
+    """Research is not product, but it stays runnable: each study's smoke version."""
+    from kinswarm.experiments.research.__main__ import main as research
+
+    assert research([name, "--quick", "--jobs", "1", "--out", str(tmp_path)]) == 0
+    assert (tmp_path / name / "results.json").is_file()
 
 
 @pytest.mark.slow
@@ -247,24 +298,3 @@ def test_all_experiments_full(tmp_path):
     assert kinswarm(["experiment", "all", "--seeds", "3", "--jobs", "2", "--out", str(tmp_path)]) == 0
     gen = json.loads((tmp_path / "generalisation" / "results.json").read_text())
     assert gen["per_level"]["Level-3"]["test_set_0"]["frac_within_0_5"] > 0.5
-
-
-def test_frozen_runs_are_not_reused_from_before_the_counts_were_frozen():
-    """A cached run is reused by its spec's identity. Frozen evaluations changed meaning in 6de7b7e (the
-    fictitious-play counts stay as trained), so their identity changed; training runs' did not."""
-    import dataclasses
-    import hashlib
-
-    from kinswarm.experiments.swarm import Spec
-
-    def identity_before(spec: Spec) -> str:  # Spec.identity as it was before 6de7b7e
-        d = dataclasses.asdict(spec)
-        for k in ("name", "checkpoint", "successive"):
-            d.pop(k)
-        return hashlib.sha256(json.dumps(d, sort_keys=True, default=list).encode()).hexdigest()[:16]
-
-    train = Spec("t", seed=0, epochs=2, steps=10)
-    frozen = Spec("t", seed=0, epochs=2, steps=10, learn=False, explore=False)
-    # (identities hashed absolute paths then: portable=False)
-    assert train.identity(portable=False) == identity_before(train)
-    assert frozen.identity(portable=False) != identity_before(frozen)
