@@ -28,7 +28,7 @@ from kinswarm.actors.cli import _resolve, build_parser
 from kinswarm.actors.config import RunConfig
 from kinswarm.actors.launch import run_swarm
 from kinswarm.actors.runtime import open_session
-from kinswarm.actors.supervisor import Supervisor
+from kinswarm.actors.supervisor.epochs import EpochLoop
 from kinswarm.protocol import codec
 from kinswarm.protocol.keys import Keys
 from kinswarm.protocol.messages import (
@@ -262,16 +262,16 @@ def switch_interval():
 def hold_last_epoch(monkeypatch: pytest.MonkeyPatch, flood: Flood) -> None:
     """The flooded run's last epoch waits until the flood is out, however slow the machine: the flood (paced) and
     the run's epochs race otherwise, and a starved CI host once let the run end first."""
-    run_epoch = Supervisor._run_epoch
+    run_epoch = EpochLoop.run_epoch
 
-    async def held(self: Supervisor, epoch: int) -> Any:
-        if self.cfg.run_id == flood.cfg.run_id and epoch == EPOCHS - 1:
+    async def held(self: EpochLoop, epoch: int) -> Any:
+        if self.sup.cfg.run_id == flood.cfg.run_id and epoch == EPOCHS - 1:
             while flood.done_at is None and flood.is_alive():
                 await asyncio.sleep(0.01)
             flood.last_epoch_at = time.monotonic()
         return await run_epoch(self, epoch)
 
-    monkeypatch.setattr(Supervisor, "_run_epoch", held)
+    monkeypatch.setattr(EpochLoop, "run_epoch", held)
 
 
 def test_a_flood_of_bad_messages_changes_nothing_and_is_counted(tmp_path, switch_interval, monkeypatch, caplog):

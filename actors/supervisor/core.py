@@ -1,0 +1,388 @@
+"""The supervisor: spawns the simulator and the agents (placements.py), waits until every one is wired and alive,
+runs the epochs, gathers metrics (recorder.py), has the agents checkpoint, applies faults (faults.py) and the restart
+policy (restarts.py), keeps several hosts in step (hosts.py), and stops everything it started.
+
+One mailbox, handled in order on the loop: the run's messages, and the supervisor's own events — an actor's end, a
+restart or thaw coming due, a host's silence, the status tick — posted there by callbacks and timers. Every wait is
+on that mailbox (with a deadline), none polls. `run()` owns every resource it opens (an AsyncExitStack) and every
+timer it arms, and leaves none behind.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+import socket
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import zenoh
+from kinswarm.actors.config import RunConfig
+from kinswarm.actors.plan import Plan, local_plan
+from kinswarm.actors.runfile import task_of
+from kinswarm.actors.runtime import Node
+from kinswarm.protocol.keys import Keys
+from kinswarm.protocol.messages import (
+    Bye,
+    EpochDone,
+    Event,
+    Fault,
+    Heartbeat,
+    JointStatus,
+    Saved,
+    Stop,
+    SwarmStatus,
+)
+from kinswarm.protocol.topology import Topology
+
+from .epochs import EpochLoop
+from .faults import THAW, FaultRouter
+from .hosts import GRACE, SILENT, HostError, HostWatch
+from .placements import EXIT, ActorId, Placement, parse_exit
+from .recorder import Recorder
+from .restarts import RestartBudgetSpent, RestartPolicy
+
+log = logging.getLogger("kinswarm.supervisor")
+ALIVE, RESPAWN, STATUS = "__alive__", "__respawn__", "__status__"  # the supervisor's own mailbox items
+
+
+class SwarmError(RuntimeError):
+    pass
+
+
+class NoMessage(SwarmError):
+    """The awaited message did not come in time."""
+
+
+class _Down(Exception):
+    """Someone asked the swarm to stop (`kinswarm down`: a Stop on ctl/stop)."""
+
+
+def actors_of(cfg: RunConfig, topo: Topology) -> list[ActorId]:
+    if cfg.controller != "agents":
+        return [("sim", "sim"), ("controller", cfg.controller)]
+    return [("sim", "sim"), *(("agent", a) for a in topo.order)]
+
+
+@dataclass
+class RunResult:
+    epochs: list[EpochDone] = field(default_factory=list)
+    interrupted: bool = False
+    error: str = ""  # why the run failed (restart budget exhausted, the sim died, ...)
+    wall_seconds: float = 0.0
+    rejected: int = 0  # messages every actor refused (from their Bye) plus the supervisor's own
+    rejected_by: dict[str, int] = field(default_factory=dict)
+    restarts: dict[str, int] = field(default_factory=dict)
+    # liveliness tokens gone while training, by actor: a kill, a freeze, or a process starved past the lease
+    tokens_lost: dict[str, int] = field(default_factory=dict)
+
+
+class Supervisor:
+    STATUS_EVERY = 0.5  # seconds between SwarmStatus messages
+    hosts_wait_s = 600.0  # how long the leader waits for the other hosts' actors (`kinswarm up --wait`)
+
+    def __init__(
+        self,
+        cfg: RunConfig,
+        topo: Topology,
+        session: zenoh.Session,
+        placement: Placement,
+        on_epoch: Callable[[EpochDone], None] | None = None,
+        plan: Plan | None = None,
+        host: str | None = None,
+    ) -> None:
+        self.cfg, self.topo, self.session, self.placement = cfg, topo, session, placement
+        self.keys = Keys(cfg.run_id)
+        self.out = Path(cfg.out)
+        self.on_epoch = on_epoch
+        self.expected = actors_of(cfg, topo)
+        self.task = task_of(cfg)  # the goal of each epoch
+        # Several hosts: this supervisor spawns and restarts its host's share; the leader also trains.
+        self.plan = plan if plan is not None else local_plan(cfg.listen, cfg.lease_ms)
+        self.host = host if host is not None else self.plan.leader
+        self.lead = self.host == self.plan.leader
+        self.multi = len(self.plan.hosts) > 1
+        self.where = self.plan.placement(topo)  # actor ident -> host
+        self.local = [a for a in self.expected if self.host_of(a) == self.host]
+        self.agents = list(topo.order) if cfg.controller == "agents" else []
+        self.alive: set[ActorId] = set()
+        self.node: Node | None = None
+        self.result = RunResult()
+        self.recorder = Recorder(self.out)
+        self.restarts = RestartPolicy(self.agents, cfg.max_restarts, cfg.restart_window_s)
+        self.faults = FaultRouter(self)
+        self.hosts = HostWatch(self)
+        self.epochs = EpochLoop(self)
+        self.training = False  # liveliness changes are events only once the swarm is up
+        self.epoch = -1
+        self.joints: JointStatus | None = None
+        self.byes: dict[str, Bye] = {}
+        self._timers: set[asyncio.TimerHandle] = set()
+        self.hostname = {h: h for h in self.plan.hosts} if self.multi else {self.host: socket.gethostname()}
+
+    def host_of(self, actor: ActorId) -> str:
+        role, ident = actor
+        return self.where[ident] if role == "agent" else self.where["sim"]  # the baseline runs beside the sim
+
+    def later(self, delay: float, key: str, payload: bytes = b"") -> asyncio.TimerHandle:
+        """A timer owned by this run: `key` comes through the mailbox after `delay` seconds."""
+        assert self.node is not None
+        push = self.node.mailbox.push_local
+        handle = asyncio.get_running_loop().call_later(
+            delay, lambda: (self._timers.discard(handle), push(key, payload))
+        )
+        self._timers.add(handle)
+        return handle
+
+    # -- the run ---------------------------------------------------------------------------------
+    async def run(self) -> RunResult:
+        t0 = time.perf_counter()
+        loop = asyncio.get_running_loop()
+        self.node = node = Node(self.session, self.keys, "supervisor", "main" if self.lead else self.host, self.cfg.key)
+        k = self.keys
+        for key in (k.metrics("epoch"), k.metrics("event"), k.metrics("joints"), k.rep("agent", "*")):
+            node.listen(key)
+        for key in (k.rep("bye", "*"), k.rep("sim", "*"), k.ctl("stop")):
+            node.listen(key)
+        node.listen(k.fault("request") if self.lead else k.ctl("fault"))  # others: what the leader forwards
+        if self.multi:
+            node.listen(k.host("*"))
+
+        def on_alive(sample: Any) -> None:  # zenoh thread
+            parsed = self.keys.parse_alive(str(sample.key_expr))
+            if parsed is not None:
+                up = b"+" if sample.kind == zenoh.SampleKind.PUT else b"-"
+                node.mailbox.push(ALIVE, up + f"{parsed[0]}/{parsed[1]}".encode())
+
+        async with contextlib.AsyncExitStack() as stack:
+            watch = self.session.liveliness().declare_subscriber(self.keys.alive_all, on_alive, history=True)
+            stack.callback(watch.undeclare)
+            if self.lead and self.multi:
+                stack.callback(self.hosts.serve_setup().undeclare)
+            node.declare_alive()
+            self.recorder.open_events()
+            self.placement.attach(node.mailbox.push_local)
+            self.later(self.STATUS_EVERY, STATUS)
+            if self.multi:
+                self.hosts.start()
+            try:
+                await self.placement.start(self.local)
+                await self._wait_alive(self.local, timeout=60.0)
+                if self.lead:
+                    await self._wait_alive(self.expected, timeout=self.hosts_wait_s, what="the other hosts' actors")
+                    await self.epochs.train()
+                else:
+                    await self._serve()
+            except asyncio.CancelledError:
+                self.result.interrupted = True
+                log.warning("interrupted: stopping the swarm")
+            except _Down as e:
+                self.result.interrupted = True
+                self.event("down", "swarm", str(e))
+            except (SwarmError, RestartBudgetSpent, HostError) as e:
+                self.result.error = str(e)
+                log.error("%s", e)
+                self.event("failed", "swarm", str(e))
+            finally:
+                await self._shutdown(loop)
+        self.result.wall_seconds = time.perf_counter() - t0
+        return self.result
+
+    async def _shutdown(self, loop: asyncio.AbstractEventLoop) -> None:
+        """Explicit, in order: Stop to every actor (the leader), their Byes (3 s), the placement stopped (frozen ones
+        woken, SIGTERM, SIGKILL), every timer cancelled, the records closed."""
+        assert self.node is not None
+        self.training = False
+        try:
+            if self.lead:
+                reason = "interrupted" if self.result.interrupted else "failed" if self.result.error else "done"
+                self.node.send(self.keys.ctl("stop"), Stop(reason=reason))
+            await self._collect_byes(timeout=3.0)
+        except Exception:  # the session may be closing
+            pass
+        await self.placement.stop()
+        for t in self._timers:
+            t.cancel()
+        self._timers.clear()
+        self.hosts.stop()
+        self.result.rejected_by = {"supervisor": self.node.rejected, **{a: b.rejected for a, b in self.byes.items()}}
+        self.result.rejected = sum(self.result.rejected_by.values())
+        self.result.restarts = self.restarts.totals
+        self.node.close()
+        self.recorder.close()
+
+    async def _serve(self) -> None:
+        """Another host's share: keep it alive (restarts, forwarded faults, heartbeats) until the leader's Stop."""
+        self.training = True
+        log.info("host %s: %d actors up; serving the leader's run %s", self.host, len(self.local), self.cfg.run_id)
+        stop = await self.expect(Stop, lambda m: True, timeout=float("inf"))
+        self.event("stop", self.host, f"the leader says: {stop.reason}")
+
+    # -- the mailbox -----------------------------------------------------------------------------
+    async def expect(
+        self, kind: type, match: Callable[[Any], bool], timeout: float, stretch: bool = True, any_item: bool = False
+    ) -> Any:
+        """Handle the mailbox until a message of `kind` satisfying `match` (any item at all with `any_item`); a
+        partition stops the deadline's clock."""
+        assert self.node is not None
+        deadline = time.monotonic() + timeout
+        paused0 = self.hosts.paused_seconds(time.monotonic())
+        while True:
+            now = time.monotonic()
+            remaining = deadline - now + (self.hosts.paused_seconds(now) - paused0 if stretch else 0.0)
+            if remaining <= 0:
+                raise NoMessage(f"no {kind.__name__} within {timeout:.0f} s")
+            try:
+                key, payload = await self.node.recv(timeout=None if remaining == float("inf") else remaining)
+            except TimeoutError:
+                continue
+            m = self._route(key, payload)
+            if isinstance(m, Stop) and self.lead and kind is not Stop:
+                raise _Down(f"stop requested ({m.reason})")
+            if isinstance(m, kind) and match(m):
+                return m
+            if any_item:
+                return None
+
+    async def _collect_byes(self, timeout: float) -> None:
+        assert self.node is not None
+        want = {ident for role, ident in self.expected if (role, ident) in self.alive}
+        deadline = time.monotonic() + timeout
+        while not want <= set(self.byes) and time.monotonic() < deadline:
+            try:
+                key, payload = await self.node.recv(timeout=deadline - time.monotonic())
+            except TimeoutError:
+                break
+            with contextlib.suppress(SwarmError, RestartBudgetSpent, HostError):  # leaving anyway
+                self._route(key, payload)
+
+    async def _wait_alive(self, expected: list[ActorId], timeout: float, what: str = "") -> None:
+        if what and not set(expected) <= self.alive:
+            hosts = sorted({self.host_of(a) for a in set(expected) - self.alive})
+            log.warning("waiting for %s (on %s): start `kinswarm up PLAN --host NAME` there", what, ", ".join(hosts))
+        try:
+            async with asyncio.timeout(timeout):
+                while not set(expected) <= self.alive:
+                    assert self.node is not None
+                    self._route(*await self.node.recv())
+        except TimeoutError:
+            raise SwarmError(f"not alive after {timeout:.0f} s: {sorted(set(expected) - self.alive)}") from None
+
+    def _route(self, key: str, payload: bytes) -> Any:
+        """Handle one mailbox item: the supervisor's own events and what it consumes itself; return EpochDone,
+        Saved, Bye and Stop to the caller."""
+        node = self.node
+        assert node is not None
+        if key.startswith("__"):
+            self._own(key, payload)
+            return None
+        kind = key[len(self.keys.root) + 1 :]
+        if kind == "metrics/epoch":
+            return node.decode(key, payload, EpochDone)
+        if kind.startswith("rep/agent/"):
+            return node.decode(key, payload, Saved)
+        if kind.startswith(("rep/bye/", "rep/sim/")):
+            if (bye := node.decode(key, payload, Bye)) is not None:
+                self.byes[self.keys.last_chunk(key)] = bye
+            return bye
+        if kind == "ctl/stop":
+            return node.decode(key, payload, Stop)
+        if kind == "metrics/event":
+            if (e := node.decode(key, payload, Event)) is not None:
+                self.recorder.event(e.epoch, e.step, e.event, e.target, e.detail)
+        elif kind == "metrics/joints":
+            if (j := node.decode(key, payload, JointStatus)) is not None:
+                self._on_joints(j)
+        elif kind == "fault/request":
+            if (f := node.decode(key, payload, Fault)) is not None:
+                self.faults.on_request(f)
+        elif kind == "ctl/fault" and not self.lead:
+            if (f := node.decode(key, payload, Fault)) is not None:
+                self.faults.on_forwarded(f)
+        elif kind.startswith("ctl/host/"):
+            hb = node.decode(key, payload, Heartbeat)
+            if hb is not None and hb.host in self.plan.hosts and hb.host != self.host:
+                self.hosts.heard_from(hb.host)
+        return None
+
+    def _own(self, key: str, payload: bytes) -> None:
+        """The supervisor's own events, in the mailbox's order with the messages."""
+        now = time.monotonic()
+        if key == ALIVE:
+            role, ident = payload[1:].decode().split("/", 1)
+            self._alive_changed((role, ident), payload[:1] == b"+")
+        elif key == EXIT:
+            actor, how = parse_exit(payload)
+            self._on_exit(actor, how, now)
+        elif key == RESPAWN:
+            agent = payload.decode()
+            self.placement.spawn(("agent", agent), restore=True)
+            self.event("restart", agent, f"restart {self.restarts.total(agent)} (restores its newest checkpoint)")
+        elif key == THAW:
+            self.faults.on_thaw_due(payload.decode())
+        elif key == SILENT:
+            self.hosts.on_silent(payload.decode())
+        elif key == GRACE:
+            self.hosts.on_grace(payload.decode())
+        elif key == STATUS:
+            self.later(self.STATUS_EVERY, STATUS)
+            if self.lead:
+                self._publish_status(now)
+
+    def _on_joints(self, j: JointStatus) -> None:
+        self.joints = j
+        self.epochs.on_joints(j)
+
+    # -- liveliness, exits, restarts -------------------------------------------------------------
+    def _alive_changed(self, actor: ActorId, up: bool) -> None:
+        if up:
+            self.alive.add(actor)
+        else:
+            self.alive.discard(actor)
+        if self.training and actor[0] != "supervisor":
+            self.event("alive" if up else "lost", actor[1], "liveliness token " + ("back" if up else "gone"))
+            if not up:
+                self.result.tokens_lost[actor[1]] = self.result.tokens_lost.get(actor[1], 0) + 1
+
+    def _on_exit(self, actor: ActorId, how: str, now: float) -> None:
+        role, ident = actor
+        if not self.training:  # starting up: nothing to restart from yet
+            raise SwarmError(f"{role} {ident} {how}; its log ends:\n{self.placement.log_tail(actor)}")
+        if role != "agent":
+            raise SwarmError(f"{role} {ident} on {self.host} {how}; its log ends:\n{self.placement.log_tail(actor)}")
+        self.event("exited", ident, how)
+        self.faults.frozen.pop(ident, None)
+        self.later(self.restarts.on_exit(ident, now), RESPAWN, ident.encode())
+
+    # -- records ---------------------------------------------------------------------------------
+    def event(self, event: str, target: str, detail: str) -> None:
+        j = self.joints
+        step = j.step if j is not None and j.epoch == self.epoch else -1
+        self.recorder.event(self.epoch, step, event, target, detail)
+
+    def _publish_status(self, now: float) -> None:
+        assert self.node is not None
+        ids = [ident for _, ident in self.expected]
+        roles = dict((ident, role) for role, ident in self.expected)
+        pids = self.placement.pids
+        faults: dict[str, list[str]] = {i: [] for i in ids}
+        for agent, what in self.faults.status(now).items():
+            faults.setdefault(agent, []).extend(what)
+        if self.joints is not None:
+            for joint, what in self.joints.faults.items():
+                faults.setdefault(joint, []).append(what)
+        status = SwarmStatus(
+            epoch=self.epoch,
+            epochs=self.cfg.epochs,
+            role=roles,
+            alive={i: int((roles[i], i) in self.alive) for i in ids},
+            pid={i: pids.get(i, 0) for i in ids},
+            host={i: self.hostname.get(self.host_of((roles[i], i)), self.host_of((roles[i], i))) for i in ids},
+            restarts={i: self.restarts.total(i) for i in ids},
+            faults=faults,
+        )
+        self.node.send(self.keys.metrics("status"), status)
