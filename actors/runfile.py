@@ -286,18 +286,20 @@ def _task(data: Any, topo: Topology, scene: SceneSpec, source: str) -> TaskDef:
 
 
 def _spec_error(e: msgspec.ValidationError, source: str, section: str) -> SpecError:
-    """msgspec's "Expected `int`, got `str` - at `$.seed`" or a __post_init__'s "field: what" as a SpecError."""
+    """msgspec's "Expected `int`, got `str` - at `$.seed`" or a __post_init__'s "field: what" (of a nested table too:
+    "radius: must be > 0 - at `$.circle`") as a SpecError naming the field."""
     text = str(e)
+    where = section
     m = re.fullmatch(r"(.*) - at `\$\.?(.*)`", text, re.S)
     if m:
-        what, where = m.group(1), m.group(2).replace("$", "")
-        what = re.sub(r"`(\w+)`", r"\1", what)
-        what = what[0].lower() + what[1:]
-        return SpecError(source, f"{section}.{where}" if where else section, what)
+        text, path = m.group(1), m.group(2).replace("$", "")
+        where = f"{section}.{path}" if path else section
+        text = re.sub(r"`(\w+)`", r"\1", text)
+        text = text[0].lower() + text[1:]
     field, sep, what = text.partition(": ")
     if sep and re.fullmatch(r"[a-z_]+", field):
-        return SpecError(source, f"{section}.{'from' if field == 'from_dir' else field}", what)
-    return SpecError(source, section, text)
+        return SpecError(source, f"{where}.{'from' if field == 'from_dir' else field}", what)
+    return SpecError(source, where, text)
 
 
 def _absolute_paths(data: dict[str, Any], base: Path) -> None:

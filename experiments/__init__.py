@@ -16,7 +16,7 @@ from typing import Any
 EXPERIMENTS = ("cost", "optimality", "convergence", "robustness", "generalisation")
 # Run by name only, not by `all` (their own reports, their own cost): the evidence for the learner the README
 # recommends for generalisation, and issue 6's tasks (§5.4, §5.5)
-BY_NAME: tuple[str, ...] = ("ablations", "corridor", "grasp")
+BY_NAME: tuple[str, ...] = ("ablations", "corridor", "grasp", "track")
 
 
 def run_experiment(
