@@ -13,7 +13,7 @@ the tabu and the shield (EVAL_SHIELD). The bars, per seed:
   frozen    the frozen epoch ends within TOL of the target with zero collisions in the whole epoch; bar: >= 4 of 5
 
 How the recipe was found, configuration by configuration (rounds 1-11): experiments/research/corridor_rounds.py,
-which runs the same machinery (`run_configs`) on every configuration tried, and docs/science.md ("Corridor").
+which runs the same machinery (`run_configs`) on every configuration tried, and docs/notebook/corridor.md.
 """
 
 from __future__ import annotations
@@ -38,7 +38,7 @@ LAST_STEPS = 100  # no collision in the epoch's last 100 steps
 STEPS = 500
 QUICK_EPOCHS, QUICK_STEPS = 3, 100
 #: the third frozen evaluation's shield ([scene] shield; round 7: 0.02 left 4 of 5 subtree-200 swarms without a
-#: refusal; 0.05 kept them further from the target, 0.01 let two jam, docs/science.md)
+#: refusal; 0.05 kept them further from the target, 0.01 let two jam, docs/notebook/corridor.md)
 EVAL_SHIELD = 0.02
 SEEDS = 5  # the bars' seeds
 REFERENCE_SEEDS = 2  # references run on fewer seeds in the full version

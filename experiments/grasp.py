@@ -110,7 +110,7 @@ def run(ctx: Context) -> dict[str, Any]:
         "contact carries a force that balances the object, and rewards reaching it; `force`: round 1's per-finger "
         "normal-force error (round 1's default, then named `shaped`); `global`: `force` averaged over the fingers; "
         "`paper`: Eq. 12 as printed; `contact`: Eq. 12 with its force, torque and slip terms paid only while all "
-        "three touch (docs/science.md, Grasp).",
+        "three touch (docs/notebook/grasp.md).",
         "",
         f"**Good grasp** at an epoch's last step: all fingertips touch (fn > 0) inside their friction cones, |F| < "
         f"{BALANCE} x mean fn (force units) and |tau| < {BALANCE} x mean fn x L, L = "

@@ -3,7 +3,7 @@
 Only the learner's own knobs live here. What a task adds (the corridor's clearance and collision variables, a grasp
 finger's fine steps, reward constants, reflexes such as the shield or the tabu) lives with the task
 (actors/tasks/); the task hands its state variables to the learner as extra state variables. Options that were
-measured and not kept are gone from the code; their numbers are in docs/science.md.
+measured and not kept are gone from the code; their numbers are in docs/notebook/.
 """
 
 from __future__ import annotations
@@ -78,7 +78,7 @@ class LearnerSettings:
     lr: float = 0.5  # learning rate lambda of Eq. 5 in epoch 0
     lr_decay: float = 1.0 / 1050.0  # lr(epoch) = lr (1 - lr_decay) ** epoch (the paper's 1/1050)
     # (first, last): lr also scaled linearly to 0 over these epochs and 0 after, so training's last epochs run the
-    # greedy policy a frozen swarm runs (docs/science.md, corridor round 9); (0, 0): off
+    # greedy policy a frozen swarm runs (docs/notebook/corridor.md, round 9); (0, 0): off
     lr_anneal: tuple[int, int] = (0, 0)
     T_max: float = 10.0  # T(t) = 1 + T_max e^(-s t) (§4.2); must exceed 1
     s: float = 0.05  # decay of T(t), t = step within the epoch: exploration tapers within the epoch

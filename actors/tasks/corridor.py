@@ -20,7 +20,7 @@ collision_tabu = true        # the move the wall just refused is left out of the
 follow_leader = 40.0         # weight of each of the last follow_leader_links agents' own progress along the axis
 follow_leader_links = 4
 ```
-Measured and reasoned: docs/science.md, "Corridor (§5.4)".
+Measured and reasoned: docs/notebook/corridor.md.
 """
 
 from __future__ import annotations
@@ -202,7 +202,7 @@ def corridor_reward(
     graded: as shaped, with Eq. 10 graded.
     settle: Eq. 10 settle, and the collision term for a refused move only, not for a link nearer a wall than d_safe:
       the success bar counts refusals, and an arrived chain has some link that near in 4-99 % of its steps (round 5
-      of docs/science.md), where shaped then pays about -4 for sitting at the target.
+      of docs/notebook/corridor.md), where shaped then pays about -4 for sitting at the target.
     """
     if mode not in REWARD_MODES:
         raise ValueError(f"unknown reward mode {mode!r}; allowed modes: {', '.join(REWARD_MODES)}")

@@ -2,7 +2,7 @@
 
 The grasp agent (the compound root, no DOF) reads the task observation (the sim's contact readings: the
 net force and torque on the object and every fingertip's contact) and sends each finger its reward with
-the down pass. Reward modes (`--reward` in a grasp scene; docs/science.md "Grasp (§5.5)"):
+the down pass. Reward modes (`--reward` in a grasp scene; docs/notebook/grasp.md):
 
 paper    Eq. 12 as printed, one global reward for all fingers: the reaching cases of Eq. 10 on
          D_goal (the fingertips' mean distance to their grasp points) plus R_f + R_tau + R_s, with

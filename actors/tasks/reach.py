@@ -128,7 +128,7 @@ def reach_reward(
     shaped: strict inside D_min; outside r = -2 + k (D_prev - D), a gradient towards the goal.
     graded: shaped with the gradient inside D_min too, r = strict + k (D_prev - D). Inside D_min an approach
       earns e^(-c D) (0.05-0.37 at D = 1-3) against -1 for a step away, so "keep" (0) beat moving wherever the
-      policy was unsure; frozen swarms stopped 1-3 from unseen goals. Measured in docs/science.md ("graded").
+      policy was unsure; frozen swarms stopped 1-3 from unseen goals. Measured in docs/notebook/reaching.md ("graded").
     settle: shaped, but while the tip stays within settle_radius of the goal (at t - 1 and t) it earns e^(-c D)
       whatever it did. Shaped pays there e^(-c D) for a step in, 0 for "keep" and -1 for a step out, so an arrived
       chain never learns to keep still; in a corridor its jitter is pushed into the walls.

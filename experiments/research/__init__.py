@@ -1,5 +1,5 @@
 """Research, not product: the configurations and probes that found what the product recommends, kept runnable so
-that every number in docs/science.md can be made again. Nothing in actors/, sim/ or protocol/ imports this, and
+that every number in docs/notebook/ can be made again. Nothing in actors/, sim/ or protocol/ imports this, and
 `kinswarm experiment` does not list it.
 
     python -m kinswarm.experiments.research corridor_rounds --quick --out runs/research
@@ -8,5 +8,5 @@ that every number in docs/science.md can be made again. Nothing in actors/, sim/
 
 Each module has a `run(ctx)` like the experiments' (experiments/common.py `Context`); options of the learner or
 the tasks that were measured and not kept are deleted from the code, so the configurations that used them are
-gone from here too (their numbers stay in docs/science.md and the committed reports).
+gone from here too (their numbers stay in docs/notebook/ and the committed reports).
 """

@@ -1,4 +1,4 @@
-"""The corridor's rounds (docs/science.md, "Corridor", rounds 1-11): every configuration tried on the way to the
+"""The corridor's rounds (docs/notebook/corridor.md, rounds 1-11): every configuration tried on the way to the
 recipe, on the product's machinery (experiments/corridor.py `run_configs`). Its report is
 docs/results/research/corridor-rounds/; the product's corridor experiment runs only the recipe and the paper.
 
@@ -74,7 +74,7 @@ def run(ctx: Context) -> dict[str, Any]:
     intro = (
         "## Set-up",
         "",
-        "Research, not product: the configurations of the corridor's rounds 1-11 (docs/science.md), each trained on "
+        "Research, not product: the configurations of the corridor's rounds 1-11 (docs/notebook/corridor.md), each trained on "
         "the hard set-up (the relaxed one for `kinswarm-relaxed`), then frozen three ways (plain; with the tabu; with "
         f"the tabu and the shield {EVAL_SHIELD}). The product's corridor experiment runs the recipe alone.",
     )

@@ -1,4 +1,4 @@
-"""Exploration fading over the epochs on the grasp (docs/science.md, "Grasp"): does epsilon_decay, which made the
+"""Exploration fading over the epochs on the grasp (docs/notebook/grasp.md): does epsilon_decay, which made the
 frozen reaching swarm generalise, make the trained grasp hold frozen? 3 seeds, 30 x 400, the reward `shaped`, each
 trained swarm then frozen for one epoch. Measured with epsilon_decay 0.1: training 90-100 % good, frozen still 0 of 3
 (|F| 1.1-6.6). Not kept.

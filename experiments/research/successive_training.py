@@ -1,4 +1,4 @@
-"""Successive training (docs/science.md, "Reaching, generalisation"): Level-3 trained with each epoch starting where
+"""Successive training (docs/notebook/reaching.md): Level-3 trained with each epoch starting where
 the last ended (the arm meets every training goal from another pose) instead of from the start pose, then tested as
 the generalisation tests are (frozen, each test goal from the start pose), on test sets 0 and 1. Measured with the
 sweep's learner before epsilon_decay and `graded` (reward `shaped`): 0.598 ± 0.102 / 0.602 ± 0.135, 72 % / 74 %
