@@ -74,8 +74,9 @@ def run(ctx: Context) -> dict[str, Any]:
     intro = (
         "## Set-up",
         "",
-        "Research, not product: the configurations of the corridor's rounds 1-11 (docs/notebook/corridor.md), each trained on "
-        "the hard set-up (the relaxed one for `kinswarm-relaxed`), then frozen three ways (plain; with the tabu; with "
-        f"the tabu and the shield {EVAL_SHIELD}). The product's corridor experiment runs the recipe alone.",
+        "Research, not product: the configurations of the corridor's rounds 1-11 (docs/notebook/corridor.md), "
+        "each trained on the hard set-up (the relaxed one for `kinswarm-relaxed`), then frozen three ways (plain; "
+        f"with the tabu; with the tabu and the shield {EVAL_SHIELD}). The product's corridor experiment runs the "
+        "recipe alone.",
     )
     return run_configs(ctx, rep, ROUNDS, intro)
