@@ -9,6 +9,7 @@ import dataclasses
 import json
 import logging
 import secrets
+import signal
 import sys
 import time
 from pathlib import Path
@@ -18,6 +19,7 @@ from kinswarm.actors.checkpoint import CheckpointError
 from kinswarm.actors.config import DEFAULT_LISTEN, PLACEMENTS, ConfigError, RunConfig
 from kinswarm.actors.launch import run_swarm
 from kinswarm.actors.plan import Plan, PlanError, load_plan
+from kinswarm.actors.rundir import check_dir
 from kinswarm.actors.runfile import load_run
 from kinswarm.actors.runtime import LEASE_MS, setup_logging
 from kinswarm.protocol.faults import FAULTS
@@ -261,6 +263,7 @@ def _deploy_tool(a: argparse.Namespace) -> int:
         run_router(a.listen, plan, topo)
         return 0
     plan = load_plan(a.plan)
+    check_dir(a.out, "--out")
     for path in write_certs(plan, _plan_run(plan, a.run_file).topo(), a.out):
         print(path)
     return 0
@@ -306,6 +309,7 @@ def _control(a: argparse.Namespace) -> int:
 def _experiment(a: argparse.Namespace, argv: list[str]) -> int:
     from kinswarm.experiments import run_experiment
 
+    check_dir(a.out, "--out")
     results = run_experiment(
         a.name, seeds=a.seeds, quick=a.quick, out=a.out, jobs=a.jobs, test_set=a.test_set, argv=list(argv)
     )
@@ -315,6 +319,16 @@ def _experiment(a: argparse.Namespace, argv: list[str]) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """The CLI: every problem a user can cause is one line and an exit code, Ctrl-C at any moment too."""
+    signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        return _main(argv)
+    except KeyboardInterrupt:
+        print("kinswarm: interrupted", file=sys.stderr)
+        return 130
+
+
+def _main(argv: list[str] | None) -> int:
     from kinswarm.actors.control import ControlError
     from kinswarm.actors.deploy import DeployError
     from kinswarm.actors.scenario import ScenarioError

@@ -20,6 +20,7 @@ from pathlib import Path
 
 from kinswarm.actors.config import RunConfig, config_from_json
 from kinswarm.actors.plan import Plan, PlanError, load_credentials
+from kinswarm.actors.rundir import check_out
 from kinswarm.actors.runtime import NetSpec, Node, open_session
 from kinswarm.protocol import codec
 from kinswarm.protocol.keys import Keys
@@ -82,6 +83,7 @@ def follower_config(setup: Setup, host: str, plan: Plan, out: Path | None) -> tu
     """This host's copy of the leader's run: same settings and key, local paths."""
     leader_cfg = config_from_json(setup.config, f"the leader's run of plan {plan.name}")
     run_dir = (out or Path("runs") / leader_cfg.run_id).resolve()
+    check_out(run_dir)
     run_dir.mkdir(parents=True, exist_ok=True)
     scenario = None
     if setup.scenario:

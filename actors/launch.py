@@ -14,6 +14,7 @@ from pathlib import Path
 
 from kinswarm.actors.config import ConfigError, RunConfig
 from kinswarm.actors.plan import Plan, local_plan
+from kinswarm.actors.rundir import claim
 from kinswarm.actors.runfile import write_resolved
 from kinswarm.actors.runtime import NetSpec, open_session
 from kinswarm.protocol.messages import EpochDone
@@ -76,10 +77,9 @@ async def _supervise(
         ) from None
     write_net(out / "net" / "cli.json", control_net(plan, host, topo))  # for `kinswarm fault/status`
 
-    def nets(role: str, ident: str) -> Path:
+    def nets(role: str, ident: str) -> Path:  # this run's own, fresh (a restart rewrites the same content)
         identity = plan.identity(role, ident, host)
-        path = out / "net" / f"{identity}.json"
-        return path if path.exists() else write_net(path, plan.net(host, identity, supervisor=False, topo=topo))
+        return write_net(out / "net" / f"{identity}.json", plan.net(host, identity, supervisor=False, topo=topo))
 
     bar = None
     if progress:
@@ -139,9 +139,9 @@ def run_swarm(
     plan = plan if plan is not None else local_plan(cfg.listen, cfg.lease_ms)
     host = host if host is not None else plan.leader
     out = Path(cfg.out)
-    out.mkdir(parents=True, exist_ok=True)
-    cfg.write(out / "config.json")
-    if host == plan.leader:
-        write_resolved(cfg, out / "run.toml")
-        (out / "metrics.jsonl").write_text("")
-    return asyncio.run(_supervise(cfg, topo, progress, plan, host, wait_s))
+    with claim(out):  # one run, once: refused before anything is written or spawned
+        cfg.write(out / "config.json")
+        if host == plan.leader:
+            write_resolved(cfg, out / "run.toml")
+            (out / "metrics.jsonl").write_text("")
+        return asyncio.run(_supervise(cfg, topo, progress, plan, host, wait_s))
