@@ -22,7 +22,7 @@ from kinswarm.actors.plan import Plan, PlanError, load_plan
 from kinswarm.actors.rundir import check_dir
 from kinswarm.actors.runfile import load_run
 from kinswarm.actors.runtime import LEASE_MS, setup_logging
-from kinswarm.protocol.faults import FAULTS
+from kinswarm.protocol.faults import FAULTS, describe
 from kinswarm.protocol.spec import SpecError
 from kinswarm.protocol.topology import Topology
 
@@ -280,9 +280,10 @@ def _control(a: argparse.Namespace) -> int:
     from kinswarm.actors.control import Client, make_fault, parse_duration, run_config, show_status, tool_net
 
     cfg = run_config(a.run_id, a.run_dir)
-    connect = tool_net(a.run_dir or Path("runs") / a.run_id, cfg, a.connect)
+    run_dir = a.run_dir or Path("runs") / a.run_id
+    connect = tool_net(run_dir, cfg, a.connect)
     if a.command == "status":
-        asyncio.run(show_status(cfg, connect, a.watch))
+        asyncio.run(show_status(cfg, connect, a.watch, run_dir))
         return 0
     f = make_fault(
         a.fault,
@@ -300,7 +301,7 @@ def _control(a: argparse.Namespace) -> int:
         if reply.error:
             print(f"kinswarm: fault refused: {reply.error}", file=sys.stderr)
             return 2
-        print(f"{a.run_id}: {reply.detail or 'applied'}")
+        print(f"{a.run_id}: {describe(f)}: applied" + (f" ({reply.detail})" if reply.detail else ""))
         return 0
 
     return asyncio.run(send())

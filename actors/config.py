@@ -45,6 +45,8 @@ RUN_KEYS = (
     "checkpoint_every",
     "max_restarts",
     "restart_window_s",
+    "stall_s",
+    "stall_limit_s",
 )
 
 
@@ -79,6 +81,10 @@ class RunConfig:
     checkpoint_every: int = 1  # every epoch: a restarted agent loses at most one epoch of learning (~3 ms a save)
     max_restarts: int = 5  # restart policy: at most this many restarts of one agent ...
     restart_window_s: float = 60.0  # ... within this many seconds, else the run fails
+    # a stall: no step of the lockstep for this long, or steps ending at the deadline without an agent's commands
+    # (0: 10 s, or 4 deadlines if longer); recorded and shown, and past stall_limit_s the run ends naming the actor
+    stall_s: float = 0.0
+    stall_limit_s: float = 300.0
     listen: str = DEFAULT_LISTEN  # the supervisor's endpoint
     # Several hosts (a deploy plan): the hosts whose heartbeats the sim must hear to step, within lease_ms
     hosts: list[str] = field(default_factory=list)
@@ -110,12 +116,21 @@ class RunConfig:
         w = self.restart_window_s
         if not (isinstance(w, (int, float)) and not isinstance(w, bool) and math.isfinite(w) and w > 0):
             raise ConfigError(f"restart_window_s: expected a number > 0, got {self.restart_window_s!r}")
+        for name in ("stall_s", "stall_limit_s"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) and v >= 0):
+                raise ConfigError(f"{name}: expected a number of seconds >= 0, got {v!r}")
         if not (isinstance(self.secret, str) and len(self.secret) >= 16):
             raise ConfigError("secret: expected a string of at least 16 characters")
         if not (isinstance(self.hosts, list) and all(isinstance(h, str) for h in self.hosts)):
             raise ConfigError(f"hosts: expected a list of host names, got {self.hosts!r}")
         if not (isinstance(self.task, dict) and isinstance(self.task.get("kind"), str)):
             raise ConfigError("task: expected a table with a kind")
+
+    @property
+    def stall_bound(self) -> float:
+        """Seconds without the lockstep's own progress that count as a stall."""
+        return self.stall_s or max(10.0, 4 * self.deadline_ms / 1000)
 
     @property
     def action_rad(self) -> float:

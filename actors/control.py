@@ -137,8 +137,8 @@ def make_fault(
 
 
 def render(status: SwarmStatus, joints: JointStatus | None, run_id: str) -> str:
-    """The `kinswarm status` table."""
-    head = f"run {run_id}  epoch {status.epoch + 1}/{status.epochs}"
+    """The `kinswarm status` table (epochs counted from 0, as metrics.jsonl and events.jsonl count them)."""
+    head = f"run {run_id}  epoch {status.epoch} of 0-{status.epochs - 1}"
     if joints is not None and joints.epoch == status.epoch:
         head += f"  step {joints.step}"
     cols = ("actor", "role", "alive", "pid", "host", "restarts", "joint", "action", "faults")
@@ -165,12 +165,40 @@ def render(status: SwarmStatus, joints: JointStatus | None, run_id: str) -> str:
     return "\n".join([head, line, *body])
 
 
-async def show_status(cfg: RunConfig, connect: str | NetSpec, watch: bool) -> None:
+async def show_status(cfg: RunConfig, connect: str | NetSpec, watch: bool, run_dir: Path) -> None:
+    """Print the status (with the joints: the first one or two statuses may come before the sim's readings); with
+    `watch`, redraw it until the run ends, and say how it ended."""
+    if (run_dir / "summary.json").exists():
+        print(ended(run_dir, cfg.run_id))
+        return
     async with Client(cfg, connect) as c:
-        async for status, joints in c.statuses():
-            table = render(status, joints, cfg.run_id)
-            if not watch:
-                print(table)
+        first = time.monotonic()
+        try:
+            async for status, joints in c.statuses():
+                table = render(status, joints, cfg.run_id)
+                if not watch:
+                    if joints is None and time.monotonic() - first < 2.0:
+                        continue  # the sim's readings come twice a second
+                    print(table)
+                    return
+                sys.stdout.write("\x1b[H\x1b[2J" + table + "\n")  # clear and redraw, like `top`
+                sys.stdout.flush()
+        except ControlError:
+            if (run_dir / "summary.json").exists():  # it ended while we watched
+                print(ended(run_dir, cfg.run_id))
                 return
-            sys.stdout.write("\x1b[H\x1b[2J" + table + "\n")  # clear and redraw, like `top`
-            sys.stdout.flush()
+            raise
+
+
+def ended(run_dir: Path, run_id: str) -> str:
+    """One line on a finished run, from its summary."""
+    import json
+
+    try:
+        s = json.loads((run_dir / "summary.json").read_text())
+    except (OSError, ValueError):
+        return f"run {run_id} has ended ({run_dir / 'summary.json'})"
+    how = "failed: " + s["error"] if s.get("error") else "was interrupted" if s.get("interrupted") else "finished"
+    fe = s.get("final_error") or []
+    last = f", final error {fe[-1]:.3f}" if fe else ""
+    return f"run {run_id} {how} ({len(fe)} epochs{last}; {run_dir / 'summary.json'})"

@@ -215,6 +215,8 @@ class JointStatus:
     q: dict[str, float]
     delta: dict[str, float]
     faults: dict[str, str]
+    # per agent whose commands stopped coming: how many steps in a row ended at the deadline without its command
+    late: dict[str, int] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)

@@ -86,6 +86,7 @@ class SimActor:
         self.errors: list[float] = []
         self.tips: dict[str, tuple[float, float, float]] = {}
         self.missed = 0
+        self.late: dict[str, int] = {}  # agent -> steps in a row that ended at the deadline without its cmd
         self.total_steps = 0
         self.started = 0.0
         self.step_started = 0.0
@@ -241,6 +242,7 @@ class SimActor:
             return
         # Counted even for a locked joint (the step must not wait); _advance decides what moves.
         self.cmds[agent] = max(-self.max_step, min(self.max_step, m.delta))
+        self.late.pop(agent, None)
         self.waiting.discard(agent)
         if not self.waiting:
             self._advance()
@@ -251,6 +253,8 @@ class SimActor:
             if self.waiting:
                 missing = sorted(self.waiting)
                 self.missed += len(missing)
+                for a in missing:
+                    self.late[a] = self.late.get(a, 0) + 1
                 self.node.log.warning("step %d/%d: no cmd from %s by the deadline; they hold", e.epoch, self.t, missing)
             self._advance()
 
@@ -282,6 +286,7 @@ class SimActor:
                 q=self.world.joint_positions(),
                 delta=dict(self.applied),
                 faults=self.fault_summary(),
+                late={a: n for a, n in self.late.items() if a not in self.down},
             ),
         )
         self._status = asyncio.get_running_loop().call_later(STATUS_S, self.node.mailbox.push, STATUS, b"")

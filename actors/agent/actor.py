@@ -123,7 +123,12 @@ class Agent:
             node.listen(s)
         watch = self.standin.watch()
         try:
-            await node.wait_matched([*self.outputs(), k.metrics("event")], timeout=30.0)
+            while True:  # a neighbour frozen or restarting is waited for, not a reason to leave (its stall is
+                try:  # the supervisor's to see and judge)
+                    await node.wait_matched([*self.outputs(), k.metrics("event")], timeout=30.0)
+                    break
+                except TimeoutError as e:
+                    node.log.warning("%s; still waiting", e)
             node.declare_alive()
             if self.memory.restored is not None:
                 node.send(k.metrics("event"), self.memory.restored)

@@ -45,6 +45,7 @@ from .hosts import GRACE, SILENT, HostError, HostWatch
 from .placements import EXIT, ActorId, Placement, parse_exit
 from .recorder import Recorder
 from .restarts import RestartBudgetSpent, RestartPolicy
+from .stalls import SIM_SILENT, StallError, StallWatch
 
 log = logging.getLogger("kinswarm.supervisor")
 ALIVE, RESPAWN, STATUS = "__alive__", "__respawn__", "__status__"  # the supervisor's own mailbox items
@@ -117,10 +118,12 @@ class Supervisor:
         self.faults = FaultRouter(self)
         self.hosts = HostWatch(self)
         self.epochs = EpochLoop(self)
+        self.stalls = StallWatch(self)
         self.training = False  # liveliness changes are events only once the swarm is up
         self.epoch = -1
         self.joints: JointStatus | None = None
         self.byes: dict[str, Bye] = {}
+        self.why_down: dict[str, tuple[float, str]] = {}  # actor -> (since when, why): what `status` says of it
         self._timers: set[asyncio.TimerHandle] = set()
         self.hostname = {h: h for h in self.plan.hosts} if self.multi else {self.host: socket.gethostname()}
 
@@ -183,7 +186,7 @@ class Supervisor:
             except _Down as e:
                 self.result.interrupted = True
                 self.event("down", "swarm", str(e))
-            except (SwarmError, RestartBudgetSpent, HostError) as e:
+            except (SwarmError, RestartBudgetSpent, HostError, StallError) as e:
                 self.result.error = str(e)
                 log.error("%s", e)
                 self.event("failed", "swarm", str(e))
@@ -209,6 +212,7 @@ class Supervisor:
             t.cancel()
         self._timers.clear()
         self.hosts.stop()
+        self.stalls.stop()
         self.result.rejected_by = {"supervisor": self.node.rejected, **{a: b.rejected for a, b in self.byes.items()}}
         self.result.rejected = sum(self.result.rejected_by.values())
         self.result.restarts = self.restarts.totals
@@ -257,7 +261,7 @@ class Supervisor:
                 key, payload = await self.node.recv(timeout=deadline - time.monotonic())
             except TimeoutError:
                 break
-            with contextlib.suppress(SwarmError, RestartBudgetSpent, HostError):  # leaving anyway
+            with contextlib.suppress(SwarmError, RestartBudgetSpent, HostError, StallError):  # leaving anyway
                 self._route(key, payload)
 
     async def _wait_alive(self, expected: list[ActorId], timeout: float, what: str = "") -> None:
@@ -328,6 +332,8 @@ class Supervisor:
             self.hosts.on_silent(payload.decode())
         elif key == GRACE:
             self.hosts.on_grace(payload.decode())
+        elif key == SIM_SILENT:
+            self.stalls.on_silent()
         elif key == STATUS:
             self.later(self.STATUS_EVERY, STATUS)
             if self.lead:
@@ -336,13 +342,17 @@ class Supervisor:
     def _on_joints(self, j: JointStatus) -> None:
         self.joints = j
         self.epochs.on_joints(j)
+        if self.lead:
+            self.stalls.on_joints(j)
 
     # -- liveliness, exits, restarts -------------------------------------------------------------
     def _alive_changed(self, actor: ActorId, up: bool) -> None:
         if up:
             self.alive.add(actor)
+            self.why_down.pop(actor[1], None)
         else:
             self.alive.discard(actor)
+            self.why_down.setdefault(actor[1], (time.monotonic(), "its liveliness token went away"))
         if self.training and actor[0] != "supervisor":
             self.event("alive" if up else "lost", actor[1], "liveliness token " + ("back" if up else "gone"))
             if not up:
@@ -356,7 +366,9 @@ class Supervisor:
             raise SwarmError(f"{role} {ident} on {self.host} {how}; its log ends:\n{self.placement.log_tail(actor)}")
         self.event("exited", ident, how)
         self.faults.frozen.pop(ident, None)
-        self.later(self.restarts.on_exit(ident, now), RESPAWN, ident.encode())
+        delay = self.restarts.on_exit(ident, now)
+        self.why_down[ident] = (now, f"{how}; restart {self.restarts.total(ident)} due {delay:.1f} s after")
+        self.later(delay, RESPAWN, ident.encode())
 
     # -- records ---------------------------------------------------------------------------------
     def event(self, event: str, target: str, detail: str) -> None:
@@ -372,9 +384,14 @@ class Supervisor:
         faults: dict[str, list[str]] = {i: [] for i in ids}
         for agent, what in self.faults.status(now).items():
             faults.setdefault(agent, []).extend(what)
+        for ident, (since, why) in self.why_down.items():
+            if ident in faults and (roles[ident], ident) not in self.alive:
+                faults[ident].append(f"down {now - since:.1f} s: {why}")
         if self.joints is not None:
             for joint, what in self.joints.faults.items():
                 faults.setdefault(joint, []).append(what)
+        if stalled := self.stalls.status(now):
+            faults.setdefault("sim", []).append(stalled)
         status = SwarmStatus(
             epoch=self.epoch,
             epochs=self.cfg.epochs,

@@ -23,12 +23,18 @@ class EpochLoop:
         self._sent = 0.0
         self._start: EpochStart | None = None  # while its EpochDone is awaited
 
+    @property
+    def running(self) -> EpochStart | None:
+        """The epoch under way (its start went out, its end has not come)."""
+        return self._start
+
     async def train(self) -> None:
         sup, cfg = self.sup, self.sup.cfg
         assert sup.node is not None
         await sup.node.wait_matched([sup.keys.ctl(v) for v in ("epoch", "checkpoint", "fault")], timeout=10.0)
         sup.recorder.open_metrics()
         sup.training = True
+        sup.stalls.arm()
         for epoch in range(cfg.epochs):
             done = await self.run_epoch(epoch)
             sup.result.epochs.append(done)
@@ -54,7 +60,7 @@ class EpochLoop:
             with contextlib.suppress(NoMessage):
                 await sup.expect(Saved, lambda m: False, timeout=0.2, stretch=False)
         sup.node.send(sup.keys.ctl("epoch"), self._start)
-        self._sent = time.monotonic()
+        self._sent = sup.stalls.progress_at = time.monotonic()  # the clock of a stall starts with the epoch
         # generous: every step may run into its deadline and still finish
         timeout = 30.0 + cfg.steps * cfg.deadline_ms / 1000 * 1.5
         done = await sup.expect(EpochDone, lambda m: m.epoch == epoch, timeout)

@@ -21,8 +21,9 @@ The reward. r(t-1) rewards the move the swarm made at t-1 against the goal it sa
 g(t-1)|, D = |tip(t) - g(t-1)|, r = R(D, D_prev) with reach's reward modes. Measured against the moving goal itself,
 D(t) - D(t-1) would also count the goal's own move, which no agent made: every step of a goal moving away would be
 punished whatever the swarm did. Reaching is the special case of a goal that does not move. Measured on the circle of
-examples/chain4-track.toml (docs/results/track/): `graded` (the gradient inside D_min too) against `shaped`, whose
-weak pull inside D_min (e^(-D) for a step closer, 0 for keeping still) leaves a goal drifting off.
+examples/chain4-track.toml (docs/results/track/, 3 seeds, 60 epochs): `graded` (the gradient inside D_min too)
+tracks with a mean error of 0.144 while learning and 0.391 frozen; `shaped`, whose weak pull inside D_min (e^(-D)
+for a step closer, 0 for keeping still) lets the goal drift off, 0.267 and 0.707. The pseudo-inverse: 0.000.
 """
 
 from __future__ import annotations
