@@ -279,21 +279,23 @@ def _resolve(a: argparse.Namespace, controller: str | None) -> tuple[RunConfig, 
 def _control(a: argparse.Namespace) -> int:
     from kinswarm.actors.control import Client, make_fault, parse_duration, run_config, show_status, tool_net
 
+    f = None
+    if a.command == "fault":  # the fault first: what is wrong with it needs no run to say
+        f = make_fault(
+            a.fault,
+            a.targets,
+            seconds=parse_duration(a.duration) if a.duration else None,
+            steps=a.steps,
+            rate=a.rate,
+            ms=a.ms,
+            amplitude_deg=a.amplitude,
+        )
     cfg = run_config(a.run_id, a.run_dir)
     run_dir = a.run_dir or Path("runs") / a.run_id
     connect = tool_net(run_dir, cfg, a.connect)
-    if a.command == "status":
+    if f is None:
         asyncio.run(show_status(cfg, connect, a.watch, run_dir))
         return 0
-    f = make_fault(
-        a.fault,
-        a.targets,
-        seconds=parse_duration(a.duration) if a.duration else None,
-        steps=a.steps,
-        rate=a.rate,
-        ms=a.ms,
-        amplitude_deg=a.amplitude,
-    )
 
     async def send() -> int:
         async with Client(cfg, connect) as c:
@@ -329,25 +331,42 @@ def main(argv: list[str] | None = None) -> int:
         return 130
 
 
+def _joined(argv: list[str]) -> list[str]:
+    """`--for -5s` as `--for=-5s`: argparse takes a value that starts with '-' for an option and says only
+    "expected one argument"; joined, the value reaches its own check, which says what is wrong with it."""
+    out: list[str] = []
+    for arg in argv:
+        if out and out[-1] in ("--for", "--ms", "--rate", "--steps", "--amplitude") and arg.startswith("-"):
+            out[-1] = f"{out[-1]}={arg}"
+        else:
+            out.append(arg)
+    return out
+
+
 def _main(argv: list[str] | None) -> int:
     from kinswarm.actors.control import ControlError
     from kinswarm.actors.deploy import DeployError
     from kinswarm.actors.scenario import ScenarioError
 
+    argv = _joined(list(sys.argv[1:] if argv is None else argv))
     a = build_parser().parse_args(argv)
     setup_logging(getattr(a, "log_level", "WARNING"))
     sys.setswitchinterval(0.0005)
     try:
         if a.command == "report":
-            from kinswarm.actors.report import write_plots
+            from kinswarm.actors.report import torn_rows, write_plots
 
+            if not (a.run_dir / "config.json").is_file():
+                raise ConfigError(f"{a.run_dir}: not a run directory (no config.json)")
+            for line in torn_rows(a.run_dir):
+                print(f"kinswarm: {line}", file=sys.stderr)
             for path in write_plots(a.run_dir):
                 print(path)
             return 0
         if a.command in ("fault", "status"):
             return _control(a)
         if a.command == "experiment":
-            return _experiment(a, argv if argv is not None else sys.argv[1:])
+            return _experiment(a, argv)
         if a.command in ("down", "router", "certs"):
             return _deploy_tool(a)
         if a.command == "up":

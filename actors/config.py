@@ -13,6 +13,7 @@ import dataclasses
 import json
 import math
 import os
+import re
 import secrets
 from dataclasses import dataclass, field
 from functools import cached_property
@@ -52,6 +53,17 @@ RUN_KEYS = (
 
 class ConfigError(ValueError):
     pass
+
+
+#: a Zenoh endpoint as the runs use them: protocol/host:port (an IPv6 host in brackets), e.g. tcp/127.0.0.1:7447
+ENDPOINT = re.compile(r"(tcp|tls|udp|quic|ws)/(\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9._-]+):(\d{1,5})")
+
+
+def check_endpoint(text: str, what: str = "listen") -> str:
+    m = ENDPOINT.fullmatch(text) if isinstance(text, str) else None
+    if m is None or not 0 <= int(m.group(3)) <= 65535:
+        raise ConfigError(f"{what}: expected an endpoint like tcp/127.0.0.1:7447 (protocol/host:port), got {text!r}")
+    return text
 
 
 @dataclass(frozen=True)
@@ -122,6 +134,7 @@ class RunConfig:
                 raise ConfigError(f"{name}: expected a number of seconds >= 0, got {v!r}")
         if not (isinstance(self.secret, str) and len(self.secret) >= 16):
             raise ConfigError("secret: expected a string of at least 16 characters")
+        check_endpoint(self.listen, "--listen")
         if not (isinstance(self.hosts, list) and all(isinstance(h, str) for h in self.hosts)):
             raise ConfigError(f"hosts: expected a list of host names, got {self.hosts!r}")
         if not (isinstance(self.task, dict) and isinstance(self.task.get("kind"), str)):

@@ -32,8 +32,8 @@ class ControlError(RuntimeError):
 def parse_duration(text: str) -> float:
     """`5s`, `500ms`, `2m`, `1.5` (seconds) -> seconds."""
     m = _DURATION.match(text)
-    if not m:
-        raise ValueError(f"expected a duration like 5s, 500ms or 2m, got {text!r}")
+    if not m or float(m.group(1)) <= 0:
+        raise ValueError(f"--for: expected a duration > 0 like 5s, 500ms or 2m, got {text!r}")
     return float(m.group(1)) * _UNIT[m.group(2)]
 
 

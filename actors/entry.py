@@ -20,3 +20,7 @@ def main() -> int:
     from kinswarm.actors.cli import main as cli
 
     return cli()
+
+
+if __name__ == "__main__":
+    sys.exit(main())

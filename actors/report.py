@@ -26,14 +26,29 @@ def read_events(run_dir: Path) -> list[dict[str, Any]]:
     return _read_jsonl(path) if path.exists() else []
 
 
-def _read_jsonl(path: Path) -> list[dict[str, Any]]:
+def _read_jsonl(path: Path, skipped: list[str] | None = None) -> list[dict[str, Any]]:
+    """Every whole row of a JSON-lines record; a row that is not one (a torn last line, where a killed writer
+    stopped) is left out, and said in `skipped`."""
     rows = []
-    for n, line in enumerate(path.read_text().splitlines(), 1):
+    for n, line in enumerate(path.read_text(errors="replace").splitlines(), 1):
         try:
-            rows.append(json.loads(line))
-        except json.JSONDecodeError as e:
-            raise ValueError(f"{path}:{n}: not JSON ({e})") from None
+            row = json.loads(line)
+        except json.JSONDecodeError:
+            row = None
+        if isinstance(row, dict):
+            rows.append(row)
+        elif skipped is not None and line.strip():
+            skipped.append(f"{path}:{n}: not a whole row ({len(line)} characters), left out")
     return rows
+
+
+def torn_rows(run_dir: Path) -> list[str]:
+    """What `kinswarm report` leaves out of a run's records, one line each."""
+    skipped: list[str] = []
+    for name in ("metrics.jsonl", "events.jsonl"):
+        if (run_dir / name).exists():
+            _read_jsonl(run_dir / name, skipped)
+    return skipped
 
 
 def arm_points(topo: Topology, angles: dict[str, float]) -> list[list[tuple[float, float]]]:

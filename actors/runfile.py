@@ -46,7 +46,7 @@ from typing import Any
 
 import msgspec
 import tomli_w
-from kinswarm.actors.config import RUN_KEYS, ConfigError, RunConfig
+from kinswarm.actors.config import RUN_KEYS, ConfigError, RunConfig, check_endpoint
 from kinswarm.actors.learning.settings import LearnerSettings
 from kinswarm.actors.tasks import kinds, task_class
 from kinswarm.actors.tasks.base import TaskDef
@@ -152,7 +152,7 @@ def resolve(
     except ValueError as e:
         raise ConfigError(f"--run-id: {e}") from None
     out_dir = Path(out) if out is not None else Path("runs") / run_id
-    extra = {"listen": listen} if listen is not None else {}
+    extra = {"listen": check_endpoint(listen, "--listen")} if listen is not None else {}
     try:
         cfg = msgspec.convert(
             {
@@ -170,10 +170,16 @@ def resolve(
         )
     except msgspec.ValidationError as e:
         raise _spec_error(e, source, "run") from None
-    if cfg.scenario is not None:  # a bad scenario is refused before anything starts
-        from kinswarm.actors.scenario import load_scenario
+    if cfg.scenario is not None:  # a bad scenario is refused before anything starts, one that cannot fire too
+        from kinswarm.actors.scenario import ScenarioError, load_scenario
 
-        load_scenario(cfg.scenario, topo)
+        for i, e in enumerate(load_scenario(cfg.scenario, topo).entries):
+            if e.step >= cfg.steps:
+                what = f"step {e.step} is beyond the run's {cfg.steps} steps per epoch (run.steps): it would never fire"
+                raise ScenarioError(cfg.scenario, f"event[{i}].step", what)
+            if e.epoch is not None and e.epoch >= cfg.epochs:
+                what = f"epoch {e.epoch} is beyond the run's {cfg.epochs} epochs (run.epochs): it would never fire"
+                raise ScenarioError(cfg.scenario, f"event[{i}].epoch", what)
     if cfg.from_dir is not None:  # and checkpoints that do not fit this run's learners
         check_checkpoints(Path(cfg.from_dir), task, learner, source)
     return cfg
@@ -186,6 +192,19 @@ def check_checkpoints(run_dir: Path, task: TaskDef, learner: Mapping[str, Any], 
     from kinswarm.actors.learning.learner import Learner
 
     topo = task.topo
+    if not run_dir.is_dir():
+        raise CheckpointError(f"run.from {run_dir}: no such run directory")
+    try:  # the run's own record says at once what it was a run of
+        from kinswarm.actors.config import load_run_config
+
+        theirs = load_run_config(run_dir / "config.json").topo()
+    except (ConfigError, SpecError):
+        theirs = None
+    if theirs is not None and set(theirs.dof_agents) != set(topo.dof_agents):
+        raise CheckpointError(
+            f"run.from {run_dir}: a run of robot {theirs.name!r} (joints {', '.join(theirs.dof_agents)}), not of this "
+            f"run's {topo.name!r} (joints {', '.join(topo.dof_agents)})"
+        )
     settings = learner_settings(task, learner, source)
     for agent in topo.dof_agents:
         arrays, _ = load_checkpoint(run_dir / "agents" / f"{agent}.npz", agent=agent)
@@ -281,6 +300,9 @@ def _task(data: Any, topo: Topology, scene: SceneSpec, source: str) -> TaskDef:
         raise _spec_error(e, source, "task") from None
     task = cls(settings, topo, scene)
     if (problem := task.check()) is not None:
+        field, sep, what = problem.partition(": ")
+        if sep and re.fullmatch(r"[a-z_]+", field):
+            raise SpecError(source, f"task.{field}", what)
         raise SpecError(source, "task", problem)
     return task
 

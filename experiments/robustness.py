@@ -12,6 +12,8 @@ simulator at the scenario's steps, and the agents are not told.
 
 from __future__ import annotations
 
+import re
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -47,6 +49,8 @@ def run(ctx: Context) -> dict[str, Any]:
     specs: dict[tuple[str, str, int], Spec] = {}
     for sc in SCENARIOS:
         path = str(ROOT / "scenarios" / f"{sc}.toml")
+        if ctx.quick:  # the same timeline squeezed into the short trial (a scenario's step past the trial is refused)
+            path = _squeezed(Path(path), ctx.runs / "scenarios", steps / 1500)
         for seed in ctx.seed_list:
             common = {"seed": seed, "epochs": 1, "steps": steps, "scenario": path}
             t = str(trained[seed].out)
@@ -172,3 +176,11 @@ def _figures(ctx: Context, rep: Report, outs: dict[tuple[str, str, int], RunOutc
         ax.legend(fontsize=7, loc="lower left")
     axes[-1, 0].set_xlabel("step")
     rep.save_figure(fig, "tracking.png", "Figs. 15/17/19/21 analogue: tracking error per step, fault times dotted")
+
+
+def _squeezed(path: Path, out: Path, factor: float) -> str:
+    """A copy of a scenario file with every `step = N` scaled by `factor` (the quick version's short trials)."""
+    out.mkdir(parents=True, exist_ok=True)
+    text = re.sub(r"(?m)^step = (\d+)", lambda m: f"step = {int(int(m.group(1)) * factor)}", path.read_text())
+    (out / path.name).write_text(text)
+    return str(out / path.name)

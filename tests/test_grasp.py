@@ -280,9 +280,9 @@ def test_force_reward_in_contact_credits_a_fingers_own_move():
 
 def test_reward_names_fit_the_task():
     assert run_config(GRASP3, ['task.reward="contact"']).task["reward"] == "contact"
-    with pytest.raises(SpecError, match="task: reward: 'strict' is not one of shaped, paper, contact, global, force"):
+    with pytest.raises(SpecError, match="task.reward: 'strict' is not one of shaped, paper, contact, global, force"):
         run_config(GRASP3, ['task.reward="strict"'])
-    with pytest.raises(SpecError, match="task: reward: 'contact' is not one of shaped, paper, strict"):
+    with pytest.raises(SpecError, match="task.reward: 'contact' is not one of shaped, paper, strict"):
         run_config(ROOT / "examples" / "chain4.toml", ['task.reward="contact"'])
     with pytest.raises(ValueError, match="unknown grasp reward"):
         GraspReward("strict", GRASP, (0.0, 0.0), (1.0, 0.5))

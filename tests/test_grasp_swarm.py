@@ -41,13 +41,13 @@ def test_grasp_swarm_runs_in_processes(tmp_path):
 def test_grasp_rejects_a_reaching_reward(tmp_path, capsys):
     args = ["run", str(GRASP3), "--reward", "strict", "--out", str(tmp_path / "x"), "--no-progress"]
     assert cli_main(args) == 2
-    assert "task: reward: 'strict' is not one of shaped, paper, contact, global, force" in capsys.readouterr().err
+    assert "task.reward: 'strict' is not one of shaped, paper, contact, global, force" in capsys.readouterr().err
     assert not (tmp_path / "x").exists()
 
 
 def test_reach_rejects_a_grasp_reward(tmp_path, chain4, capsys):
     assert cli_main(["run", str(chain4), "--reward", "contact", "--out", str(tmp_path / "x"), "--no-progress"]) == 2
-    assert "task: reward: 'contact' is not one of shaped, paper" in capsys.readouterr().err
+    assert "task.reward: 'contact' is not one of shaped, paper" in capsys.readouterr().err
 
 
 def _final_angles(tmp_path, name: str, extra: list[str]) -> dict:

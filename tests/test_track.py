@@ -43,7 +43,7 @@ def test_it_is_a_module_the_generic_actors_do_not_name():
         (['task.circle.turn="left"'], "task.circle.turn: expected one of ccw, cw"),
         (["task.closed=true"], "task.closed: only with polyline"),
         (["task.goal=[1, 2]"], "task.goal: unknown field"),
-        (['task.reward="contact"'], "task: reward: 'contact' is not one of"),
+        (['task.reward="contact"'], "task.reward: 'contact' is not one of"),
     ],
 )
 def test_settings_are_checked(sets, what):

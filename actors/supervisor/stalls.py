@@ -88,16 +88,16 @@ class StallWatch:
 
     def _why(self, now: float, stuck: list[str], still: bool) -> str:
         parts = []
+        down = self._down()
+        if down:
+            frozen = set(self.sup.faults.frozen)
+            parts.append("down: " + ", ".join(f"{a} (frozen)" if a in frozen else a for a in down))
         if still:
             at = "" if self.step is None else f" (epoch {self.step[0]} step {self.step[1]})"
             parts.append(f"the sim's step has not advanced for {now - self.progress_at:.1f} s{at}")
         if stuck:
             since = max(now - self.late_since[a] for a in stuck)
             parts.append(f"steps end at the deadline without commands from {', '.join(stuck)} ({since:.1f} s)")
-        down = self._down()
-        if down:
-            frozen = set(self.sup.faults.frozen)
-            parts.append("down: " + ", ".join(f"{a} (frozen)" if a in frozen else a for a in down))
         return "; ".join(parts)
 
     def status(self, now: float) -> str:

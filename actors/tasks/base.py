@@ -98,6 +98,20 @@ class TaskDef:
         """What is wrong with the settings for this robot and scene (None: nothing); named by field."""
         return None
 
+    def out_of_reach(self, field: str, points: list[Vec2]) -> str | None:
+        """`field: ...` when a point lies beyond the robot's reach from its base (it cannot be reached; the best the
+        swarm can do is reach minus that distance away), else None."""
+        t = self.topo
+        base = (t.base[0], t.base[1])
+        for p in points:
+            d = math.hypot(p[0] - base[0], p[1] - base[1])
+            if d > t.reach + 1e-9:
+                return (
+                    f"{field}: ({p[0]:g}, {p[1]:g}) lies {d:.3g} from the robot's base ({base[0]:g}, {base[1]:g}), "
+                    f"beyond its reach {t.reach:.3g}: the nearest the tip can come is {d - t.reach:.3g} from it"
+                )
+        return None
+
     def goal(self, epoch: int, steps: int) -> tuple[Vec2, list[Vec2]]:
         """The goal of epoch `epoch`, and the goal of each of its `steps` steps when it moves (else [])."""
         raise NotImplementedError

@@ -66,9 +66,12 @@ class ReachTask(TaskDef):
     rewards = REWARD_MODES
 
     def check(self) -> str | None:
-        if self.settings.reward not in self.rewards:
-            return f"reward: {self.settings.reward!r} is not one of {', '.join(self.rewards)}"
-        return None
+        s = self.settings
+        if s.reward not in self.rewards:
+            return f"reward: {s.reward!r} is not one of {', '.join(self.rewards)}"
+        return self.out_of_reach("goal", [s.goal] if s.goal is not None else []) or self.out_of_reach(
+            "goals", list(s.goals)
+        )
 
     def goal(self, epoch: int, steps: int) -> tuple[Vec2, list[Vec2]]:
         s = self.settings

@@ -101,9 +101,11 @@ class TrackTask(TaskDef):
     rewards = REWARD_MODES
 
     def check(self) -> str | None:
-        if self.settings.reward not in self.rewards:
-            return f"reward: {self.settings.reward!r} is not one of {', '.join(self.rewards)}"
-        return None
+        s = self.settings
+        if s.reward not in self.rewards:
+            return f"reward: {s.reward!r} is not one of {', '.join(self.rewards)}"
+        lap = [s.at(k * 0.05) for k in range(4000)] if s.circle is not None else list(s.polyline)
+        return self.out_of_reach("circle" if s.circle is not None else "polyline", lap)
 
     def goal(self, epoch: int, steps: int) -> tuple[Vec2, list[Vec2]]:
         path = [self.settings.at(self.settings.speed * t) for t in range(steps)]
