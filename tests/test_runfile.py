@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import shutil
 
 import pytest
 from conftest import EXAMPLES, ROOT, free_port, run_config
@@ -97,8 +98,15 @@ def test_a_file_laid_over_its_base(tmp_path):
     assert stage2["learner"] == {**stage1["learner"], "lr_anneal": [200, 240], "count_freeze": 200}
     assert (stage1["run"]["epochs"], stage2["run"]["epochs"]) == (200, 60)
     assert stage2["run"]["from"] == str((ROOT / "runs" / "corridor7-inner200").resolve())  # relative to its file
+    # the second stage before the first: said before anything, whether or not the first's directory exists yet
+    (tmp_path / "examples").mkdir()
+    for name in ("corridor7-guided.toml", "corridor7-inner200.toml", "corridor7-freeze260.toml"):
+        shutil.copy(EXAMPLES / name, tmp_path / "examples" / name)
+    with pytest.raises(CheckpointError, match="corridor7-inner200: no such run directory"):
+        load_run(tmp_path / "examples" / "corridor7-freeze260.toml")
+    (tmp_path / "runs" / "corridor7-inner200").mkdir(parents=True)
     with pytest.raises(CheckpointError, match="corridor7-inner200/agents/a1.npz: no such checkpoint"):
-        load_run(EXAMPLES / "corridor7-freeze260.toml")  # the second stage before the first: said before anything
+        load_run(tmp_path / "examples" / "corridor7-freeze260.toml")
     looped = tmp_path / "loop.toml"
     looped.write_text('base = "loop.toml"\n')
     with pytest.raises(SpecError, match="its own base"):
