@@ -141,27 +141,31 @@ def build_parser() -> argparse.ArgumentParser:
     _add_common(base)
     base.add_argument(
         "--law",
-        choices=("pinv", "greedy"),
+        choices=("pinv", "greedy", "rule"),
         default="pinv",
         help="pinv: the Jacobian pseudo-inverse (default); greedy: each joint alone takes the 1-step move that "
-        "brings the tip nearest (a reference for what per-joint greedy control can do)",
+        "brings the tip nearest (a reference for what per-joint greedy control can do); rule: each joint one step "
+        "along sign(g_perp) (no learning, no model: the control every learning result needs)",
     )
     rep = sub.add_parser("report", help="rebuild a run's summary plots")
     rep.add_argument("run_dir", type=Path)
     fault = sub.add_parser(
         "fault",
         help="inject a fault into a running swarm",
-        description="lock|free|disturb a joint (the robot); kill|freeze|thaw|restart an agent (its process); "
+        description="lock|free|disturb a joint, or reverse|scale|deadzone|offset|lag its motor or encoder (the robot, "
+        "unknown to the agents; free ends them all); kill|freeze|thaw|restart an agent (its process); "
         "drop|delay|duplicate|corrupt|clear an agent's messages. TARGET: agent ids or `all`.",
     )
     fault.add_argument("run_id", metavar="RUN-ID")
     fault.add_argument("fault", choices=FAULTS, metavar="FAULT")
     fault.add_argument("targets", nargs="+", metavar="TARGET")
     fault.add_argument("--for", dest="duration", default=None, help="freeze or message faults: how long (5s, 500ms)")
-    fault.add_argument("--steps", type=int, default=None, help="disturb: for how many steps")
+    fault.add_argument("--steps", type=int, default=None, help="disturb: for how many steps; lag: how many behind")
     fault.add_argument("--rate", type=float, default=None, help="drop/duplicate/corrupt: probability per message")
     fault.add_argument("--ms", type=float, default=None, help="delay: milliseconds")
     fault.add_argument("--amplitude", type=float, default=None, help="disturb: degrees per step (default 2)")
+    fault.add_argument("--factor", type=float, default=None, help="scale: the motor moves FACTOR x the command")
+    fault.add_argument("--degrees", type=float, default=None, help="deadzone: smallest move; offset: encoder error")
     status = sub.add_parser("status", help="show a running swarm's actors (alive, pid, restarts, faults, joints)")
     status.add_argument("run_id", metavar="RUN-ID")
     status.add_argument("--watch", action="store_true", help="refresh live until Ctrl-C")
@@ -289,6 +293,8 @@ def _control(a: argparse.Namespace) -> int:
             rate=a.rate,
             ms=a.ms,
             amplitude_deg=a.amplitude,
+            factor=a.factor,
+            degrees=a.degrees,
         )
     cfg = run_config(a.run_id, a.run_dir)
     run_dir = a.run_dir or Path("runs") / a.run_id
@@ -331,12 +337,15 @@ def main(argv: list[str] | None = None) -> int:
         return 130
 
 
+VALUED = ("--for", "--ms", "--rate", "--steps", "--amplitude", "--factor", "--degrees")  # fault's options
+
+
 def _joined(argv: list[str]) -> list[str]:
     """`--for -5s` as `--for=-5s`: argparse takes a value that starts with '-' for an option and says only
     "expected one argument"; joined, the value reaches its own check, which says what is wrong with it."""
     out: list[str] = []
     for arg in argv:
-        if out and out[-1] in ("--for", "--ms", "--rate", "--steps", "--amplitude") and arg.startswith("-"):
+        if out and out[-1] in VALUED and arg.startswith("-"):
             out[-1] = f"{out[-1]}={arg}"
         else:
             out.append(arg)

@@ -119,6 +119,8 @@ def make_fault(
     rate: float | None = None,
     ms: float | None = None,
     amplitude_deg: float | None = None,
+    factor: float | None = None,
+    degrees: float | None = None,
 ) -> Fault:
     f = Fault(
         id=f"cli-{secrets.token_hex(4)}",
@@ -129,6 +131,8 @@ def make_fault(
         rate=rate,
         ms=ms,
         amplitude_deg=amplitude_deg,
+        factor=factor,
+        degrees=degrees,
     )
     error = check_fault(f)
     if error:

@@ -9,10 +9,11 @@ step = 0                 # required: the step (within an epoch) at whose start t
 epoch = 3                # optional: only in this epoch (absent: in every epoch)
 fault = "lock"           # see protocol/faults.py
 target = ["a2", "a3"]    # an agent id, a list of them, or "all"
-# optional, as the fault takes them: seconds, steps, rate, ms, amplitude_deg
+# as the fault takes them: seconds, steps, rate, ms, amplitude_deg, factor, degrees
 ```
 
-The sim applies joint faults (lock, free, disturb) itself and forwards the others to the supervisor.
+The sim applies joint faults (lock, free, disturb, and reverse, scale, deadzone, offset, lag in the robot's model)
+itself and forwards the others to the supervisor.
 """
 
 from __future__ import annotations
@@ -56,7 +57,7 @@ class Scenario:
 
 
 _TOP_KEYS = {"name", "description", "event"}
-_FLOATS = ("seconds", "rate", "ms", "amplitude_deg")
+_FLOATS = ("seconds", "rate", "ms", "amplitude_deg", "factor", "degrees")
 _EVENT_KEYS = {"step", "epoch", "fault", "target", "steps", *_FLOATS}
 
 

@@ -15,7 +15,7 @@ from typing import Any
 # epochs) and robustness (the trained swarm).
 EXPERIMENTS = ("cost", "optimality", "convergence", "robustness", "generalisation")
 # Run by name only, not by `all` (their own reports, their own cost): the evidence for the learner the README
-# recommends for generalisation, and issue 6's tasks (§5.4, §5.5)
+# recommends for generalisation, the paper's corridor and grasp (§5.4, §5.5), and the moving goal
 BY_NAME: tuple[str, ...] = ("ablations", "corridor", "grasp", "track")
 
 

@@ -94,8 +94,10 @@ REWARD = "graded"
 # Model-based references on the same test goals, same start pose, steps and 1-degree moves (no learning, one run
 # each: deterministic). "greedy" is each joint alone moving to bring the tip nearest (sim/baseline.py): a per-joint
 # policy greedy in the distance, which is what the shaped reward pays for. Not a bound on learning (the swarm's
-# median beats it).
-REFERENCES = {"pseudo-inverse": "pinv", "greedy per joint": "greedy"}
+# median beats it). "rule" is the hand-written control on the agents' own state (sim/baseline.py rule_increments):
+# no learning, no model; what learning adds is measured against it, under both protocols.
+REFERENCES = {"pseudo-inverse": "pinv", "greedy per joint": "greedy", "rule on g_perp": "rule"}
+SUCCESSIVE_REFERENCES = {"rule on g_perp, successive test goals": "rule"}  # on test set K, as the swarm's row
 
 
 @dataclass(frozen=True)
@@ -247,26 +249,24 @@ def train_and_test(ctx: Context, trainings: list[Training], second_level: int, w
     }
     ref_specs = {
         (name, block): Spec(
-            f"gen-ref{block}-{controller}",
+            f"gen-ref{block}-{controller}{'-succ' if successive else ''}",
             epochs=len(test_sets[block]),
             steps=eval_steps,
             goals=tuple(test_sets[block]),
             controller=controller,
+            successive=successive,
         )
-        for name, controller in REFERENCES.items()
-        for block in test_sets
+        for refs, successive in ((REFERENCES, False), (SUCCESSIVE_REFERENCES, True))
+        for name, controller in refs.items()
+        for block in (test_sets if not successive else [k])
     }
     done = run_specs(ctx, [*eval_specs.values(), *scratch_specs.values(), *ref_specs.values()], "test")
     evals = dict(zip(eval_specs, done[: len(eval_specs)], strict=True))
     scratch_runs = dict(zip(scratch_specs, done[len(eval_specs) : len(eval_specs) + len(scratch_specs)], strict=True))
     refs = dict(zip(ref_specs, done[len(eval_specs) + len(scratch_specs) :], strict=True))
-    references = {
-        name: {
-            f"test_set_{block}": {**stats(refs[(name, block)].final_errors), "errors": refs[(name, block)].final_errors}
-            for block in test_sets
-        }
-        for name in REFERENCES
-    }
+    references: dict[str, Any] = {}
+    for (name, block), r in refs.items():
+        references.setdefault(name, {})[f"test_set_{block}"] = {**stats(r.final_errors), "errors": r.final_errors}
 
     per: dict[str, Any] = {}
     for (label, block, _seed), r in evals.items():
@@ -446,7 +446,11 @@ def _references(rep: Report, references: dict, per: dict, swarm: str, k: int) ->
         "--law greedy`: each joint alone takes the move (−1°, 0, +1°) that, the others held, brings the tip "
         "nearest. It knows the model; like an agent it sees only its own effect and is greedy in the distance, "
         "which is what the shaped reward pays for. Neither bounds what learning can reach: on some goals "
-        "behind the start tip both end folded against a joint's ±180° limit.",
+        "behind the start tip both end folded against a joint's ±180° limit. 'rule on g_perp' is `kinswarm baseline "
+        "--law rule`: each joint one step along the sign of g_perp (the goal along the direction its own joint moves "
+        "the tip), kept inside a one-move dead band; no learning and no model beyond the agent's own state — the "
+        "control for what learning adds. Its successive row runs the test goals the paper's way, each from where "
+        "the last ended.",
     )
     rep.table(["reference", "test set", "mean", "STD", "median", "within 0.5", "max"], rows)
     greedy = references["greedy per joint"][f"test_set_{k}"]["errors"]
@@ -493,6 +497,7 @@ def _verdict(rep: Report, per: dict, trainings: list, k: int, quick: bool, refer
         f"- The model-based references (no learning) on test set {k}: {refs}; "
         f"the paper's Level-3 mean is {PAPER[3][0]}."
     )
+    lines += _against_the_rule(per, references, k)
     ctl = [t for t in trainings if "control" in t.label]
     if ctl:
         c = per[ctl[0].label][f"test_set_{k}"]
@@ -503,6 +508,34 @@ def _verdict(rep: Report, per: dict, trainings: list, k: int, quick: bool, refer
             f"{100 * per['Level-2'][f'test_set_{k}']['frac_within_0_5']:.0f} %)."
         )
     rep.text(*lines)
+
+
+def _against_the_rule(per: dict, references: dict, k: int) -> list[str]:
+    """What learning adds over the hand-written rule on the same state: the Level-3 frozen swarm against the rule,
+    on both test sets and under the successive protocol, said plainly either way."""
+    rule, rule_succ = references.get("rule on g_perp"), references.get("rule on g_perp, successive test goals")
+    pairs = [
+        (f"test set {b}", per.get("Level-3", {}).get(f"test_set_{b}"), (rule or {}).get(f"test_set_{b}"))
+        for b in (k, k + 1)
+    ]
+    pairs.append(
+        (
+            "successive test goals",
+            per.get("Level-3, successive test goals", {}).get(f"test_set_{k}"),
+            (rule_succ or {}).get(f"test_set_{k}"),
+        )
+    )
+    out = []
+    for what, swarm, r in pairs:
+        if swarm is None or r is None:
+            continue
+        verdict = "the trained swarm is **better**" if swarm["mean"] < r["mean"] else "**the rule is better**"
+        out.append(
+            f"- Against the rule on g_perp (no learning, no model), {what}: Level-3 frozen {swarm['mean']:.3f} "
+            f"({100 * swarm['frac_within_0_5']:.0f} % within 0.5), the rule {r['mean']:.3f} "
+            f"({100 * r['frac_within_0_5']:.0f} %): {verdict}."
+        )
+    return out
 
 
 def _figures(

@@ -64,6 +64,7 @@ def run(ctx: Context) -> dict[str, Any]:
         for seed in ctx.seed_list
     }
     pinv = Spec("pinv", seed=0, epochs=1, steps=steps, controller="pinv", observe=True)
+    rule = Spec("rule", seed=0, epochs=1, steps=steps, controller="rule", observe=True)
     trained = dict(zip(train, run_specs(ctx, [*train.values()], "train"), strict=True))
     evals = {
         k: Spec(
@@ -79,8 +80,8 @@ def run(ctx: Context) -> dict[str, Any]:
         )
         for k, v in train.items()
     }
-    done = run_specs(ctx, [pinv, *evals.values()], "greedy")
-    base, greedy = done[0], dict(zip(evals, done[1:], strict=True))
+    done = run_specs(ctx, [pinv, rule, *evals.values()], "greedy")
+    base, ruled, greedy = done[0], done[1], dict(zip(evals, done[2:], strict=True))
 
     base_trace = base.trace()
     q_ls = {a: float(v) for a, v in base.rows[-1]["final_angles_deg"].items()}
@@ -115,6 +116,14 @@ def run(ctx: Context) -> dict[str, Any]:
                 "final_error": base.final_errors[-1],
                 "effort_rad": base_effort,
                 "steps_to_0_1": _first_within(base_trace, goal, 0.1),
+            },
+            "rule": {
+                "final_angles_deg": ruled.rows[-1]["final_angles_deg"],
+                "dist_to_ls_deg": joint_distance(_angles(ruled, 0), q_ls),
+                "final_error": ruled.final_errors[-1],
+                "effort_rad": effort(ruled.trace()),
+                "effort_to_0_1_rad": effort(ruled.trace(), 0.1, goal),
+                "steps_to_0_1": _first_within(ruled.trace(), goal, 0.1),
             },
             "paper": {"ls_angles_deg": PAPER_LS_DEG, "pinv_effort_rad": PAPER_PINV_EFFORT},
             "per_s": per_s,
@@ -163,7 +172,24 @@ def run(ctx: Context) -> dict[str, Any]:
                 + f" ({sum(not math.isnan(e) for e in r['greedy_effort_to_0_1_rad'])}/{len(ctx.seed_list)} reach)",
             ]
         )
+    ru = rep.results["rule"]
+    rows.append(
+        [
+            "rule on g_perp (no learning)",
+            "—",
+            "—",
+            f"{ru['dist_to_ls_deg']:.1f}",
+            f"{ru['final_error']:.3f}",
+            f"{ru['effort_rad']:.2f}",
+            "never within 0.1" if math.isnan(ru["effort_to_0_1_rad"]) else f"{ru['effort_to_0_1_rad']:.2f}",
+        ]
+    )
     rep.table(header, rows)
+    rep.text(
+        "The last row is the hand-written rule on the agents' own state (`kinswarm baseline --law rule`: each joint "
+        "one step along the sign of g_perp, no learning, no model), run the same way: the control for what "
+        "learning adds."
+    )
     greedy_dist = {s: mean_std(per_s[str(s)]["dist_to_ls_deg_greedy"])[0] for s in s_values}
     best, worst = min(greedy_dist, key=greedy_dist.__getitem__), max(greedy_dist, key=greedy_dist.__getitem__)
     near = [s for s in s_values if greedy_dist[s] <= NEAR_DEG]

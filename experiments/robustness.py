@@ -5,6 +5,7 @@ conditions, over seeds:
   learning   the trained swarm still learning (`--from T`)
   scratch    an untrained swarm learning from scratch within the trial (the control)
   baseline   the pseudo-inverse controller (`kinswarm baseline`), which knows the model but not the faults
+  rule       each joint one step along sign(g_perp) (`kinswarm baseline --law rule`): no learning, no model
 
 One trial of 1500 steps each (the paper's "time units per trial"); the faults are applied by the
 simulator at the scenario's steps, and the agents are not told.
@@ -25,7 +26,7 @@ from .optimality import EPOCHS as OPT_EPOCHS
 from .swarm import CHAIN4, ROOT, RunOutcome, Spec, robot_and_goal
 
 SCENARIOS = ("paper-recovery", "paper-fail-disturb-fail", "paper-locked")
-CONDITIONS = ("frozen", "learning", "scratch", "baseline")
+CONDITIONS = ("frozen", "learning", "scratch", "baseline", "rule")
 PAPER = {
     "paper-recovery": "MAS finds a new solution and reaches the goal (Fig. 15)",
     "paper-fail-disturb-fail": "MAS reaches the goal (Fig. 17)",
@@ -58,6 +59,7 @@ def run(ctx: Context) -> dict[str, Any]:
             specs[(sc, "learning", seed)] = Spec(f"rob-{sc}-learning", from_dir=t, **common)
             specs[(sc, "scratch", seed)] = Spec(f"rob-{sc}-scratch", **common)
             specs[(sc, "baseline", seed)] = Spec(f"rob-{sc}-baseline", controller="pinv", **common)
+            specs[(sc, "rule", seed)] = Spec(f"rob-{sc}-rule", controller="rule", **common)
     outs = dict(zip(specs, run_specs(ctx, [*specs.values()], "trials"), strict=True))
 
     tail = min(TAIL, steps // 2)
@@ -115,7 +117,8 @@ def run(ctx: Context) -> dict[str, Any]:
         ours = (
             f"within 0.5 at the end: {', '.join(learned) or 'no swarm condition'}; "
             f"baseline final error {pm(per[sc]['baseline']['final_error'])}, "
-            f"swing {pm(per[sc]['baseline'][f'swing_last_{tail}'])}"
+            f"swing {pm(per[sc]['baseline'][f'swing_last_{tail}'])}; "
+            f"rule final error {pm(per[sc]['rule']['final_error'])}"
         )
         claims.append([sc, PAPER[sc], ours])
     rep.table(["scenario", "paper", "kinswarm"], claims)

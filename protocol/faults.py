@@ -3,9 +3,13 @@
 
 from __future__ import annotations
 
+import math
+
 from .messages import Fault
 
-JOINT_FAULTS = ("lock", "free", "disturb")  # the robot: applied by the sim, unknown to the agents
+# The robot's model: what a controller that assumes the model gets wrong, and a learner can relearn. `free` ends them.
+MODEL_FAULTS = ("reverse", "scale", "deadzone", "offset", "lag")
+JOINT_FAULTS = ("lock", "free", "disturb", *MODEL_FAULTS)  # the robot: applied by the sim, unknown to the agents
 PROCESS_FAULTS = ("kill", "freeze", "thaw", "restart")  # the processes: applied by the supervisor
 LINK_FAULTS = ("drop", "delay", "duplicate", "corrupt", "clear")  # the messages: applied in the runtime
 FAULTS = JOINT_FAULTS + PROCESS_FAULTS + LINK_FAULTS
@@ -18,6 +22,11 @@ _PARAMS: dict[str, tuple[str, ...]] = {
     "lock": (),
     "free": (),
     "disturb": ("steps", "amplitude_deg"),
+    "reverse": (),  # the motor turns the other way
+    "scale": ("factor",),  # the motor moves factor x the command
+    "deadzone": ("degrees",),  # commands smaller than this move nothing
+    "offset": ("degrees",),  # the encoder reads q + degrees
+    "lag": ("steps",),  # the encoder reads the angle of `steps` steps ago
     "kill": (),
     "freeze": ("seconds",),
     "thaw": (),
@@ -28,8 +37,17 @@ _PARAMS: dict[str, tuple[str, ...]] = {
     "corrupt": ("rate", "seconds"),
     "clear": (),
 }
-_REQUIRED: dict[str, tuple[str, ...]] = {"drop": ("rate",), "delay": ("ms",), "disturb": ("steps",)}
-_OPTIONAL_FIELDS = ("seconds", "steps", "rate", "ms", "amplitude_deg")
+_REQUIRED: dict[str, tuple[str, ...]] = {
+    "drop": ("rate",),
+    "delay": ("ms",),
+    "disturb": ("steps",),
+    "scale": ("factor",),
+    "deadzone": ("degrees",),
+    "offset": ("degrees",),
+    "lag": ("steps",),
+}
+_OPTIONAL_FIELDS = ("seconds", "steps", "rate", "ms", "amplitude_deg", "factor", "degrees")
+MAX_LAG_STEPS = 1000  # the encoder's memory is kept per step
 
 
 def check_fault(f: Fault, agents: list[str] | None = None) -> str:
@@ -60,6 +78,14 @@ def check_fault(f: Fault, agents: list[str] | None = None) -> str:
         return f"{f.fault}: ms must be in [0, 60000], got {f.ms}"
     if f.amplitude_deg is not None and not 0 < f.amplitude_deg <= 90:
         return f"{f.fault}: amplitude_deg must be in (0, 90], got {f.amplitude_deg}"
+    if f.factor is not None and not (math.isfinite(f.factor) and 0 < abs(f.factor) <= 100):
+        return f"{f.fault}: factor must be nonzero, at most 100 in size, got {f.factor}"
+    if f.degrees is not None:
+        lo = 0 if f.fault == "deadzone" else -180
+        if not lo < f.degrees <= 180:
+            return f"{f.fault}: degrees must be in ({lo}, 180], got {f.degrees}"
+    if f.fault == "lag" and f.steps is not None and f.steps > MAX_LAG_STEPS:
+        return f"lag: steps must be at most {MAX_LAG_STEPS}, got {f.steps}"
     return ""
 
 

@@ -10,12 +10,13 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import ClassVar
 
-SCHEMA_VERSION = 7  # 2: faults, events, status, bye; payloads carry a MAC (codec.py). 3: Up.action is the
+SCHEMA_VERSION = 8  # 2: faults, events, status, bye; payloads carry a MAC (codec.py). 3: Up.action is the
 # sender's action of the step before (sent before it learns), plus a closing Up after an epoch's last step.
 # 4: scenes with obstacles and the grasp scene: `sense` maps, `traces` on EpochDone. 5: several hosts (deploy
 # plans): Setup, Heartbeat. 6: Up.clearance. 7: every scene reading and task aggregate travels in the one `sense`
 # route (Readings: Obs, Task, Down, Up; the clearance/collided/collisions fields are gone), EpochDone's scene series
-# only in `traces`, and EpochStart.path, the goal of every step when it moves.
+# only in `traces`, and EpochStart.path, the goal of every step when it moves. 8: faults in the robot's model
+# (reverse, scale, deadzone, offset, lag) and their sizes, Fault.factor and Fault.degrees.
 
 Vec2 = tuple[float, float]
 Vec3 = tuple[float, float, float]
@@ -169,7 +170,8 @@ class Fault:
     anyone -> supervisor on `fault/request` (the CLI, or the sim at a scenario step); the supervisor
     answers on `rep/fault/<id>` and applies it: process faults itself, joint faults through the sim and
     link faults through the targets' runtimes, both by forwarding the same message on `ctl/fault`.
-    Durations: `seconds` for freeze and link faults, `steps` for disturb; None means until cleared."""
+    Durations: `seconds` for freeze and link faults, `steps` for disturb; None means until cleared. The faults in
+    the robot's model take their size: `factor` (scale), `degrees` (deadzone, offset), `steps` (lag: how far behind)."""
 
     KIND: ClassVar[str] = "fault"
     id: str
@@ -180,6 +182,8 @@ class Fault:
     rate: float | None
     ms: float | None
     amplitude_deg: float | None
+    factor: float | None = None
+    degrees: float | None = None
 
 
 @dataclass(frozen=True)

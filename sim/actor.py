@@ -6,26 +6,24 @@ missing command means that joint holds — hands the increments (clipped to the 
 the scene, which moves the robot as it allows, and records the error. At the end of an epoch it publishes
 `metrics/epoch`. What surrounds the robot is the run's scene (sim/scenes/): this file names none.
 
-It is also where joint faults live (DESIGN §5): a locked joint ignores its agent, a disturbed one
-moves at random; the agents are not told. Faults come live on `ctl/fault` or from the run's scenario
-file; every change is published on `metrics/event`, and the joints' state on `metrics/joints`.
+It is also where joint faults live (DESIGN §5, sim/faults.py): a locked joint ignores its agent, a disturbed one
+moves at random, a faulty motor or encoder moves or reads wrong; the agents are not told. Faults come live on
+`ctl/fault` or from the run's scenario file; every change is published on `metrics/event`, and the joints' state on
+`metrics/joints`.
 """
 
 from __future__ import annotations
 
 import asyncio
 import dataclasses
-import math
 import time
-import zlib
 from typing import Any
 
-import numpy as np
 import zenoh
 from kinswarm.actors.config import RunConfig
 from kinswarm.actors.runtime import Node
 from kinswarm.actors.scenario import ScenarioEntry, load_scenario
-from kinswarm.protocol.faults import DISTURB_AMPLITUDE_DEG, JOINT_FAULTS, check_fault, describe, expand_targets
+from kinswarm.protocol.faults import JOINT_FAULTS, check_fault, describe, expand_targets
 from kinswarm.protocol.messages import (
     Bye,
     Cmd,
@@ -40,6 +38,7 @@ from kinswarm.protocol.messages import (
     Task,
 )
 from kinswarm.protocol.topology import Topology
+from kinswarm.sim.faults import JointFaults
 from kinswarm.sim.scenes import build_scene
 from kinswarm.sim.world import World
 
@@ -47,13 +46,6 @@ from kinswarm.sim.world import World
 # with "ks/"), so every handler runs on the loop, in arrival order.
 DEADLINE, ALIVE, STATUS, PAUSE_CHECK = "__deadline__", "__alive__", "__status__", "__pause__"
 STATUS_S = 0.5
-
-
-@dataclasses.dataclass(frozen=True)
-class Disturbance:
-    left: int  # steps still to disturb
-    amplitude: float  # radians
-    detail: str  # the fault that started it, for the disturb_end event
 
 
 class SimActor:
@@ -78,11 +70,8 @@ class SimActor:
         self.cmds: dict[str, float] = {}
         self.waiting: set[str] = set()  # agents whose cmd the current step still waits for
         self.down: set[str] = set()  # agents whose liveliness token went away (and has not come back)
-        self.locked: set[str] = set()
-        self.disturbed: dict[str, Disturbance] = {}
+        self.faults = JointFaults(list(self.dof), cfg.seed)
         self.applied: dict[str, float] = dict.fromkeys(self.dof, 0.0)  # last increment per joint
-        # Its own stream, apart from the agents' [seed, crc32(id)]: disturbances replay with the seed.
-        self.rng = np.random.default_rng([cfg.seed, zlib.crc32(b"sim-disturb")])
         self.errors: list[float] = []
         self.tips: dict[str, tuple[float, float, float]] = {}
         self.missed = 0
@@ -221,6 +210,7 @@ class SimActor:
         self.last_epoch = e.epoch
         if not (self.cfg.successive and e.epoch > 0):
             self.world.reset()  # faults persist, angles do not: a locked joint is locked at its initial angle
+            self.faults.reset()
         self.tips = self.world.tip_poses()
         self.scene.reset()
         self.t = 0
@@ -285,7 +275,7 @@ class SimActor:
                 step=step,
                 q=self.world.joint_positions(),
                 delta=dict(self.applied),
-                faults=self.fault_summary(),
+                faults=self.faults.summary(),
                 late={a: n for a, n in self.late.items() if a not in self.down},
             ),
         )
@@ -306,22 +296,8 @@ class SimActor:
             if a not in self.dof_set:
                 self.node.log.warning("ignored fault %s on %s: a compound agent has no joint", f.id, a)
                 continue
-            if f.fault == "lock":
-                self.locked.add(a)
-            elif f.fault == "free":  # the joint obeys its agent again, whatever was wrong with it
-                self.locked.discard(a)
-                self.disturbed.pop(a, None)
-            else:
-                assert f.steps is not None  # check_fault: disturb needs steps
-                amp = f.amplitude_deg if f.amplitude_deg is not None else DISTURB_AMPLITUDE_DEG
-                self.disturbed[a] = Disturbance(f.steps, math.radians(amp), detail)
+            self.faults.apply(f, a)
             self._event(f.fault, a, detail)
-
-    def fault_summary(self) -> dict[str, str]:
-        out = {a: "locked" for a in self.dof if a in self.locked}
-        for a, d in self.disturbed.items():
-            out[a] = f"disturbed ({d.left} steps left)" + (", then locked" if a in self.locked else "")
-        return out
 
     def now(self) -> tuple[int, int]:
         """(epoch, step) for events: the running step, or where the last epoch ended (-1 before any)."""
@@ -344,23 +320,6 @@ class SimActor:
                 self.node.log.info("scenario: requesting %s (%s)", describe(f), f.id)
                 self.node.send(self.keys.fault("request"), f)
 
-    def _increments(self) -> dict[str, float]:
-        """The agents' commands, except that locked joints hold and disturbed ones move at random."""
-        d = {a: v for a, v in self.cmds.items() if a not in self.locked and a not in self.disturbed}
-        for a in self.dof:  # in DOF order: the draws, hence the run, replay with the seed
-            if (dist := self.disturbed.get(a)) is not None:
-                d[a] = float(self.rng.uniform(-dist.amplitude, dist.amplitude))
-        return d
-
-    def _count_disturbances(self) -> None:
-        for a in [a for a in self.dof if a in self.disturbed]:
-            d = self.disturbed[a]
-            if d.left > 1:
-                self.disturbed[a] = dataclasses.replace(d, left=d.left - 1)
-            else:
-                del self.disturbed[a]
-                self._event("disturb_end", a, d.detail)
-
     # -- the step ----------------------------------------------------------------------------------
     def _publish_step(self) -> None:
         e = self.epoch
@@ -368,7 +327,7 @@ class SimActor:
         if self._due:
             self._apply_due(e.epoch)
         k, send, scene, t = self.keys, self.node.send, self.scene, self.t
-        q = self.world.joint_positions()
+        q = self.faults.readings(self.world.joint_positions())  # what the encoders read
         # The root begins once it holds both the task and its own reading: put them back to back, so they
         # reach it in one burst (one wake-up); the others' readings are needed only a hop later.
         for a in self._obs_first:
@@ -390,15 +349,16 @@ class SimActor:
         if self._deadline is not None:
             self._deadline.cancel()
             self._deadline = None
-        faulted = bool(self.locked or self.disturbed)
-        self.applied = self.scene.move(self._increments() if faulted else self.cmds)
+        faults = self.faults
+        self.applied = self.scene.move(faults.increments(self.cmds) if faults.moves_changed else self.cmds)
         self.tips = self.world.tip_poses()
         self.errors.append(self.scene.error(self.tips, self.goal()))
         self.longest_step = max(self.longest_step, time.perf_counter() - self.step_started)
         self.t += 1
         self.total_steps += 1
-        if self.disturbed:
-            self._count_disturbances()
+        if faults.disturbed:
+            for a, detail in faults.count_step():
+                self._event("disturb_end", a, detail)
         if self.t < e.steps:
             if self.paused:
                 self.held = True

@@ -82,6 +82,45 @@ def greedy_increments(
     return out
 
 
+RULE_DEADBAND = 1.0  # in moves: keep while the goal is within one move's arc of the tip along my motion
+
+
+def rule_increments(
+    topo: Topology,
+    angles: Mapping[str, float],
+    goal_xy: tuple[float, float],
+    *,
+    max_step: float = math.radians(1),
+    deadband: float = RULE_DEADBAND,
+) -> dict[str, float]:
+    """The simplest hand-written rule on an agent's own state, no learning: each joint moves one step along
+    sign(g_perp), g_perp being the goal's component along the direction its own joint moves the tip, when
+    |g_perp| > deadband · |joint → tip| · max_step (a move's arc at the tip), else keeps.
+
+    It uses what an agent's state already holds (its joint's position, from the encoder readings and link
+    lengths, and the tip), no Jacobian, no model of the other joints. The control every learning result is
+    measured against: what learning adds beyond it. Several end effectors: the g_perp of the tips the joint
+    moves are summed, against the largest arc.
+    """
+    if max_step <= 0:
+        raise ValueError(f"max_step must be > 0, got {max_step}")
+    gx, gy = goal_xy
+    tip = kinematics.tips(topo, angles)
+    along = np.zeros(len(topo.dof_agents))
+    arc = np.zeros(len(topo.dof_agents))
+    for leaf in topo.end_effectors:
+        motion = kinematics.jacobian(topo, angles, leaf)  # column a: z x (tip - joint a), |.| = |joint a -> tip|
+        lever = np.hypot(motion[0], motion[1])
+        w = np.array([gx - tip[leaf][0], gy - tip[leaf][1]])
+        moved = lever > 0
+        along[moved] += (w @ motion)[moved] / lever[moved]
+        arc = np.maximum(arc, lever * max_step)
+    return {
+        a: float(math.copysign(max_step, along[i])) if abs(along[i]) > deadband * arc[i] and arc[i] > 0 else 0.0
+        for i, a in enumerate(topo.dof_agents)
+    }
+
+
 def run_baseline(
     topo: Topology,
     goal_xy: tuple[float, float],

@@ -1,7 +1,8 @@
 """The model-based baselines as an actor: one takes the place of the agents on the same wire — reads the
 same encoder readings and task observation, and sends one `cmd` per joint — so learned and
 model-based runs go through the same simulator, deadlines and metrics. Its control law is the run's
-`controller`: "pinv" (the pseudo-inverse) or "greedy" (each joint alone, greedy in the distance)."""
+`controller`: "pinv" (the pseudo-inverse), "greedy" (each joint alone, greedy in the distance) or "rule" (each joint
+along sign(g_perp), the hand-written control on the agents' own state)."""
 
 from __future__ import annotations
 
@@ -9,9 +10,9 @@ from kinswarm.actors.config import RunConfig
 from kinswarm.actors.runtime import Node
 from kinswarm.protocol.messages import Cmd, Obs, Stop, Task
 from kinswarm.protocol.topology import Topology
-from kinswarm.sim.baseline import greedy_increments, pinv_increments
+from kinswarm.sim.baseline import greedy_increments, pinv_increments, rule_increments
 
-LAWS = {"pinv": pinv_increments, "greedy": greedy_increments}
+LAWS = {"pinv": pinv_increments, "greedy": greedy_increments, "rule": rule_increments}
 
 
 class BaselineController:

@@ -1,5 +1,5 @@
 """The model-based baselines: the pseudo-inverse (1-degree steps, convergence on the paper's chain4 reaching task)
-and the greedy per-joint reference."""
+the greedy per-joint reference, and the rule on g_perp."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 from kinswarm.protocol.topology import load_robot
 from kinswarm.sim import kinematics
-from kinswarm.sim.baseline import greedy_increments, pinv_increments, run_baseline
+from kinswarm.sim.baseline import greedy_increments, pinv_increments, rule_increments, run_baseline
 from kinswarm.sim.world import World
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
@@ -98,3 +98,31 @@ def test_greedy_can_fold_into_a_local_minimum() -> None:
     ((x, y, _),) = kinematics.tips(topo, q).values()
     assert math.dist((x, y), goal) > 3.0
     assert any(q[a] == pytest.approx(topo.agents[a].limits[1]) for a in q)  # folded into a limit
+
+
+def test_rule_moves_each_joint_along_its_own_g_perp_and_keeps_inside_its_dead_band() -> None:
+    """One step along sign(g_perp) per joint (the goal along the direction the joint moves the tip), nothing
+    inside one move's arc; it reaches the example goal on the model; with a motor reversed it cannot know."""
+    topo = load_robot(EXAMPLES / "chain4.toml")
+    goal, deg = GOAL["chain4"], math.radians(1)
+    q = topo.initial_angles()
+    dq = rule_increments(topo, q, goal)
+    (tip,) = kinematics.tips(topo, q).values()
+    motion = kinematics.jacobian(topo, q, topo.end_effectors[0])
+    w = (goal[0] - tip[0], goal[1] - tip[1])
+    for i, a in enumerate(topo.dof_agents):
+        assert dq[a] == pytest.approx(math.copysign(deg, w[0] * motion[0, i] + w[1] * motion[1, i]))
+    near = (tip[0] + 0.001, tip[1])  # inside every joint's dead band
+    assert rule_increments(topo, q, near) == dict.fromkeys(topo.dof_agents, 0.0)
+
+    def final_error(sign_a1: float) -> float:
+        q = topo.initial_angles()
+        for _ in range(400):
+            for a, d in rule_increments(topo, q, goal).items():
+                lo, hi = topo.agents[a].limits
+                q[a] = min(max(q[a] + (sign_a1 if a == "a1" else 1.0) * d, lo), hi)
+        ((x, y, _),) = kinematics.tips(topo, q).values()
+        return math.dist((x, y), goal)
+
+    assert final_error(1.0) < 0.2
+    assert final_error(-1.0) > 0.5, "a reversed motor: the rule pushes the wrong way"

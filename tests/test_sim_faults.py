@@ -106,14 +106,14 @@ def test_lock_free_disturb(tmp_path, chain4):
             q = step(sim)
         assert q["a2"] == q0["a2"], "a locked joint ignores its commands"
         assert q["a1"] == pytest.approx(q0["a1"] + 5 * DEG) and q["a4"] == pytest.approx(q0["a4"] + 5 * DEG)
-        assert sim.fault_summary() == {"a2": "locked"}
+        assert sim.faults.summary() == {"a2": "locked"}
 
         sim.apply_fault(fault("free", "a2"))
         q = step(sim)
         assert q["a2"] == pytest.approx(q0["a2"] + DEG)
 
         sim.apply_fault(fault("disturb", "a3", steps=3, amplitude_deg=2.0))
-        assert sim.fault_summary() == {"a3": "disturbed (3 steps left)"}
+        assert sim.faults.summary() == {"a3": "disturbed (3 steps left)"}
         before = q["a3"]
         moves = []
         for _ in range(3):
@@ -123,7 +123,7 @@ def test_lock_free_disturb(tmp_path, chain4):
         assert all(abs(m) <= math.radians(2.0) + 1e-12 for m in moves)
         assert all(abs(m - DEG) > 1e-9 for m in moves), "a disturbed joint ignores its commands"
         assert len(set(moves)) == 3
-        assert sim.fault_summary() == {}
+        assert sim.faults.summary() == {}
         q2 = step(sim)
         assert q2["a3"] == pytest.approx(q["a3"] + DEG), "after the disturbance the joint obeys again"
         assert events(sim) == [
@@ -144,9 +144,9 @@ def test_disturbed_lock_stays_locked_at_new_angle_and_faults_persist_across_epoc
         q0 = sim.topo.initial_angles()
         sim._on_epoch(EpochStart(epoch=0, steps=6, goal=GOAL))
         sim.apply_fault(fault("lock", "all"))
-        assert sim.locked == set(sim.dof)
+        assert sim.faults.locked == set(sim.dof)
         sim.apply_fault(fault("disturb", "a1", steps=2))  # default amplitude
-        assert sim.fault_summary()["a1"] == "disturbed (2 steps left), then locked"
+        assert sim.faults.summary()["a1"] == "disturbed (2 steps left), then locked"
         step(sim)
         q = step(sim)
         assert q["a1"] != q0["a1"] and abs(q["a1"] - q0["a1"]) <= 2 * math.radians(2.0)
@@ -163,6 +163,102 @@ def test_disturbed_lock_stays_locked_at_new_angle_and_faults_persist_across_epoc
         assert sim.world.joint_positions() == q0, "a broken joint stays broken"
 
     asyncio.run(body())
+
+
+def test_model_faults_move_and_read_wrong_and_free_ends_them(tmp_path, chain4):
+    """reverse, scale, deadzone (the motor) and offset, lag (the encoder): each as specified, composed per joint,
+    listed in status and events, ended by `free`."""
+
+    async def body() -> None:
+        sim = make_sim(tmp_path, chain4)
+        q0 = sim.topo.initial_angles()
+        sim._on_epoch(EpochStart(epoch=0, steps=50, goal=GOAL))
+        sim.apply_fault(fault("reverse", "a1"))
+        sim.apply_fault(fault("scale", "a2", factor=3.0))
+        sim.apply_fault(fault("deadzone", "a3", degrees=1.5))
+        q = step(sim)
+        assert q["a1"] == pytest.approx(q0["a1"] - DEG), "reversed: the motor turns the other way"
+        assert q["a2"] == pytest.approx(q0["a2"] + 3 * DEG), "scaled: 3 x the command"
+        assert q["a3"] == q0["a3"], "a 1 degree command is inside a 1.5 degree dead zone"
+        assert q["a4"] == pytest.approx(q0["a4"] + DEG)
+        sim.apply_fault(fault("scale", "a1", factor=0.5))  # composes with the reversal
+        q1 = step(sim)
+        assert q1["a1"] == pytest.approx(q["a1"] - 0.5 * DEG)
+        assert sim.faults.summary() == {
+            "a1": "reversed, scaled x0.5",
+            "a2": "scaled x3",
+            "a3": "dead zone 1.5 deg",
+        }
+
+        sim.apply_fault(fault("offset", "a4", degrees=-5.0))
+        sim.apply_fault(fault("lag", "a2", steps=2))
+        node: RecordingNode = sim.node  # type: ignore[assignment]
+        seen: list[dict[str, float]] = []
+        true: list[dict[str, float]] = []
+        for _ in range(4):  # each step ends by publishing the next step's readings
+            n = len(node.sent)
+            true.append(step(sim))
+            seen.append({k.rsplit("/", 1)[1]: m.q for k, m in node.sent[n:] if "/sim/obs/" in k})
+        assert [r["a4"] for r in seen] == pytest.approx([t["a4"] - math.radians(5) for t in true]), "offset"
+        assert seen[2]["a2"] == true[0]["a2"] and seen[3]["a2"] == true[1]["a2"], "lag: the angle of 2 steps ago"
+        assert seen[0]["a2"] == true[0]["a2"], "lag from the fault on: no reading older than the fault"
+        assert [r["a1"] for r in seen] == [t["a1"] for t in true], "other encoders read true"
+
+        sim.apply_fault(fault("free", "all"))
+        assert sim.faults.summary() == {} and not sim.faults.moves_changed
+        q = sim.world.joint_positions()
+        q2 = step(sim)
+        assert all(q2[a] == pytest.approx(q[a] + DEG) for a in sim.dof), "free: the joints obey again"
+        assert [e[:2] for e in events(sim)[:5]] == [
+            ("reverse", "a1"),
+            ("scale", "a2"),
+            ("deadzone", "a3"),
+            ("scale", "a1"),
+            ("offset", "a4"),
+        ]
+        assert sim.node.of(Event)[1].detail == "scale a2 factor=3"  # type: ignore[attr-defined]
+
+    asyncio.run(body())
+
+
+def test_agents_are_not_told_of_model_faults(tmp_path, chain4):
+    """What the agents receive (their encoder readings and the task) carries no trace of a motor fault: with a1
+    reversed, a step's messages to the agents are exactly those of the intact robot in the same pose; the fault
+    goes only to observers (metrics/event, metrics/joints)."""
+
+    async def run(faulty: bool) -> list[tuple[str, Any]]:
+        sim = make_sim(tmp_path, chain4)
+        sim._on_epoch(EpochStart(epoch=0, steps=10, goal=GOAL))
+        if faulty:
+            sim.apply_fault(fault("reverse", "a1"))
+            sim.apply_fault(fault("scale", "a2", factor=3.0))
+        node: RecordingNode = sim.node  # type: ignore[assignment]
+        n = len(node.sent)
+        step(sim, delta=0.0)  # no move: the same pose either way
+        return [(k, m) for k, m in node.sent[n:] if "/metrics/" not in k]
+
+    intact, faulty = asyncio.run(run(False)), asyncio.run(run(True))
+    assert intact == faulty and intact, "the agents' messages are the same"
+    for _, m in faulty:
+        assert "reverse" not in repr(m) and "scale" not in repr(m)
+
+
+def test_bad_model_faults_are_refused_with_the_reason():
+    from kinswarm.protocol.faults import check_fault
+
+    cases = {
+        "scale: needs factor": fault("scale", "a1"),
+        "factor must be nonzero": fault("scale", "a1", factor=0.0),
+        "deadzone: degrees must be in (0, 180]": fault("deadzone", "a1", degrees=-1.0),
+        "offset: needs degrees": fault("offset", "a1"),
+        "lag: needs steps": fault("lag", "a1"),
+        "lag: steps must be at most 1000": fault("lag", "a1", steps=5000),
+        "reverse: does not take factor": fault("reverse", "a1", factor=2.0),
+        "scale: factor must be nonzero, at most 100 in size, got nan": fault("scale", "a1", factor=float("nan")),
+    }
+    for expected, f in cases.items():
+        assert expected in check_fault(f), (expected, check_fault(f))
+    assert check_fault(fault("offset", "a1", degrees=-5.0)) == ""
 
 
 def test_disturbance_replays_with_the_seed(tmp_path, chain4):
@@ -185,7 +281,7 @@ def test_other_faults_and_bad_faults_are_ignored(tmp_path, chain4):
         sim.apply_fault(fault("drop", "a2", rate=0.5))
         sim.apply_fault(fault("lock", "zz"))  # not an agent
         sim.apply_fault(fault("disturb", "a1"))  # no steps
-        assert not sim.locked and not sim.disturbed and not sim.node.sent  # type: ignore[attr-defined]
+        assert not sim.faults.moves_changed and not sim.node.sent  # type: ignore[attr-defined]
 
     asyncio.run(body())
 

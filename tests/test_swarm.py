@@ -20,7 +20,7 @@ from kinswarm.actors.cli import main as cli_main
 from kinswarm.actors.runtime import open_session
 from kinswarm.protocol.topology import load_robot
 from kinswarm.sim import kinematics
-from kinswarm.sim.baseline import greedy_increments
+from kinswarm.sim.baseline import greedy_increments, rule_increments
 
 pytestmark = pytest.mark.timeout(180)
 
@@ -339,15 +339,17 @@ def test_baseline_reaches_the_goal(tmp_path, chain4, endpoint):
     assert (tmp_path / "b" / "arm.png").is_file()
 
 
-def test_greedy_reference_drives_the_world_as_the_model_says(tmp_path, chain4, endpoint):
-    """`kinswarm baseline --law greedy` over the wire ends where the model's replay of its law ends."""
-    args = ["baseline", str(chain4), "--law", "greedy", "--placement", "single", "--epochs", "1"]
+@pytest.mark.parametrize("law", ["greedy", "rule"])
+def test_reference_laws_drive_the_world_as_the_model_says(tmp_path, chain4, endpoint, law):
+    """`kinswarm baseline --law greedy|rule` over the wire ends where the model's replay of its law ends."""
+    args = ["baseline", str(chain4), "--law", law, "--placement", "single", "--epochs", "1"]
     s = run([*args, "--steps", "150", "--listen", endpoint, "--out", str(tmp_path / "g")])
-    assert s["controller"] == "greedy"
+    assert s["controller"] == law
     topo, goal = load_robot(chain4), (4.16, 6.18)
     q = topo.initial_angles()
+    increments = {"greedy": greedy_increments, "rule": rule_increments}[law]
     for _ in range(150):
-        dq = greedy_increments(topo, q, goal)
+        dq = increments(topo, q, goal)
         q = {a: q[a] + dq[a] for a in q}
     ((x, y, _),) = kinematics.tips(topo, q).values()
     assert s["final_error"][0] == pytest.approx(math.dist((x, y), goal), abs=1e-6)
