@@ -124,6 +124,22 @@ def run_suffix(learner: tuple, reward: str) -> str:
     return RUN_SUFFIX[learner] + ("" if reward == "shaped" else f"-{reward}")
 
 
+def training_spec(t: Training, seed: int, steps: int) -> Spec:
+    """The run that trains row `t`'s swarm of one seed: the level's goals in a seeded order, checkpointed."""
+    goals = training_order(quadtree(t.level), math.ceil(t.epochs / 4**t.level), seed)[: t.epochs]
+    return Spec(
+        f"gen-train-L{t.level}-e{t.epochs}{t.suffix}{'-succ' if t.train_successive else ''}",
+        seed=seed,
+        epochs=t.epochs,
+        steps=steps,
+        goals=goals,
+        learner=t.learner,
+        reward=t.reward,
+        successive=t.train_successive,
+        checkpoint=True,
+    )
+
+
 def reps_for(level: int) -> int:
     return 1 if level >= 4 else REPS
 
@@ -193,22 +209,11 @@ def train_and_test(ctx: Context, trainings: list[Training], second_level: int, w
 
     train_specs = {}
     for t in trainings:
-        label, level, epochs = t.label, t.level, t.epochs
+        label = t.label
         if t.successive:  # the same training as the level's own row (added below)
             continue
         for seed in seeds_of(t):
-            goals = training_order(quadtree(level), math.ceil(epochs / 4**level), seed)[:epochs]
-            train_specs[(label, seed)] = Spec(
-                f"gen-train-L{level}-e{epochs}{t.suffix}{'-succ' if t.train_successive else ''}",
-                seed=seed,
-                epochs=epochs,
-                steps=train_steps,
-                goals=goals,
-                learner=t.learner,
-                reward=t.reward,
-                successive=t.train_successive,
-                checkpoint=True,
-            )
+            train_specs[(label, seed)] = training_spec(t, seed, train_steps)
     trained = dict(zip(train_specs, run_specs(ctx, [*train_specs.values()], "train"), strict=True))
     for t in trainings:
         if t.successive:

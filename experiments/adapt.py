@@ -1,0 +1,331 @@
+"""What learning buys: faults in the robot's model, unknown to every controller (sim/faults.py).
+
+A motor wired backwards or with a wrong gain, a dead zone, an encoder that reads wrong or late: a controller that
+assumes the model (the pseudo-inverse, the greedy per-joint reference) or the hand-written rule on the agents' own
+state (each joint along sign(g_perp)) keeps acting on the model it assumes; a swarm that learns from the reward
+can find what its moves do now. For each fault, on the generalisation report's test goals (one 500-step episode
+per goal, each from the start pose):
+
+  fresh, learning     an untrained swarm learning online, a new one for each goal (the default learner, `shaped`)
+  trained, learning   the generalisation recipe's Level-3 swarm (examples/reach-generalise.toml), learning on; its
+                      learning carries from goal to goal, as a deployed swarm's would
+  trained, frozen     the same swarm, learning and exploration off
+  rule                `kinswarm baseline --law rule`; pseudo-inverse and greedy per joint: `--law pinv|greedy`
+
+and the live case: the trained swarm learning, at its goal, `a1` reversed at step 500 of a 1000-step episode;
+steps until it is back within 0.5 for good, against a fresh swarm in the same episode (500 steps old at the fault).
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from typing import Any
+
+import numpy as np
+
+from .common import Context, Report, mean_std, plt_module, run_specs, settings
+from .generalisation import LEARNER, REPS, Training, training_spec
+from .goals import halton
+from .swarm import Spec
+
+STEPS = 500
+GOALS = 30  # of test set 0 (experiments/goals.py halton(0)): the generalisation report's first 30 test goals
+LIVE_GOALS = 10
+LIVE_STEPS, LIVE_AT = 1000, 500
+WITHIN = 0.5
+# (label, [(fault, targets, parameters)]): each applied at step 0 of every episode (sim/faults.py)
+CONDITIONS: dict[str, list[tuple[str, list[str], dict[str, Any]]]] = {
+    "intact": [],
+    "a1 reversed": [("reverse", ["a1"], {})],
+    "a2, a3 reversed": [("reverse", ["a2", "a3"], {})],
+    "a2 gain x3": [("scale", ["a2"], {"factor": 3.0})],
+    "a2 gain x0.3": [("scale", ["a2"], {"factor": 0.3})],
+    "a2 dead zone 0.5°": [("deadzone", ["a2"], {"degrees": 0.5})],
+    "a1 reads +10°": [("offset", ["a1"], {"degrees": 10.0})],
+    "a1 reads 5 steps late": [("lag", ["a1"], {"steps": 5})],
+}
+QUICK_CONDITIONS = ("intact", "a1 reversed")
+LAWS = {"rule": "rule", "pseudo-inverse": "pinv", "greedy per joint": "greedy"}
+CONTROLLERS = ("fresh, learning", "trained, learning", "trained, frozen", *LAWS)
+FRESH = settings()  # the default learner; the chain's default reward, shaped
+
+
+def slug(label: str) -> str:
+    return re.sub(r"[^a-z0-9]+", "-", label.lower()).strip("-")
+
+
+def scenario(ctx: Context, name: str, events: list[tuple[int, str, list[str], dict[str, Any]]]) -> str | None:
+    """A scenario file under the experiment's runs (its content is part of each run's identity); None: no faults."""
+    if not events:
+        return None
+    lines = [f'name = "adapt-{name}"']
+    for step, fault, targets, params in events:
+        lines += ["", "[[event]]", f"step = {step}", f'fault = "{fault}"', f"target = {targets!r}".replace("'", '"')]
+        lines += [f"{k} = {v!r}" for k, v in params.items()]
+    path = ctx.runs / "scenarios" / f"adapt-{name}.toml"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text("\n".join(lines) + "\n")
+    return str(path)
+
+
+def steps_to_within(errors: list[float], start: int = 0) -> float:
+    """Steps from `start` until the error is within 0.5 for the rest of the episode (0: it never left; inf: it
+    never is, so a median over episodes counts those as the slowest)."""
+    over = [t for t in range(start, len(errors)) if errors[t] > WITHIN]
+    if not over:
+        return 0.0
+    if over[-1] == len(errors) - 1:
+        return math.inf
+    return float(over[-1] + 1 - start)
+
+
+def median_steps(values: list[float]) -> float | None:
+    """The median over episodes, never-within ones as the slowest; None when that median is one of them."""
+    m = float(np.median(values))
+    return None if math.isinf(m) else m
+
+
+def run(ctx: Context) -> dict[str, Any]:
+    q = ctx.quick
+    steps, n_goals = (100, 4) if q else (STEPS, GOALS)
+    goals = tuple(halton(0)[:n_goals])
+    conditions = {c: CONDITIONS[c] for c in (QUICK_CONDITIONS if q else CONDITIONS)}
+    level = 1 if q else 3
+    recipe = Training(f"Level-{level}", level, (1 if q else REPS) * 4**level, LEARNER)
+    trained = dict(
+        zip(
+            ctx.seed_list,
+            run_specs(ctx, [training_spec(recipe, s, 100 if q else 500) for s in ctx.seed_list], "train"),
+            strict=True,
+        )
+    )
+
+    specs: dict[tuple[str, str, int], list[Spec]] = {}
+    for label, faults in conditions.items():
+        path = scenario(ctx, slug(label), [(0, f, t, p) for f, t, p in faults])
+        common = {"steps": steps, "scenario": path}
+        for seed in ctx.seed_list:
+            t = str(trained[seed].out)
+            specs[(label, "fresh, learning", seed)] = [
+                Spec(f"adapt-fresh-{slug(label)}-g{i}", seed=seed, epochs=1, goals=(g,), learner=FRESH, **common)
+                for i, g in enumerate(goals)
+            ]
+            trained_common = {"seed": seed, "epochs": n_goals, "goals": goals, "learner": LEARNER, "from_dir": t}
+            specs[(label, "trained, learning", seed)] = [
+                Spec(f"adapt-trained-{slug(label)}", reward="graded", **trained_common, **common)
+            ]
+            specs[(label, "trained, frozen", seed)] = [
+                Spec(
+                    f"adapt-frozen-{slug(label)}",
+                    learn=False,
+                    explore=False,
+                    reward="graded",
+                    **trained_common,
+                    **common,
+                )
+            ]
+        for name, law in LAWS.items():  # deterministic: one run serves every seed
+            run_ = Spec(f"adapt-{law}-{slug(label)}", epochs=n_goals, goals=goals, controller=law, **common)
+            for seed in ctx.seed_list:
+                specs[(label, name, seed)] = [run_]
+
+    live_steps, live_at = (200, 100) if q else (LIVE_STEPS, LIVE_AT)
+    live_path = scenario(ctx, "live", [(0, "free", ["a1"], {}), (live_at, "reverse", ["a1"], {})])
+    live_goals = goals[: 2 if q else LIVE_GOALS]
+    live_common = {"steps": live_steps, "scenario": live_path}
+    live: dict[tuple[str, int], list[Spec]] = {}
+    for seed in ctx.seed_list:
+        live[("trained, learning", seed)] = [
+            Spec(
+                f"adapt-live-trained-g{i}",
+                seed=seed,
+                epochs=1,
+                goals=(g,),
+                learner=LEARNER,
+                reward="graded",
+                from_dir=str(trained[seed].out),
+                **live_common,
+            )  # fmt: skip
+            for i, g in enumerate(live_goals)
+        ]
+        live[("fresh, learning", seed)] = [
+            Spec(f"adapt-live-fresh-g{i}", seed=seed, epochs=1, goals=(g,), learner=FRESH, **live_common)
+            for i, g in enumerate(live_goals)
+        ]
+    for name, law in (("rule", "rule"), ("pseudo-inverse", "pinv")):
+        for seed in ctx.seed_list:
+            live[(name, seed)] = [Spec(f"adapt-live-{law}", epochs=len(live_goals), goals=live_goals,
+                                       controller=law, **live_common)]  # fmt: skip
+
+    flat = [s for group in (*specs.values(), *live.values()) for s in group]
+    unique = list(dict.fromkeys(flat))
+    done = dict(zip(unique, run_specs(ctx, unique, "episodes"), strict=True))
+
+    def episodes(group: list[Spec]) -> list[list[float]]:
+        """Every episode's error per step, in goal order."""
+        return [row["errors"] for s in group for row in done[s].rows]
+
+    per: dict[str, dict[str, Any]] = {}
+    for label in conditions:
+        per[label] = {}
+        for c in CONTROLLERS:
+            eps = [episodes(specs[(label, c, seed)]) for seed in ctx.seed_list]
+            finals = [[e[-1] for e in seed_eps] for seed_eps in eps]
+            reach = [steps_to_within(e) for seed_eps in eps for e in seed_eps]
+            per[label][c] = {
+                "final_error": finals,
+                "within": [float(np.mean([f <= WITHIN for f in fs])) for fs in finals],
+                "mean_final": [float(np.mean(fs)) for fs in finals],
+                "median_steps_to_within": median_steps(reach),
+                "never_within": int(np.sum(np.isinf(reach))),
+                "mean_curve": np.mean([e for seed_eps in eps for e in seed_eps], axis=0).tolist(),
+            }
+    live_per: dict[str, Any] = {}
+    for c in ("trained, learning", "fresh, learning", "rule", "pseudo-inverse"):
+        eps = [e for seed in ctx.seed_list for e in episodes(live[(c, seed)])]
+        at_goal = [e[live_at - 1] <= WITHIN for e in eps]
+        back = [steps_to_within(e, live_at) for e in eps]
+        live_per[c] = {
+            "at_goal_when_reversed": int(np.sum(at_goal)),
+            "episodes": len(eps),
+            "steps_back": [None if math.isinf(b) else b for b in back],
+            "median_steps_back": median_steps(back),
+            "never_back": int(np.sum(np.isinf(back))),
+            "mean_curve": np.mean(eps, axis=0).tolist(),
+        }
+
+    rep = Report(ctx, "What learning buys: faults in the robot's model", "ours (the paper's model-free claim)")
+    rep.results.update(
+        {
+            "steps": steps,
+            "goals": [list(g) for g in goals],
+            "trained": {"level": level, "epochs": recipe.epochs, "runs": [str(trained[s].out.name) for s in trained]},
+            "conditions": {k: [{"fault": f, "targets": t, **p} for f, t, p in v] for k, v in conditions.items()},
+            "per_condition": per,
+            "live": {"steps": live_steps, "reversed_at": live_at, "goals": len(live_goals), "per": live_per},
+        }
+    )
+    _text(rep, ctx, per, live_per, steps, n_goals, level, recipe.epochs, live_steps, live_at, len(live_goals))
+    _figures(rep, per, live_per, live_at)
+    rep.write(
+        {
+            "topology": "examples/chain4.toml",
+            "test_goals": f"the first {n_goals} of test set 0 (experiments/goals.py halton(0))",
+            "fresh_learner": "defaults, reward shaped",
+            "trained": f"generalisation's Level-{level} training (examples/reach-generalise.toml), reward graded",
+        },
+        list(done.values()),
+    )
+    return rep.results
+
+
+def _fmt_steps(x: float | None) -> str:
+    return "never" if x is None else f"{x:.0f}"
+
+
+def _text(rep: Report, ctx: Context, per: dict, live: dict, steps: int, n_goals: int, level: int, epochs: int,
+          live_steps: int, live_at: int, live_goals: int) -> None:  # fmt: skip
+    rep.text(
+        "## Set-up",
+        "",
+        f"examples/chain4.toml; the first {n_goals} goals of the generalisation report's test set 0, one {steps}-step "
+        "episode per goal from the start pose (0, 10, 20, 30)°. The fault is applied by the simulator at step 0 of "
+        "every episode (a scenario file); no controller is told. 'trained' is the generalisation recipe's "
+        f"Level-{level} swarm ({epochs} epochs on Level-{level}'s goals, `graded`); 'fresh' is a new untrained swarm "
+        "per goal with the default learner and reward. The rule, the pseudo-inverse and the greedy reference are "
+        "deterministic: one run each.",
+        "",
+        "## Result",
+        "",
+        f"Share of episodes ending within {WITHIN} (mean ± std over seeds), mean final error, and the median number of "
+        f"steps until the error is within {WITHIN} for the rest of the episode, an episode that never is counted as "
+        "the slowest ('never': how many never are).",
+    )
+    rows = []
+    for label, cs in per.items():
+        for i, c in enumerate(CONTROLLERS):
+            p = cs[c]
+            w, ws = mean_std(p["within"])
+            rows.append(
+                [
+                    label if i == 0 else "",
+                    c,
+                    f"{100 * w:.0f} ± {100 * ws:.0f} %",
+                    f"{mean_std(p['mean_final'])[0]:.3f}",
+                    _fmt_steps(p["median_steps_to_within"]),
+                    p["never_within"],
+                ]
+            )
+    rep.table(["fault", "controller", f"within {WITHIN}", "mean final error", "median steps to within", "never"], rows)
+    lines = ["", "In words:"]
+    for label, cs in per.items():
+        best = max(CONTROLLERS, key=lambda c: (mean_std(cs[c]["within"])[0], -mean_std(cs[c]["mean_final"])[0]))
+        fresh, rule = mean_std(cs["fresh, learning"]["within"])[0], mean_std(cs["rule"]["within"])[0]
+        pinv = mean_std(cs["pseudo-inverse"]["within"])[0]
+        lines.append(
+            f"- {label}: best {best} ({100 * mean_std(cs[best]['within'])[0]:.0f} %); a fresh learning swarm "
+            f"{100 * fresh:.0f} %, the rule {100 * rule:.0f} %, the pseudo-inverse {100 * pinv:.0f} %."
+        )
+    rep.text(*lines)
+    t, f = live["trained, learning"], live["fresh, learning"]
+    rep.text(
+        "## Live: a motor reversed at a trained swarm's goal",
+        "",
+        f"{live_goals} goals × {len(ctx.seed_list)} seeds, one {live_steps}-step episode each; `a1` is reversed at "
+        f"step {live_at} (a scenario file; `kinswarm fault RUN reverse a1` does the same on a running swarm). "
+        f"'steps back': from the fault until the error is within {WITHIN} for the rest of the episode (0: it never "
+        "left).",
+    )
+    rep.table(
+        ["controller", f"within {WITHIN} when reversed", "median steps back", "never back"],
+        [
+            [c, f"{v['at_goal_when_reversed']}/{v['episodes']}", _fmt_steps(v["median_steps_back"]), v["never_back"]]
+            for c, v in live.items()
+        ],
+    )
+    faster = t["median_steps_back"] is not None and (
+        f["median_steps_back"] is None or t["median_steps_back"] < f["median_steps_back"]
+    )
+    rep.text(
+        "",
+        f"The trained swarm is back within {WITHIN} after a median of {_fmt_steps(t['median_steps_back'])} steps, "
+        f"a fresh swarm after {_fmt_steps(f['median_steps_back'])}: "
+        + ("**the trained swarm recovers faster**." if faster else "**the trained swarm is not faster**."),
+    )
+
+
+def _figures(rep: Report, per: dict, live: dict, live_at: int) -> None:
+    plt = plt_module()
+    n = len(per)
+    cols = 2 if n > 1 else 1
+    rows = (n + cols - 1) // cols
+    fig, axes = plt.subplots(rows, cols, figsize=(6.5 * cols, 2.9 * rows), squeeze=False, sharex=True)
+    for ax, (label, cs) in zip(axes.flat, per.items(), strict=False):
+        for i, c in enumerate(CONTROLLERS):
+            ax.plot(cs[c]["mean_curve"], lw=1.1, color=f"C{i}", label=c)
+        ax.axhline(WITHIN, color="grey", ls="--", lw=0.8)
+        ax.set_title(f"{label} (from step 0)", fontsize=9)
+        ax.set_ylabel("error, mean over episodes")
+        ax.grid(alpha=0.3)
+    for ax in axes.flat[n:]:
+        ax.axis("off")
+    for ax in axes[-1]:
+        ax.set_xlabel("step")
+    handles, labels = axes.flat[0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="lower center", ncol=len(CONTROLLERS), fontsize=8, frameon=False)
+    fig.tight_layout(rect=(0, 0.04, 1, 1))
+    rep.save_figure(fig, "faults.png", "Error over the episode per fault and controller (mean over goals and seeds)")
+
+    fig, ax = plt.subplots(figsize=(8, 3.6))
+    for i, (c, v) in enumerate(live.items()):
+        ax.plot(v["mean_curve"], lw=1.1, color=f"C{i}", label=c)
+    ax.axvline(live_at, color="C3", ls=":", lw=1.0)
+    ax.annotate("a1 reversed", (live_at, 1.0), xycoords=("data", "axes fraction"), xytext=(4, -12),
+                textcoords="offset points", color="C3", fontsize=8)  # fmt: skip
+    ax.axhline(WITHIN, color="grey", ls="--", lw=0.8)
+    ax.set_xlabel("step")
+    ax.set_ylabel("error, mean over episodes")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0), frameon=False)
+    rep.save_figure(fig, "live.png", "A motor reversed mid-episode: the error per step (mean over goals and seeds)")
