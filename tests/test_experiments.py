@@ -280,6 +280,28 @@ def test_quick_grasp_experiment(tmp_path):
     assert "frozen (`--learn off --explore off`) it ends good in" in (out / "report.md").read_text()
 
 
+def test_quick_adapt_experiment(tmp_path):
+    """The adaptation report's smoke version: every controller on every condition, the live case, and the model
+    fault unknown to the laws that assume the model (deterministic: the rule cannot reach with a1 reversed)."""
+    from kinswarm.experiments import run_experiment
+
+    res = run_experiment("adapt", seeds=1, quick=True, out=tmp_path)["adapt"]
+    out = tmp_path / "adapt"
+    for f in ("report.md", "results.json", "faults.png", "live.png"):
+        assert (out / f).is_file(), f
+    per = res["per_condition"]
+    assert set(per) == {"intact", "a1 reversed"}
+    for cs in per.values():
+        assert set(cs) == {"fresh, learning", "trained, learning", "trained, frozen", "rule", "pseudo-inverse",
+                           "greedy per joint"}  # fmt: skip
+        for c in cs.values():
+            assert len(c["final_error"][0]) == 4 and 0.0 <= c["within"][0] <= 1.0
+    assert per["intact"]["rule"]["within"] == [1.0] and per["a1 reversed"]["rule"]["within"] == [0.0]
+    assert set(res["live"]["per"]) == {"trained, learning", "fresh, learning", "rule", "pseudo-inverse"}
+    text = (out / "report.md").read_text()
+    assert "## Live: a motor reversed at a trained swarm's goal" in text and "quick" in text
+
+
 @pytest.mark.research
 @pytest.mark.timeout(600)
 @pytest.mark.parametrize("name", ["corridor_rounds", "successive_training", "grasp_epsilon_decay"])

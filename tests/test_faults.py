@@ -160,6 +160,34 @@ def test_bad_faults_are_refused_with_a_reason(tmp_path, chain4):
     assert swarm_pids(str(run.out)) == []
 
 
+def test_a_motor_reversed_live_is_applied_shown_and_freed(tmp_path, chain4):
+    """`kinswarm fault RUN reverse a2` (and scale, offset) on a running swarm: the sim applies it (an event with its
+    size), `status` shows it, `free` ends it, and a bad size is one line before anything is sent."""
+    run = Run(tmp_path, chain4, "--epochs", "5000", "--steps", "100", "--placement", "single")
+    run.wait_epochs(1)
+    r = run.fault("reverse", "a2")
+    assert r.returncode == 0 and "reverse a2" in r.stdout, r.stdout + r.stderr
+    assert run.fault("scale", "a3", "--factor", "3").returncode == 0
+    assert run.fault("offset", "a4", "--degrees", "-5").returncode == 0  # a negative value is not an option
+    run.wait_event("reverse", "a2")
+    assert run.wait_event("scale", "a3")["detail"] == "scale a3 factor=3"
+    assert run.wait_event("offset", "a4")["detail"] == "offset a4 degrees=-5"
+    deadline = time.monotonic() + 20
+    while "reversed" not in (status := run.cli("status", run.run_id)).stdout and time.monotonic() < deadline:
+        time.sleep(0.3)
+    assert "reversed" in status.stdout and "scaled x3" in status.stdout and "reads -5 deg" in status.stdout
+    r = run.fault("scale", "a3", "--factor", "0")
+    assert r.returncode == 2 and "factor must be nonzero" in r.stderr and "Traceback" not in r.stderr
+    r = run.fault("lag", "a3")
+    assert r.returncode == 2 and "lag: needs steps" in r.stderr
+    assert run.fault("free", "all").returncode == 0
+    run.wait_event("free", "a2")
+    run.proc.send_signal(2)  # Ctrl-C
+    code, _ = run.finish()
+    assert code == 130
+    assert swarm_pids(str(run.out)) == []
+
+
 def test_fault_needs_the_runs_key(tmp_path):
     r = subprocess.run(
         [*CLI, "fault", "nosuchrun", "kill", "a1", "--run-dir", str(tmp_path)],

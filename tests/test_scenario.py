@@ -65,6 +65,22 @@ def test_optional_fields_and_non_joint_faults(tmp_path, topo):
     assert not drop.is_joint and freeze.fault.seconds == 5.0 and freeze.epoch is None
 
 
+def test_faults_in_the_robots_model(tmp_path, topo):
+    p = tmp_path / "s.toml"
+    p.write_text(
+        'name = "model"\n'
+        '[[event]]\nstep = 0\nfault = "reverse"\ntarget = ["a1", "a2"]\n'
+        '[[event]]\nstep = 3\nfault = "scale"\ntarget = "a2"\nfactor = 0.3\n'
+        '[[event]]\nstep = 4\nfault = "deadzone"\ntarget = "a3"\ndegrees = 0.5\n'
+        '[[event]]\nstep = 5\nfault = "offset"\ntarget = "a4"\ndegrees = -10\n'
+        '[[event]]\nstep = 6\nfault = "lag"\ntarget = "a1"\nsteps = 5\n'
+    )
+    rev, scale, dead, off, lag = load_scenario(p, topo).entries
+    assert all(e.is_joint for e in (rev, scale, dead, off, lag)), "applied by the sim, not the supervisor"
+    assert rev.fault.targets == ["a1", "a2"] and scale.fault.factor == 0.3 and dead.fault.degrees == 0.5
+    assert off.fault.degrees == -10.0 and lag.fault.steps == 5
+
+
 HEAD = 'name = "bad"\n'
 LOCK = '[[event]]\nstep = 0\nfault = "lock"\ntarget = "a2"\n'
 
@@ -92,6 +108,11 @@ LOCK = '[[event]]\nstep = 0\nfault = "lock"\ntarget = "a2"\n'
         (HEAD + "event = [3]\n", "event[0]", "must be a table"),
         (HEAD + "event = 3\n", "event", "at least one"),
         (HEAD + "[[event\n", "toml", ""),
+        (HEAD + LOCK.replace('"lock"', '"scale"'), "event[0]", "scale: needs factor"),
+        (HEAD + LOCK.replace('"lock"', '"scale"') + "factor = 0\n", "event[0]", "factor must be nonzero"),
+        (HEAD + LOCK.replace('"lock"', '"deadzone"') + "degrees = 0\n", "event[0]", "degrees must be in (0, 180]"),
+        (HEAD + LOCK.replace('"lock"', '"reverse"') + "degrees = 3\n", "event[0]", "reverse: does not take degrees"),
+        (HEAD + LOCK.replace('"lock"', '"lag"') + "steps = 0\n", "event[0]", "steps must be >= 1"),
     ],
 )
 def test_bad_scenarios_name_file_and_field(tmp_path, topo, text, where, what):
