@@ -149,6 +149,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     rep = sub.add_parser("report", help="rebuild a run's summary plots")
     rep.add_argument("run_dir", type=Path)
+    rep.add_argument("--log", action="store_true", help="the learning curve's error axis logarithmic")
     fault = sub.add_parser(
         "fault",
         help="inject a fault into a running swarm",
@@ -369,7 +370,7 @@ def _main(argv: list[str] | None) -> int:
                 raise ConfigError(f"{a.run_dir}: not a run directory (no config.json)")
             for line in torn_rows(a.run_dir):
                 print(f"kinswarm: {line}", file=sys.stderr)
-            for path in write_plots(a.run_dir):
+            for path in write_plots(a.run_dir, log=a.log):
                 print(path)
             return 0
         if a.command in ("fault", "status"):

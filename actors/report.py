@@ -1,6 +1,10 @@
 """What a run leaves behind: `summary.json`, `learning_curve.png`, `arm.png`, `tracking.png` — rebuilt
 from the run directory alone (`kinswarm report RUN-DIR`). Runs from before faults existed (no
-`events.jsonl`, no per-step `errors` in `metrics.jsonl`) still get the plots their data allows."""
+`events.jsonl`, no per-step `errors` in `metrics.jsonl`) still get the plots their data allows.
+
+Plots a person reads at a glance: a linear error axis (log on request), whole epochs on the axis, legends beside
+the data rather than on it, a lasting joint fault drawn as the span it lasts (actors/timeline.py), event labels
+that never overlap, and a title that says what drove the robot."""
 
 from __future__ import annotations
 
@@ -11,6 +15,7 @@ from typing import Any
 
 from kinswarm.actors.config import RunConfig, load_run_config
 from kinswarm.actors.learning.state import joint_frame, link_end
+from kinswarm.actors.timeline import Span, active_at_end, fault_spans, label_groups
 from kinswarm.protocol.topology import Topology
 
 TRACKED_EPOCHS = 4  # tracking.png: at most this many epochs with events (else the last epoch)
@@ -51,8 +56,14 @@ def torn_rows(run_dir: Path) -> list[str]:
     return skipped
 
 
-def arm_points(topo: Topology, angles: dict[str, float]) -> list[list[tuple[float, float]]]:
-    """Polylines of the robot, one per root-to-leaf path, from the agents' own frame composition."""
+def joint_points(topo: Topology, angles: dict[str, float]) -> dict[str, tuple[float, float]]:
+    """Where each agent's joint sits, from the agents' own frame composition."""
+    return {a: f[:2] for a, f in _frames(topo, angles)[0].items()}
+
+
+def _frames(
+    topo: Topology, angles: dict[str, float]
+) -> tuple[dict[str, tuple[float, float, float]], dict[str, tuple[float, float, float]]]:
     ends: dict[str, tuple[float, float, float]] = {}
     starts: dict[str, tuple[float, float, float]] = {}
     for a in topo.order:
@@ -60,6 +71,12 @@ def arm_points(topo: Topology, angles: dict[str, float]) -> list[list[tuple[floa
         base = topo.base if spec.parent is None else ends[spec.parent]
         frame = joint_frame(base, spec.offset, angles.get(a, 0.0))
         starts[a], ends[a] = frame, link_end(frame, spec.link_length)
+    return starts, ends
+
+
+def arm_points(topo: Topology, angles: dict[str, float]) -> list[list[tuple[float, float]]]:
+    """Polylines of the robot, one per root-to-leaf path, from the agents' own frame composition."""
+    starts, ends = _frames(topo, angles)
     lines = []
     for leaf in topo.end_effectors:
         path, a = [], leaf
@@ -73,21 +90,26 @@ def arm_points(topo: Topology, angles: dict[str, float]) -> list[list[tuple[floa
     return lines
 
 
-def write_plots(run_dir: Path) -> list[Path]:
+def write_plots(run_dir: Path, log: bool = False) -> list[Path]:
+    """Every plot the run's records allow; `log`: the learning curve's error axis logarithmic."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.ticker import MaxNLocator
 
     cfg = load_run_config(run_dir / "config.json")
     topo, scene = cfg.topo(), cfg.scene_spec
     rows = read_metrics(run_dir)
     goal = _goal(cfg, rows)
-    by_epoch = _events_by_epoch(read_events(run_dir))
+    events = read_events(run_dir)
+    by_epoch = _events_by_epoch(events)
+    spans = fault_spans(events)
     written = []
     if rows:
         ep = [r["epoch"] for r in rows]
-        fig, ax = plt.subplots(figsize=(7, 4))
+        fig, ax = plt.subplots(figsize=(8, 4.2))
+        _epoch_spans(ax, spans, ep)
         ax.plot(ep, [r["mean_error"] for r in rows], label="mean error over the epoch")
         ax.plot(ep, [r["final_error"] for r in rows], label="final error (last step)")
         marked = [r for r in rows if r["epoch"] in by_epoch]
@@ -101,33 +123,39 @@ def write_plots(run_dir: Path) -> list[Path]:
                 label="epoch with events (faults, restarts, ...)",
             )
         ax.axhline(0.5, color="grey", ls="--", lw=0.8, label="0.5")
-        ax.set_yscale("log")
+        if log:
+            ax.set_yscale("log")
+        else:
+            ax.set_ylim(bottom=0)
+        ax.xaxis.set_major_locator(MaxNLocator(integer=True))
         ax.set_xlabel("epoch")
         ax.set_ylabel("end-effector distance to goal")
-        ax.set_title(f"{cfg.run_id}: {topo.name}, {_controller(cfg)}, seed={cfg.seed}")
-        ax.legend()
+        ax.set_title(f"{cfg.run_id}: {topo.name}, {_controller(cfg)}, seed {cfg.seed}", fontsize=10)
+        _legend_beside(ax)
         fig.tight_layout()
         fig.savefig(run_dir / "learning_curve.png", dpi=110)
         plt.close(fig)
         written.append(run_dir / "learning_curve.png")
 
         final = {a: math.radians(v) for a, v in rows[-1]["final_angles_deg"].items()}
-        fig, ax = plt.subplots(figsize=(5, 5))
+        fig, ax = plt.subplots(figsize=(7, 5))
         for i, (angles, style) in enumerate(((topo.initial_angles(), ":"), (final, "-"))):
             for pts in arm_points(topo, angles):
                 xs, ys = zip(*pts, strict=True)
                 label = "start" if i == 0 else f"epoch {rows[-1]['epoch']} final"
                 ax.plot(xs, ys, style, marker="o", ms=4, color="grey" if i == 0 else "C0", label=label)
         ax.plot(*goal, "r*", ms=14, label=f"goal ({goal[0]:.2f}, {goal[1]:.2f})")
+        joints = joint_points(topo, final)
+        for i, (a, what) in enumerate(sorted(active_at_end(events).items())):
+            if a in joints:  # a joint still faulty when the run ended
+                ax.plot(*joints[a], "X", ms=11, color=f"C{3 + i}", label=f"{a}: {', '.join(what)}")
         R = topo.reach
         ax.set_xlim(topo.base[0] - R * 1.05, topo.base[0] + R * 1.05)
         ax.set_ylim(topo.base[1] - R * 1.05, topo.base[1] + R * 1.05)
         ax.set_aspect("equal")
         ax.grid(alpha=0.3)
-        handles, labels = ax.get_legend_handles_labels()
-        uniq = dict(zip(labels, handles, strict=True))
-        ax.legend(uniq.values(), uniq.keys(), loc="lower left", fontsize=8)
-        ax.set_title(f"final error {rows[-1]['final_error']:.3f}")
+        _legend_beside(ax)
+        ax.set_title(f"{_controller(cfg)}: final error {rows[-1]['final_error']:.3f}", fontsize=10)
         fig.tight_layout()
         fig.savefig(run_dir / "arm.png", dpi=110)
         plt.close(fig)
@@ -144,11 +172,11 @@ def write_plots(run_dir: Path) -> list[Path]:
     with_events = [r for r in tracked if r["epoch"] in by_epoch]
     chosen = with_events[-TRACKED_EPOCHS:] or tracked[-1:]
     if chosen:
-        fig, axes = plt.subplots(len(chosen), 1, figsize=(8, 2.6 * len(chosen) + 0.6), squeeze=False, sharex=True)
+        fig, axes = plt.subplots(len(chosen), 1, figsize=(10, 2.8 * len(chosen) + 0.6), squeeze=False, sharex=True)
         for ax, r in zip(axes[:, 0], chosen, strict=True):
-            _tracking(ax, r, by_epoch.get(r["epoch"], []))
+            _tracking(ax, r, by_epoch.get(r["epoch"], []), spans)
         axes[-1, 0].set_xlabel("step (error after the step's joint actions)")
-        fig.suptitle(f"{cfg.run_id}: end-effector error within an epoch ({cfg.controller})", fontsize=10)
+        fig.suptitle(f"{cfg.run_id}: end-effector error within an epoch ({_controller(cfg)})", fontsize=10)
         fig.tight_layout()
         fig.savefig(run_dir / "tracking.png", dpi=110)
         plt.close(fig)
@@ -170,23 +198,52 @@ def _events_by_epoch(events: list[dict[str, Any]]) -> dict[int, list[dict[str, A
     return out
 
 
-def _tracking(ax: Any, row: dict[str, Any], events: list[dict[str, Any]]) -> None:
-    """One epoch's error per step (the paper's Figs. 13-21), a labelled line at every event step."""
+SPAN_COLOURS = {"locked": "C3", "disturbed": "C1", "reversed": "C4", "scaled": "C5", "dead zone": "C6",
+                "reads offset": "C8", "reads late": "C9"}  # fmt: skip
+
+
+def _tracking(ax: Any, row: dict[str, Any], events: list[dict[str, Any]], spans: list[Span]) -> None:
+    """One epoch's error per step (the paper's Figs. 13-21): each lasting joint fault a shaded span (a lock
+    from an earlier epoch shades the whole epoch), a line at every event step, one label per group of close
+    events so no two labels overlap."""
     errors = row["errors"]
-    ax.plot(range(len(errors)), errors, lw=1.0, color="C0")
+    n = len(errors)
+    for s in spans:
+        if (steps := s.within(row["epoch"], n)) is not None:
+            colour = SPAN_COLOURS.get(s.label.split(" ", 1)[1], "C7")
+            ax.axvspan(*steps, color=colour, alpha=0.10, lw=0, label=s.label)
+    ax.plot(range(n), errors, lw=1.0, color="C0", label="error")
     ax.axhline(0.5, color="grey", ls="--", lw=0.8)
-    # One line per step; the events at it in one label: "lock a1,a2,a3".
-    at: dict[int, dict[str, list[str]]] = {}
+    ax.set_ylim(bottom=0, top=max(max(errors, default=1.0) * 1.45, 0.6))  # room above the curve for the labels
     for ev in events:
-        at.setdefault(ev["step"], {}).setdefault(str(ev.get("event", "?")), []).append(str(ev.get("target", "")))
-    top = max(errors) if errors else 1.0
-    for step, kinds in sorted(at.items()):
-        ax.axvline(step, color="C3", lw=0.8, alpha=0.7)
-        label = "; ".join(f"{k} {','.join(dict.fromkeys(t))}" for k, t in kinds.items())
-        ax.text(step, top, f" {label}", rotation=90, va="top", ha="right", fontsize=7, color="C3")
+        ax.axvline(ev["step"], color="C3", lw=0.7, alpha=0.6)
+    for step, label in label_groups(events, n):
+        ax.text(step, 0.98, f" {label}", rotation=90, va="top", ha="right", fontsize=7, color="C3",
+                transform=ax.get_xaxis_transform())  # fmt: skip
     ax.set_ylabel("error")
     ax.set_title(f"epoch {row['epoch']}: final {row['final_error']:.3f}, mean {row['mean_error']:.3f}", fontsize=9)
     ax.grid(alpha=0.3)
+    _legend_beside(ax)
+
+
+def _epoch_spans(ax: Any, spans: list[Span], epochs: list[int]) -> None:
+    """The learning curve's shading: the epochs over which each lasting joint fault held."""
+    if not epochs:
+        return
+    last = max(epochs)
+    for s in spans:
+        end = last + 0.5 if s.end is None else s.end[0] + 0.5
+        colour = SPAN_COLOURS.get(s.label.split(" ", 1)[1], "C7")
+        ax.axvspan(s.start[0] - 0.5, end, color=colour, alpha=0.10, lw=0, label=s.label)
+
+
+def _legend_beside(ax: Any) -> None:
+    """One entry per label, to the right of the axes: never over the data."""
+    handles, labels = ax.get_legend_handles_labels()
+    uniq = dict(zip(labels, handles, strict=True))
+    if uniq:
+        ax.legend(uniq.values(), uniq.keys(), loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=7,
+                  frameon=False)  # fmt: skip
 
 
 def write_summary(run_dir: Path, extra: dict[str, Any]) -> dict[str, Any]:
@@ -230,8 +287,16 @@ def _goal(cfg: RunConfig, rows: list[dict[str, Any]]) -> tuple[float, float]:
     return task_of(cfg).goal(epoch, cfg.steps)[0]
 
 
+LAW_NAMES = {
+    "pinv": "pseudo-inverse (model-based)",
+    "greedy": "greedy per joint (model-based)",
+    "rule": "rule on g_perp (no learning)",
+}
+
+
 def _controller(cfg: RunConfig) -> str:
-    """What drove the robot: the agents and their reward, or the model-based law."""
+    """What drove the robot: the agents (learning or frozen) and their reward, or the law that replaced them."""
     if cfg.controller != "agents":
-        return f"{cfg.controller} (model-based)"
-    return f"{cfg.task['kind']}, reward {cfg.task.get('reward', '-')}"
+        return LAW_NAMES.get(cfg.controller, cfg.controller)
+    how = "learning" if cfg.learn else "frozen"
+    return f"{cfg.task['kind']}, agents {how}, reward {cfg.task.get('reward', '-')}"

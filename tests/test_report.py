@@ -65,3 +65,32 @@ def test_old_runs_still_get_their_plots(tmp_path, chain4):
 def test_tracking_without_events_shows_the_last_epoch(tmp_path, chain4):
     run = make_run(tmp_path, chain4, errors=True, events=None)
     assert [p.name for p in write_plots(run)][-1] == "tracking.png"
+
+
+def test_a_lasting_fault_is_a_span_and_close_labels_are_one():
+    """A lock lasts until freed (over whole later epochs), a disturbance until it ends, a model fault until
+    freed; a fault the scenario applies again every epoch continues its span; events closer than 3 % of the
+    epoch share one label."""
+    from kinswarm.actors.timeline import Span, active_at_end, fault_spans, label_groups
+
+    events = [
+        ev(1, 10, "lock", "a2"),
+        ev(2, 0, "lock", "a2"),  # the scenario's step-0 lock again: the same span
+        ev(3, 40, "free", "a2"),
+        ev(2, 5, "disturb", "a4"),
+        ev(2, 25, "disturb_end", "a4"),
+        ev(3, 60, "reverse", "a1"),
+        ev(-1, -1, "reverse", "a3"),  # not placed: left out
+    ]
+    spans = fault_spans(events)
+    assert spans == [
+        Span("a2", "lock", (1, 10), (3, 40)),
+        Span("a4", "disturb", (2, 5), (2, 25)),
+        Span("a1", "reverse", (3, 60), None),
+    ]
+    lock, disturb, rev = spans
+    assert [lock.within(e, 100) for e in range(5)] == [None, (10, 100), (0, 100), (0, 40), None]
+    assert disturb.within(2, 100) == (5, 25) and rev.within(7, 100) == (0, 100)
+    assert active_at_end(events) == {"a1": ["reversed"]}
+    close = [ev(0, 30, "lost", "a2"), ev(0, 31, "adopt", "a2"), ev(0, 31, "adopt", "a3"), ev(0, 60, "handback", "a2")]
+    assert label_groups(close, 100) == [(30, "lost a2 · adopt a2,a3"), (60, "handback a2")]
