@@ -150,6 +150,15 @@ def build_parser() -> argparse.ArgumentParser:
     rep = sub.add_parser("report", help="rebuild a run's summary plots")
     rep.add_argument("run_dir", type=Path)
     rep.add_argument("--log", action="store_true", help="the learning curve's error axis logarithmic")
+    anim = sub.add_parser(
+        "animate",
+        help="a run's motion as a GIF: the robot in chosen epochs, its faults and events, beside its error",
+        description="Draws RUN-DIR/motion.gif from the run's records: by default the first and last epochs and the "
+        "latest epochs with events (faults, losses, restarts).",
+    )
+    anim.add_argument("run_dir", type=Path, metavar="RUN-DIR")
+    anim.add_argument("--epochs", default=None, help="which epochs, e.g. 0,5,9 (default: first, last, with events)")
+    anim.add_argument("--out", type=Path, default=None, help="the GIF to write (default RUN-DIR/motion.gif)")
     fault = sub.add_parser(
         "fault",
         help="inject a fault into a running swarm",
@@ -338,6 +347,19 @@ def main(argv: list[str] | None = None) -> int:
         return 130
 
 
+def _epoch_list(text: str | None) -> list[int] | None:
+    """`--epochs 0,5,9`: whole epochs >= 0, or one line that says what is wrong."""
+    if text is None:
+        return None
+    try:
+        out = [int(x) for x in text.split(",")]
+    except ValueError:
+        raise ConfigError(f"--epochs: expected epochs like 0,5,9, got {text!r}") from None
+    if not out or min(out) < 0:
+        raise ConfigError(f"--epochs: epochs count from 0, got {text!r}")
+    return out
+
+
 VALUED = ("--for", "--ms", "--rate", "--steps", "--amplitude", "--factor", "--degrees")  # fault's options
 
 
@@ -372,6 +394,13 @@ def _main(argv: list[str] | None) -> int:
                 print(f"kinswarm: {line}", file=sys.stderr)
             for path in write_plots(a.run_dir, log=a.log):
                 print(path)
+            return 0
+        if a.command == "animate":
+            from kinswarm.actors.animate import write_animation
+
+            if not (a.run_dir / "config.json").is_file():
+                raise ConfigError(f"{a.run_dir}: not a run directory (no config.json)")
+            print(write_animation(a.run_dir, _epoch_list(a.epochs), a.out))
             return 0
         if a.command in ("fault", "status"):
             return _control(a)

@@ -22,16 +22,16 @@ TRACKED_EPOCHS = 4  # tracking.png: at most this many epochs with events (else t
 
 
 def read_metrics(run_dir: Path) -> list[dict[str, Any]]:
-    return _read_jsonl(run_dir / "metrics.jsonl")
+    return read_jsonl(run_dir / "metrics.jsonl")
 
 
 def read_events(run_dir: Path) -> list[dict[str, Any]]:
     """`events.jsonl` rows (faults, detections, restarts, ...); [] for a run that has none."""
     path = run_dir / "events.jsonl"
-    return _read_jsonl(path) if path.exists() else []
+    return read_jsonl(path) if path.exists() else []
 
 
-def _read_jsonl(path: Path, skipped: list[str] | None = None) -> list[dict[str, Any]]:
+def read_jsonl(path: Path, skipped: list[str] | None = None) -> list[dict[str, Any]]:
     """Every whole row of a JSON-lines record; a row that is not one (a torn last line, where a killed writer
     stopped) is left out, and said in `skipped`."""
     rows = []
@@ -52,7 +52,7 @@ def torn_rows(run_dir: Path) -> list[str]:
     skipped: list[str] = []
     for name in ("metrics.jsonl", "events.jsonl"):
         if (run_dir / name).exists():
-            _read_jsonl(run_dir / name, skipped)
+            read_jsonl(run_dir / name, skipped)
     return skipped
 
 
@@ -103,7 +103,7 @@ def write_plots(run_dir: Path, log: bool = False) -> list[Path]:
     rows = read_metrics(run_dir)
     goal = _goal(cfg, rows)
     events = read_events(run_dir)
-    by_epoch = _events_by_epoch(events)
+    by_epoch = events_by_epoch(events)
     spans = fault_spans(events)
     written = []
     if rows:
@@ -188,7 +188,7 @@ def write_plots(run_dir: Path, log: bool = False) -> list[Path]:
     return written
 
 
-def _events_by_epoch(events: list[dict[str, Any]]) -> dict[int, list[dict[str, Any]]]:
+def events_by_epoch(events: list[dict[str, Any]]) -> dict[int, list[dict[str, Any]]]:
     """Events placed in an epoch and step; those the sender could not place (-1) are left out of plots."""
     out: dict[int, list[dict[str, Any]]] = {}
     for ev in events:
@@ -199,7 +199,7 @@ def _events_by_epoch(events: list[dict[str, Any]]) -> dict[int, list[dict[str, A
 
 
 SPAN_COLOURS = {"locked": "C3", "disturbed": "C1", "reversed": "C4", "scaled": "C5", "dead zone": "C6",
-                "reads offset": "C8", "reads late": "C9"}  # fmt: skip
+                "reads offset": "C8", "reads late": "C9", "lost": "C7"}  # fmt: skip
 
 
 def _tracking(ax: Any, row: dict[str, Any], events: list[dict[str, Any]], spans: list[Span]) -> None:

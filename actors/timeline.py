@@ -1,5 +1,5 @@
-"""A run's events as a timeline a plot can draw: how long each joint fault lasts, and event labels that never sit
-on top of each other. Read from `events.jsonl` rows alone (actors/report.py reads them)."""
+"""A run's events as a timeline a plot can draw: how long each joint fault (or an agent's loss) lasts, and event
+labels that never sit on top of each other. Read from `events.jsonl` rows alone (actors/report.py reads them)."""
 
 from __future__ import annotations
 
@@ -16,8 +16,10 @@ LASTING = {
     "deadzone": "dead zone",
     "offset": "reads offset",
     "lag": "reads late",
+    "lost": "lost",  # the agent, not the joint: from its loss until it is back
 }
-ENDS = {"free": tuple(LASTING), "disturb_end": ("disturb",)}
+ENDS = {"free": tuple(k for k in LASTING if k != "lost"), "disturb_end": ("disturb",), "handback": ("lost",),
+        "alive": ("lost",)}  # fmt: skip
 
 
 @dataclass(frozen=True)

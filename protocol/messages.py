@@ -16,7 +16,8 @@ SCHEMA_VERSION = 8  # 2: faults, events, status, bye; payloads carry a MAC (code
 # plans): Setup, Heartbeat. 6: Up.clearance. 7: every scene reading and task aggregate travels in the one `sense`
 # route (Readings: Obs, Task, Down, Up; the clearance/collided/collisions fields are gone), EpochDone's scene series
 # only in `traces`, and EpochStart.path, the goal of every step when it moves. 8: faults in the robot's model
-# (reverse, scale, deadzone, offset, lag) and their sizes, Fault.factor and Fault.degrees.
+# (reverse, scale, deadzone, offset, lag) and their sizes, Fault.factor and Fault.degrees; EpochDone.angles, the
+# robot's pose after every step.
 
 Vec2 = tuple[float, float]
 Vec3 = tuple[float, float, float]
@@ -124,6 +125,8 @@ class EpochDone:
     # per-step series of the scene, e.g. the walls' "collisions" (refused moves) and "clearance" (the smallest),
     # a grasp's forces
     traces: dict[str, list[float]] = field(default_factory=dict)
+    # the robot's true joint angles (rad) after each step, in the topology's DOF order: the run's motion
+    angles: list[list[float]] = field(default_factory=list)
 
 
 @dataclass(frozen=True)

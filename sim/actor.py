@@ -73,6 +73,7 @@ class SimActor:
         self.faults = JointFaults(list(self.dof), cfg.seed)
         self.applied: dict[str, float] = dict.fromkeys(self.dof, 0.0)  # last increment per joint
         self.errors: list[float] = []
+        self.angles: list[list[float]] = []  # the true pose after each step of the epoch
         self.tips: dict[str, tuple[float, float, float]] = {}
         self.missed = 0
         self.late: dict[str, int] = {}  # agent -> steps in a row that ended at the deadline without its cmd
@@ -215,6 +216,7 @@ class SimActor:
         self.scene.reset()
         self.t = 0
         self.errors = []
+        self.angles = []
         self.missed = 0
         self.started = time.perf_counter()
         self.longest_step = 0.0
@@ -353,6 +355,8 @@ class SimActor:
         self.applied = self.scene.move(faults.increments(self.cmds) if faults.moves_changed else self.cmds)
         self.tips = self.world.tip_poses()
         self.errors.append(self.scene.error(self.tips, self.goal()))
+        q = self.world.joint_positions()
+        self.angles.append([q[a] for a in self.dof])
         self.longest_step = max(self.longest_step, time.perf_counter() - self.step_started)
         self.t += 1
         self.total_steps += 1
@@ -378,6 +382,7 @@ class SimActor:
                 seconds=time.perf_counter() - self.started,
                 max_step_seconds=self.longest_step,
                 traces=self.scene.traces(),
+                angles=self.angles,
             ),
         )
         self.epoch = None

@@ -7,7 +7,7 @@ import math
 from pathlib import Path
 
 from conftest import run_config
-from kinswarm.actors.report import _events_by_epoch, read_events, write_plots
+from kinswarm.actors.report import events_by_epoch, read_events, write_plots
 
 
 def make_run(tmp_path: Path, chain4: Path, *, errors: bool, events: list[dict] | None) -> Path:
@@ -52,7 +52,7 @@ def test_plots_with_events_and_errors(tmp_path, chain4):
     assert [p.name for p in written] == ["learning_curve.png", "arm.png", "tracking.png"]
     assert all(p.stat().st_size > 1000 for p in written)
     assert read_events(run) == events
-    by = _events_by_epoch(events)
+    by = events_by_epoch(events)
     assert sorted(by) == [1, 4] and len(by[1]) == 3  # the unplaced event is left out
 
 
@@ -94,3 +94,28 @@ def test_a_lasting_fault_is_a_span_and_close_labels_are_one():
     assert active_at_end(events) == {"a1": ["reversed"]}
     close = [ev(0, 30, "lost", "a2"), ev(0, 31, "adopt", "a2"), ev(0, 31, "adopt", "a3"), ev(0, 60, "handback", "a2")]
     assert label_groups(close, 100) == [(30, "lost a2 · adopt a2,a3"), (60, "handback a2")]
+
+
+def test_animation_of_the_chosen_epochs(tmp_path, chain4, capsys):
+    """`kinswarm animate`: a GIF of the first, the last and the epochs with events (a frame for the start pose and
+    at most FRAMES_PER_EPOCH more per epoch); a run without poses, or a bad --epochs, is one line."""
+    from kinswarm.actors.animate import pick_epochs, read_poses
+    from kinswarm.actors.cli import main as cli_main
+    from PIL import Image
+
+    run = make_run(tmp_path, chain4, errors=True, events=[ev(2, 30, "lock", "a2"), ev(2, 31, "lost", "a3")])
+    assert cli_main(["animate", str(run)]) == 2
+    assert "no poses.jsonl rows" in capsys.readouterr().err
+    poses = [{"epoch": e, "angles_deg": [[5.0 + s * 0.1, 20.0, 40.0, 50.0] for s in range(100)]} for e in range(6)]
+    (run / "poses.jsonl").write_text("".join(json.dumps(p) + "\n" for p in poses) + '{"epoch": 6, "ang')  # torn
+    assert sorted(read_poses(run)) == list(range(6))
+    assert pick_epochs(list(range(6)), [2]) == [0, 2, 5]
+    assert pick_epochs(list(range(20)), list(range(1, 19))) == [0, 15, 16, 17, 18, 19]
+    assert cli_main(["animate", str(run), "--epochs", "0,2"]) == 0
+    gif = run / "motion.gif"
+    with Image.open(gif) as im:
+        assert im.n_frames == 2 * (1 + 50 + 1)  # the start pose, every second of the 100 steps, and the last
+    assert cli_main(["animate", str(run), "--epochs", "9"]) == 2
+    assert "no poses for epoch(s) [9]" in capsys.readouterr().err
+    assert cli_main(["animate", str(run), "--epochs", "x"]) == 2
+    assert "--epochs: expected epochs like 0,5,9" in capsys.readouterr().err

@@ -1,5 +1,6 @@
 """What a run leaves behind while it runs: `events.jsonl` (faults, detections, restarts, re-wirings, hand-backs,
-each with its epoch and step and the time) and `metrics.jsonl` (one row per epoch). Each row is flushed as it is
+each with its epoch and step and the time), `metrics.jsonl` (one row per epoch) and `poses.jsonl` (the robot's
+joint angles after every step, one row per epoch: what `kinswarm animate` draws). Each row is flushed as it is
 written, so a killed supervisor leaves every whole row behind."""
 
 from __future__ import annotations
@@ -22,12 +23,14 @@ class Recorder:
         self.t0 = time.monotonic()
         self._events: IO[str] | None = None
         self._metrics: IO[str] | None = None
+        self._poses: IO[str] | None = None
 
     def open_events(self) -> None:
         self._events = open(self.out / "events.jsonl", "a")  # noqa: SIM115 -- closed in close()
 
     def open_metrics(self) -> None:
         self._metrics = open(self.out / "metrics.jsonl", "a")  # noqa: SIM115 -- closed in close()
+        self._poses = open(self.out / "poses.jsonl", "a")  # noqa: SIM115 -- closed in close()
 
     def event(self, epoch: int, step: int | None, event: str, target: str, detail: str) -> None:
         row = {
@@ -61,8 +64,12 @@ class Recorder:
         assert self._metrics is not None
         self._metrics.write(json.dumps(row) + "\n")
         self._metrics.flush()
+        if d.angles and self._poses is not None:  # degrees to 0.001: a pose to well under a pixel
+            pose = {"epoch": d.epoch, "angles_deg": [[round(math.degrees(q), 3) for q in step] for step in d.angles]}
+            self._poses.write(json.dumps(pose, separators=(",", ":")) + "\n")
+            self._poses.flush()
 
     def close(self) -> None:
-        for f in (self._metrics, self._events):
+        for f in (self._metrics, self._poses, self._events):
             if f is not None:
                 f.close()
