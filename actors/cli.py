@@ -109,6 +109,15 @@ def _add_common(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--scenario", type=Path, default=None, help="a TOML timeline of faults (e.g. scenarios/*.toml)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument(
+        "--view",
+        nargs="?",
+        const="here",
+        default=None,
+        metavar="here|web|FILE.rrd",
+        help="stream each epoch into the rerun viewer as it ends: spawned on this machine (the default), served from "
+        "it for a browser (`web`), or written to FILE.rrd as the run goes (the optional extra kinswarm[viewer])",
+    )
     p.add_argument("--log-level", default="WARNING")
 
 
@@ -156,6 +165,15 @@ def build_parser() -> argparse.ArgumentParser:
         description="Draws RUN-DIR/motion.gif from the run's records: by default the first and last epochs and the "
         "latest epochs with events (faults, losses, restarts).",
     )
+    view = sub.add_parser(
+        "view",
+        help="open a finished run in the rerun viewer (the optional extra kinswarm[viewer]), or save it as .rrd",
+        description="The robot at every step, the goal, the error, faulty joints and every event, on the timelines "
+        "step, epoch and step_in_epoch: scrub back and forth across the faults.",
+    )
+    view.add_argument("run_dir", type=Path, metavar="RUN-DIR")
+    view.add_argument("--save", type=Path, default=None, metavar="FILE.rrd", help="write the recording, open nothing")
+    view.add_argument("--web", action="store_true", help="serve the viewer for a browser instead of spawning it")
     anim.add_argument("run_dir", type=Path, metavar="RUN-DIR")
     anim.add_argument("--epochs", default=None, help="which epochs, e.g. 0,5,9 (default: first, last, with events)")
     anim.add_argument("--out", type=Path, default=None, help="the GIF to write (default RUN-DIR/motion.gif)")
@@ -347,6 +365,30 @@ def main(argv: list[str] | None = None) -> int:
         return 130
 
 
+def _view(a: argparse.Namespace) -> int:
+    from kinswarm.actors.recording import open_stream, record_run, rerun_module
+
+    rerun_module()
+    if not (a.run_dir / "config.json").is_file():
+        raise ConfigError(f"{a.run_dir}: not a run directory (no config.json)")
+    if a.save is not None and not a.save.parent.is_dir():
+        raise ConfigError(f"--save {a.save}: no such directory {a.save.parent}")
+    run_id = a.run_dir.resolve().name
+    stream = open_stream(run_id, save=a.save, web=a.web)
+    epochs = record_run(a.run_dir, stream)
+    stream.flush()
+    if a.save is not None:
+        stream.disconnect()  # the file's footer
+    print(f"{a.save or 'the viewer'}: {epochs} epochs of {a.run_dir}")
+    if a.web and a.save is None:  # the served viewer lives as long as this process
+        print("kinswarm: serving; Ctrl-C to stop")
+        import time
+
+        while True:
+            time.sleep(3600)
+    return 0
+
+
 def _epoch_list(text: str | None) -> list[int] | None:
     """`--epochs 0,5,9`: whole epochs >= 0, or one line that says what is wrong."""
     if text is None:
@@ -402,6 +444,8 @@ def _main(argv: list[str] | None) -> int:
                 raise ConfigError(f"{a.run_dir}: not a run directory (no config.json)")
             print(write_animation(a.run_dir, _epoch_list(a.epochs), a.out))
             return 0
+        if a.command == "view":
+            return _view(a)
         if a.command in ("fault", "status"):
             return _control(a)
         if a.command == "experiment":
@@ -418,7 +462,11 @@ def _main(argv: list[str] | None) -> int:
                 return 130 if summary.get("interrupted") else 0
         else:
             cfg, topo = _resolve(a, None if a.command == "run" else a.law)
-            summary = run_swarm(cfg, topo, progress=not a.no_progress and sys.stderr.isatty())
+            if a.view:  # the extra is there and the target makes sense, or one line before anything is spawned
+                from kinswarm.actors.recording import check_view
+
+                check_view(a.view)
+            summary = run_swarm(cfg, topo, progress=not a.no_progress and sys.stderr.isatty(), view=a.view)
     except (SpecError, ConfigError, CheckpointError, ScenarioError, ControlError, ValueError, DeployError) as e:
         print(f"kinswarm: error: {e}", file=sys.stderr)
         return 2

@@ -57,7 +57,13 @@ def _signals_stop_once() -> Iterator[None]:
 
 
 async def _supervise(
-    cfg: RunConfig, topo: Topology, progress: bool, plan: Plan, host: str, wait_s: float = 600.0
+    cfg: RunConfig,
+    topo: Topology,
+    progress: bool,
+    plan: Plan,
+    host: str,
+    wait_s: float = 600.0,
+    view: str | None = None,
 ) -> dict:
     from kinswarm.actors.deploy import control_net
     from kinswarm.actors.report import write_plots, write_summary
@@ -87,7 +93,16 @@ async def _supervise(
 
         bar = tqdm(total=cfg.epochs, unit="epoch", desc=cfg.run_id, dynamic_ncols=True) if lead else None
 
+    live = None
+    if view is not None and lead:
+        from kinswarm.actors.recording import LiveRecording
+
+        live = LiveRecording(cfg, view)
+
     def on_epoch(d: EpochDone) -> None:
+        if live is not None:
+            row = {"epoch": d.epoch, "final_error": d.final_error, "mean_error": d.mean_error, "errors": d.errors}
+            live.epoch(row, d.angles)
         if bar is not None:
             bar.set_postfix(
                 final=f"{d.final_error:.3f}", mean=f"{d.mean_error:.3f}", steps_s=f"{d.steps / d.seconds:.0f}"
@@ -107,6 +122,8 @@ async def _supervise(
         finally:
             if bar is not None:
                 bar.close()
+            if live is not None:
+                live.close()
             session.close()
         if not lead:
             return {"host": host, "error": result.error, "interrupted": result.interrupted, "restarts": result.restarts}
@@ -133,6 +150,7 @@ def run_swarm(
     plan: Plan | None = None,
     host: str | None = None,
     wait_s: float = 600.0,
+    view: str | None = None,
 ) -> dict:
     """Run one swarm (or, with a deploy plan, one host's share of it) to the end and return its summary
     (used by the CLI, experiments and tests). Without a plan: the one-host plan (`kinswarm run`)."""
@@ -144,4 +162,4 @@ def run_swarm(
         if host == plan.leader:
             write_resolved(cfg, out / "run.toml")
             (out / "metrics.jsonl").write_text("")
-        return asyncio.run(_supervise(cfg, topo, progress, plan, host, wait_s))
+        return asyncio.run(_supervise(cfg, topo, progress, plan, host, wait_s, view))

@@ -1,0 +1,54 @@
+"""The recording (actors/recording.py, the optional extra kinswarm[viewer]): a run streamed into a .rrd as it
+goes (`kinswarm run … --view FILE.rrd`) and a finished run saved as one (`kinswarm view RUN --save`), read back
+by rerun's own tool; bad targets are one line before anything is spawned. No viewer is spawned here."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from conftest import free_port
+from kinswarm.actors.cli import main as cli_main
+
+pytest.importorskip("rerun")
+RERUN = Path(sys.executable).parent / "rerun"
+
+
+def entities(rrd: Path) -> dict[str, int]:
+    """Entity path -> how many chunks of it `rerun rrd print` shows (after `rerun rrd verify` passes)."""
+    ok = subprocess.run([str(RERUN), "rrd", "verify", str(rrd)], capture_output=True, text=True, timeout=120)
+    assert ok.returncode == 0, ok.stderr
+    out = subprocess.run([str(RERUN), "rrd", "print", str(rrd)], capture_output=True, text=True, timeout=120).stdout
+    counts: dict[str, int] = {}
+    for word in out.split():
+        if word.startswith(("/world/", "/error/", "/events")):
+            key = word.rstrip(":,")
+            counts[key] = counts.get(key, 0) + 1
+    return counts
+
+
+def test_a_run_recorded_live_and_a_finished_run_saved(tmp_path, chain4):
+    scenario = tmp_path / "lock.toml"
+    scenario.write_text('name = "l"\n[[event]]\nstep = 20\nepoch = 1\nfault = "lock"\ntarget = "a2"\n')
+    live, out = tmp_path / "live.rrd", tmp_path / "run"
+    args = ["run", str(chain4), "--epochs", "2", "--steps", "60", "--placement", "single", "--no-progress"]
+    args += ["--scenario", str(scenario), "--listen", f"tcp/127.0.0.1:{free_port()}", "--out", str(out)]
+    assert cli_main([*args, "--view", str(live)]) == 0
+    seen = entities(live)
+    for entity in ("/world/arm", "/world/joints", "/world/goal", "/error/step", "/events", "/error/final_of_epoch"):
+        assert seen.get(entity), (entity, seen)
+    saved = tmp_path / "saved.rrd"
+    assert cli_main(["view", str(out), "--save", str(saved)]) == 0
+    assert set(entities(saved)) == set(seen)
+
+
+def test_bad_view_targets_are_one_line(tmp_path, chain4, capsys):
+    assert cli_main(["run", str(chain4), "--view", "foo", "--out", str(tmp_path / "x")]) == 2
+    assert "--view 'foo': expected here, web or a FILE.rrd" in capsys.readouterr().err
+    assert not (tmp_path / "x").exists()
+    assert cli_main(["run", str(chain4), "--view", str(tmp_path / "no" / "x.rrd"), "--out", str(tmp_path / "y")]) == 2
+    assert "no such directory" in capsys.readouterr().err
+    assert cli_main(["view", str(tmp_path), "--save", str(tmp_path / "a.rrd")]) == 2
+    assert "not a run directory" in capsys.readouterr().err
