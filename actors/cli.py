@@ -304,6 +304,8 @@ def _deploy_tool(a: argparse.Namespace) -> int:
 def _resolve(a: argparse.Namespace, controller: str | None) -> tuple[RunConfig, Topology]:
     """The run of `kinswarm run|baseline`: its run file with the command line's overrides, every input checked."""
     sets = _sets(a) + ([f'run.controller="{controller}"'] if controller else [])
+    if getattr(a, "view", None):  # the viewer shows what each agent saw and chose
+        sets.append("run.record_agents=true")
     cfg = load_run(a.run_file, sets, run_id=a.run_id, out=a.out, listen=a.listen)
     return cfg, cfg.topo()
 

@@ -48,6 +48,7 @@ RUN_KEYS = (
     "restart_window_s",
     "stall_s",
     "stall_limit_s",
+    "record_agents",
 )
 
 
@@ -97,6 +98,8 @@ class RunConfig:
     # (0: 10 s, or 4 deadlines if longer); recorded and shown, and past stall_limit_s the run ends naming the actor
     stall_s: float = 0.0
     stall_limit_s: float = 300.0
+    # every agent sends what it saw and chose at each step, once an epoch (AgentTrace -> agents.jsonl, the viewer)
+    record_agents: bool = False
     listen: str = DEFAULT_LISTEN  # the supervisor's endpoint
     # Several hosts (a deploy plan): the hosts whose heartbeats the sim must hear to step, within lease_ms
     hosts: list[str] = field(default_factory=list)

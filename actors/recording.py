@@ -19,7 +19,7 @@ from pathlib import Path
 from typing import Any
 
 from kinswarm.actors.config import ConfigError, RunConfig, load_run_config
-from kinswarm.actors.report import arm_points, joint_points, read_events, read_metrics
+from kinswarm.actors.report import arm_points, joint_points, read_events, read_jsonl, read_metrics
 from kinswarm.actors.timeline import LASTING, fault_spans
 
 log = logging.getLogger("kinswarm.view")
@@ -27,6 +27,7 @@ APP = "kinswarm"
 FAULT = (214, 39, 40)
 ARM = (31, 119, 180)
 GOAL = (255, 200, 0)
+ACTIONS = ("decrease", "keep", "increase")  # an agent's actions 0, 1, 2
 
 
 def rerun_module() -> Any:
@@ -112,6 +113,39 @@ class Recorder:
         s.set_time("step", sequence=first + max(n - 1, 0))
         s.log("error/final_of_epoch", rr.Scalars(float(row["final_error"])))
         s.log("error/mean_of_epoch", rr.Scalars(float(row["mean_error"])))
+        lost = [sp for sp in spans if sp.fault == "lost"]
+        for a in self.dof:  # liveliness: 0 while the agent is lost (its parent stands in)
+            down = [w for sp in lost if sp.target == a and (w := sp.within(e, n)) is not None]
+            alive = [0.0 if any(lo <= t < hi for lo, hi in down) else 1.0 for t in range(n)]
+            s.send_columns(f"agents/{a}/alive", indexes=times, columns=rr.Scalars.columns(scalars=alive))
+
+    def agents(self, rows: Sequence[dict[str, Any]]) -> None:
+        """What each agent saw and chose (agents.jsonl rows of one epoch): its state variables, action, E of
+        Eq. 9 per own action, P of Eq. 7 per visible child and action."""
+        rr, s = self.rr, self.stream
+        for row in rows:
+            a, e, steps = row["agent"], int(row["epoch"]), row["steps"]
+            if not steps:
+                continue
+            first = e * self.cfg.steps
+            times = [
+                rr.TimeColumn("step", sequence=[first + t for t in steps]),
+                rr.TimeColumn("epoch", sequence=[e] * len(steps)),
+                rr.TimeColumn("step_in_epoch", sequence=steps),
+            ]
+
+            def column(path: str, values: Sequence[float], times: list[Any] = times) -> None:
+                s.send_columns(path, indexes=times, columns=rr.Scalars.columns(scalars=values))
+
+            column(f"agents/{a}/action", [x - 1 for x in row["actions"]])  # -1, 0, +1: decrease, keep, increase
+            for i, name in enumerate(row["names"]):
+                column(f"agents/{a}/state/{name}", [st[i] for st in row["states"]])
+            for i, act in enumerate(ACTIONS):
+                column(f"agents/{a}/E/{act}", [x[i] for x in row["E"]])
+            visible = [c for c in self.topo.agents[a].children if self.topo.agents[c].has_dof]
+            for j, child in enumerate(visible):
+                for i, act in enumerate(ACTIONS):
+                    column(f"agents/{a}/P/{child}/{act}", [p[j * len(ACTIONS) + i] for p in row["P"]])
 
 
 def _placed(events: list[dict[str, Any]], epoch: int) -> list[dict[str, Any]]:
@@ -127,13 +161,24 @@ def record_run(run_dir: Path, stream: Any) -> int:
     if not poses:
         raise ConfigError(f"{run_dir}: no poses.jsonl rows to show (a run from before poses were recorded?)")
     events = read_events(run_dir)
+    traces = read_agent_rows(run_dir)
     rec = Recorder(cfg, stream)
     done = 0
     for row in read_metrics(run_dir):
         if (e := row["epoch"]) in poses:
             rec.epoch(row, poses[e], _placed(events, e))
+            rec.agents(traces.get(e, []))
             done += 1
     return done
+
+
+def read_agent_rows(run_dir: Path) -> dict[int, list[dict[str, Any]]]:
+    """agents.jsonl (run.record_agents) by epoch; {} for a run that did not record its agents."""
+    path = run_dir / "agents.jsonl"
+    out: dict[int, list[dict[str, Any]]] = {}
+    for row in read_jsonl(path) if path.exists() else []:
+        out.setdefault(int(row.get("epoch", -1)), []).append(row)
+    return out
 
 
 def check_view(view: str) -> None:
@@ -202,6 +247,7 @@ def _live(config: str, view: str, rows: Any) -> None:
     while (row := rows.get()) is not None:
         try:
             rec.epoch(row, row.pop("angles_deg"), _placed(read_events(out), row["epoch"]))
+            rec.agents(read_agent_rows(out).get(row["epoch"], []))  # those in by now; `kinswarm view` has all
         except Exception as e:  # the viewer went away: the run goes on without it
             log.warning("viewer: stopped recording (%s)", e)
             break

@@ -14,7 +14,7 @@ from pathlib import Path
 from kinswarm.actors.config import ConfigError
 
 #: files that say a directory holds a run
-RUN_FILES = ("config.json", "metrics.jsonl", "summary.json", "run.toml", "events.jsonl", "poses.jsonl")
+RUN_FILES = ("config.json", "metrics.jsonl", "summary.json", "run.toml", "events.jsonl", "poses.jsonl", "agents.jsonl")
 
 
 def check_dir(path: Path, flag: str) -> None:

@@ -17,7 +17,7 @@ SCHEMA_VERSION = 8  # 2: faults, events, status, bye; payloads carry a MAC (code
 # route (Readings: Obs, Task, Down, Up; the clearance/collided/collisions fields are gone), EpochDone's scene series
 # only in `traces`, and EpochStart.path, the goal of every step when it moves. 8: faults in the robot's model
 # (reverse, scale, deadzone, offset, lag) and their sizes, Fault.factor and Fault.degrees; EpochDone.angles, the
-# robot's pose after every step.
+# robot's pose after every step; AgentTrace, what each agent saw and chose.
 
 Vec2 = tuple[float, float]
 Vec3 = tuple[float, float, float]
@@ -265,6 +265,24 @@ class Heartbeat:
     leader: int  # 1 from the leading supervisor
 
 
+@dataclass(frozen=True)
+class AgentTrace:
+    """agent -> observers (metrics/agent), once an epoch, when the run records its agents (`run.record_agents`,
+    on with `--view`): what the agent saw and chose at each step it decided — its state S_i (`names`: the
+    learner's state variables), its action, E of Eq. 9 (the expected value of each own action: their spread is
+    how sure it was) and P of Eq. 7 (its fictitious-play estimate of each visible child's action, child by child)."""
+
+    KIND: ClassVar[str] = "agent_trace"
+    epoch: int
+    agent: str
+    names: list[str]
+    steps: list[int]
+    states: list[list[float]]
+    actions: list[int]
+    expected: list[list[float]]
+    beliefs: list[list[float]]
+
+
 _ALL = (Obs, Task, Down, Up, Cmd, EpochStart, EpochDone, Checkpoint, Saved, Stop)
-_ALL += (Bye, Fault, FaultReply, Event, JointStatus, SwarmStatus, Setup, Heartbeat)
+_ALL += (Bye, Fault, FaultReply, Event, JointStatus, SwarmStatus, Setup, Heartbeat, AgentTrace)
 MESSAGE_TYPES: dict[str, type] = {m.KIND: m for m in _ALL}

@@ -7,6 +7,7 @@ from kinswarm.protocol.keys import Keys, check_id
 from kinswarm.protocol.messages import (
     MESSAGE_TYPES,
     SCHEMA_VERSION,
+    AgentTrace,
     Bye,
     Checkpoint,
     Cmd,
@@ -53,6 +54,18 @@ SAMPLES = [
         seconds=0.5,
         max_step_seconds=0.01,
     ),
+    EpochDone(
+        epoch=5,
+        steps=2,
+        final_error=0.1,
+        mean_error=0.2,
+        errors=[0.3, 0.1],
+        final_angles={"a1": 0.1},
+        missed_cmds=0,
+        seconds=0.5,
+        max_step_seconds=0.01,
+        angles=[[0.1, 0.2], [0.15, 0.25]],
+    ),
     Checkpoint(epoch=2, directory="/tmp/x"),
     Saved(epoch=2, path="/tmp/x/a1.npz", error=""),
     Stop(reason="done"),
@@ -76,6 +89,27 @@ SAMPLES = [
     ),
     Setup(plan="two-hosts", config="{}", scenario=""),
     Heartbeat(host="brain", seq=7, leader=1),
+    Fault(
+        id="f3",
+        fault="scale",
+        targets=["a2"],
+        seconds=None,
+        steps=None,
+        rate=None,
+        ms=None,
+        amplitude_deg=None,
+        factor=3.0,
+    ),  # fmt: skip
+    AgentTrace(
+        epoch=2,
+        agent="a1",
+        names=["q", "g_perp"],
+        steps=[0, 1],
+        states=[[0.1, -0.2], [0.1, -0.1]],
+        actions=[2, 1],
+        expected=[[0.0, 0.5, 1.0], [0.1, 0.2, 0.3]],
+        beliefs=[[0.2, 0.3, 0.5], []],
+    ),  # fmt: skip
 ]
 
 

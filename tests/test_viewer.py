@@ -4,6 +4,7 @@ by rerun's own tool; bad targets are one line before anything is spawned. No vie
 
 from __future__ import annotations
 
+import json
 import subprocess
 import sys
 from pathlib import Path
@@ -23,7 +24,7 @@ def entities(rrd: Path) -> dict[str, int]:
     out = subprocess.run([str(RERUN), "rrd", "print", str(rrd)], capture_output=True, text=True, timeout=120).stdout
     counts: dict[str, int] = {}
     for word in out.split():
-        if word.startswith(("/world/", "/error/", "/events")):
+        if word.startswith(("/world/", "/error/", "/events", "/agents/")):
             key = word.rstrip(":,")
             counts[key] = counts.get(key, 0) + 1
     return counts
@@ -39,6 +40,9 @@ def test_a_run_recorded_live_and_a_finished_run_saved(tmp_path, chain4):
     seen = entities(live)
     for entity in ("/world/arm", "/world/joints", "/world/goal", "/error/step", "/events", "/error/final_of_epoch"):
         assert seen.get(entity), (entity, seen)
+    for entity in ("/agents/a1/action", "/agents/a1/E/keep", "/agents/a1/P/a2/keep", "/agents/a4/state/g3"):
+        assert seen.get(entity), (entity, seen)  # --view records the agents (run.record_agents)
+    assert seen.get("/agents/a2/alive")
     saved = tmp_path / "saved.rrd"
     assert cli_main(["view", str(out), "--save", str(saved)]) == 0
     assert set(entities(saved)) == set(seen)
@@ -52,3 +56,24 @@ def test_bad_view_targets_are_one_line(tmp_path, chain4, capsys):
     assert "no such directory" in capsys.readouterr().err
     assert cli_main(["view", str(tmp_path), "--save", str(tmp_path / "a.rrd")]) == 2
     assert "not a run directory" in capsys.readouterr().err
+
+
+def test_recording_the_agents_changes_nothing_they_do(tmp_path, chain4):
+    """run.record_agents only reads what the learner chose from: the same run with and without gives the same
+    errors, and every agent's trace has a row per step it decided, with its E and P."""
+    from kinswarm.actors.recording import read_agent_rows
+
+    finals = []
+    for record in (False, True):
+        out = tmp_path / f"r{record}"
+        args = ["run", str(chain4), "--epochs", "2", "--steps", "40", "--placement", "single", "--no-progress"]
+        args += ["--listen", f"tcp/127.0.0.1:{free_port()}", "--out", str(out)]
+        assert cli_main([*args, "--set", f"run.record_agents={str(record).lower()}"]) == 0
+        finals.append([json.loads(line)["errors"] for line in (out / "metrics.jsonl").read_text().splitlines()])
+    assert finals[0] == finals[1]
+    rows = read_agent_rows(tmp_path / "rTrue")
+    assert sorted(rows) == [0, 1] and sorted(r["agent"] for r in rows[0]) == ["a1", "a2", "a3", "a4"]
+    for r in rows[1]:
+        assert r["steps"] == list(range(40)) and len(r["states"][0]) == len(r["names"]) == 6
+        assert all(len(e) == 3 for e in r["E"]) and all(a in (0, 1, 2) for a in r["actions"])
+        assert len(r["P"][0]) == (0 if r["agent"] == "a4" else 3)  # a4 sees no child

@@ -36,6 +36,7 @@ from kinswarm.protocol.topology import Topology
 
 from .memory import Memory
 from .standin import StandIn
+from .trace import StepTrace
 
 Key = tuple[int, int]  # (epoch, step)
 
@@ -77,6 +78,9 @@ class Agent:
             self.learner = Learner(settings, len(self.visible), agent_seed(cfg.seed, agent_id))
             self.extra_names = tuple(v.name for v in settings.extra_state[self.n_task_vars :])
         self.unsigned_g3 = self.learner is not None and self.learner.settings.g3 == "unsigned"
+        self.trace = None  # what it saw and chose, for the recording (run.record_agents)
+        if cfg.record_agents and self.learner is not None:
+            self.trace = StepTrace(agent_id, self.learner.settings.state_names)
         self.task = task.agent(agent_id, self.learner.settings if self.learner else None)
         self.memory = Memory(self)
         self.standin = StandIn(self)
@@ -114,6 +118,8 @@ class Agent:
             outs.append(k.up(self.spec.parent))  # type: ignore[arg-type]
         if self.spec.has_dof:
             outs.append(k.cmd(self.id))
+        if self.trace is not None:
+            outs.append(k.metrics("agent"))
         return outs
 
     # -- the loop ----------------------------------------------------------------------------------
@@ -286,6 +292,10 @@ class Agent:
             avoid = self.task.avoid(view)
             action = self.learner.decide(s, reward, learn=self.cfg.learn, explore=self.cfg.explore, avoid=avoid)
             self.decided = (cur.key, action)
+            if self.trace is not None:
+                self.trace.add(epoch, step, s, action, self.learner.E, self.learner.P)
+                if step == self.cfg.steps - 1:
+                    self.node.send(self.keys.metrics("agent"), self.trace.take())
             if self.visible:
                 # a lost child's joint holds: to this agent's fictitious play it chose "keep"
                 self.observing = (cur.key, frozenset(c for c in self.visible if c not in cur.ups))

@@ -46,6 +46,8 @@ class Learner:
         self._pending: tuple[list[int], list[int], np.ndarray, int] | None = None
         self._own = 0  # a(t) of the pending transition
         self._counting = True  # fictitious play counts in this epoch (count_freeze)
+        self.E = np.zeros(self.n_actions)  # E (Eq. 9) and P (Eq. 7) the last a(t) was chosen from
+        self.P = self._no_visible
 
     # -- epochs ---------------------------------------------------------------------------------
     def start_epoch(self, epoch: int, t: int = 0) -> None:
@@ -142,6 +144,7 @@ class Learner:
                 pi[mask] = 0.0
             pi /= pi.sum()
         a = jasm.select_action(pi, jasm.explore_probability(T, st.T_max, self.epsilon), self.rng, explore)
+        self.E, self.P = E, P  # what a(t) was chosen from: the recording shows them (AgentTrace)
 
         # (d) remember s(t) for the next update; observe() adds the joint action.
         self._pending = (rules_list, rows, w, -1)

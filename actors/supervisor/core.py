@@ -27,6 +27,7 @@ from kinswarm.actors.runfile import task_of
 from kinswarm.actors.runtime import Node
 from kinswarm.protocol.keys import Keys
 from kinswarm.protocol.messages import (
+    AgentTrace,
     Bye,
     EpochDone,
     Event,
@@ -151,6 +152,8 @@ class Supervisor:
             node.listen(key)
         for key in (k.rep("bye", "*"), k.rep("sim", "*"), k.ctl("stop")):
             node.listen(key)
+        if self.cfg.record_agents and self.lead:
+            node.listen(k.metrics("agent"))
         node.listen(k.fault("request") if self.lead else k.ctl("fault"))  # others: what the leader forwards
         if self.multi:
             node.listen(k.host("*"))
@@ -298,6 +301,9 @@ class Supervisor:
         if kind == "metrics/event":
             if (e := node.decode(key, payload, Event)) is not None:
                 self.recorder.event(e.epoch, e.step, e.event, e.target, e.detail)
+        elif kind == "metrics/agent":
+            if (tr := node.decode(key, payload, AgentTrace)) is not None:
+                self.recorder.agent(tr)
         elif kind == "metrics/joints":
             if (j := node.decode(key, payload, JointStatus)) is not None:
                 self._on_joints(j)

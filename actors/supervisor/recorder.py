@@ -12,7 +12,7 @@ import time
 from pathlib import Path
 from typing import IO, Any
 
-from kinswarm.protocol.messages import EpochDone
+from kinswarm.protocol.messages import AgentTrace, EpochDone
 
 log = logging.getLogger("kinswarm.supervisor")
 
@@ -24,6 +24,7 @@ class Recorder:
         self._events: IO[str] | None = None
         self._metrics: IO[str] | None = None
         self._poses: IO[str] | None = None
+        self._agents: IO[str] | None = None
 
     def open_events(self) -> None:
         self._events = open(self.out / "events.jsonl", "a")  # noqa: SIM115 -- closed in close()
@@ -69,7 +70,17 @@ class Recorder:
             self._poses.write(json.dumps(pose, separators=(",", ":")) + "\n")
             self._poses.flush()
 
+    def agent(self, tr: AgentTrace) -> None:
+        """One agent's epoch (run.record_agents): agents.jsonl, opened at the first."""
+        if self._agents is None:
+            self._agents = open(self.out / "agents.jsonl", "a")  # noqa: SIM115 -- closed in close()
+        if not self._agents.closed:
+            row = {k: getattr(tr, k) for k in ("epoch", "agent", "names", "steps", "states", "actions")}
+            row.update({"E": tr.expected, "P": tr.beliefs})
+            self._agents.write(json.dumps(row, separators=(",", ":")) + "\n")
+            self._agents.flush()
+
     def close(self) -> None:
-        for f in (self._metrics, self._poses, self._events):
+        for f in (self._metrics, self._poses, self._agents, self._events):
             if f is not None:
                 f.close()
