@@ -14,6 +14,8 @@ from __future__ import annotations
 import logging
 import math
 import multiprocessing
+import os
+import sys
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -184,6 +186,8 @@ def read_agent_rows(run_dir: Path) -> dict[int, list[dict[str, Any]]]:
 def check_view(view: str) -> None:
     """`--view here|web|FILE.rrd`: the extra is installed and the target is one of those, or one line."""
     rerun_module()
+    if view == "here":
+        check_screen()
     if view in ("here", "web"):
         return
     if not view.endswith(".rrd"):
@@ -203,8 +207,25 @@ def open_stream(run_id: str, save: Path | None = None, web: bool = False) -> Any
         rr.serve_web_viewer(connect_to=uri, open_browser=False)
         print(f"kinswarm: the viewer is served on http://localhost:9090 (recording {uri})")
     else:
-        stream.spawn()
+        spawn_viewer(stream)
     return stream
+
+
+def check_screen() -> None:
+    if sys.platform.startswith("linux") and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
+        raise ConfigError("no screen here to open the viewer on: `web` serves it for a browser, or save a .rrd")
+
+
+def spawn_viewer(stream: Any) -> None:
+    """The viewer on this machine's screen (the `rerun` executable next to this Python, as the extra installs it),
+    or one line saying what to do instead."""
+    check_screen()
+    rr = rerun_module()
+    exe = Path(sys.executable).parent / "rerun"
+    try:
+        rr.spawn(recording=stream, executable_path=str(exe) if exe.exists() else None)
+    except RuntimeError as e:
+        raise ConfigError(f"cannot start the rerun viewer: {str(e).splitlines()[0]}") from None
 
 
 class LiveRecording:
@@ -241,7 +262,13 @@ def _live(config: str, view: str, rows: Any) -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the run's; it ends us through close()
     cfg = load_run_config(Path(config))
     save = None if view in ("here", "web") else Path(view)
-    stream = open_stream(cfg.run_id, save=save, web=view == "web")
+    try:
+        stream = open_stream(cfg.run_id, save=save, web=view == "web")
+    except (ConfigError, OSError, RuntimeError) as e:  # the run goes on without a viewer
+        log.warning("viewer: not recording (%s)", e)
+        while rows.get() is not None:
+            pass
+        return
     rec = Recorder(cfg, stream)
     out = Path(config).parent
     while (row := rows.get()) is not None:
