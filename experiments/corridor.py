@@ -12,7 +12,7 @@ the tabu and the shield (EVAL_SHIELD). The bars, per seed:
             penetrating increment) in the epoch's last LAST_STEPS steps; bar: >= 80 % over 5 seeds
   frozen    the frozen epoch ends within TOL of the target with zero collisions in the whole epoch; bar: >= 4 of 5
 
-How the recipe was found, configuration by configuration (rounds 1-11): experiments/research/corridor_rounds.py,
+How the recipe was found, configuration by configuration (studies 1-11): experiments/research/corridor_studies.py,
 which runs the same machinery (`run_configs`) on every configuration tried, and docs/notebook/corridor.md.
 """
 
@@ -37,7 +37,7 @@ TAIL = 50  # the last 50 training epochs
 LAST_STEPS = 100  # no collision in the epoch's last 100 steps
 STEPS = 500
 QUICK_EPOCHS, QUICK_STEPS = 3, 100
-#: the third frozen evaluation's shield ([scene] shield; round 7: 0.02 left 4 of 5 subtree-200 swarms without a
+#: the third frozen evaluation's shield ([scene] shield; study 7: 0.02 left 4 of 5 subtree-200 swarms without a
 #: refusal; 0.05 kept them further from the target, 0.01 let two jam, docs/notebook/corridor.md)
 EVAL_SHIELD = 0.02
 SEEDS = 5  # the bars' seeds
@@ -208,7 +208,7 @@ def seed_metrics(train: RunOutcome, frozen: RunOutcome, tabu: RunOutcome, shield
         "success_last": sum(ok) / len(ok),  # within TOL and no collision in the last 100 steps
         "within_last": sum(within) / len(within),
         # the frozen bar's conditions (no collision in the whole epoch) on each training epoch: once the learning
-        # rate is 0 (lr_anneal) the frozen epoch is one draw from these (round 9)
+        # rate is 0 (lr_anneal) the frozen epoch is one draw from these (study 9)
         "strict_last": sum(strict) / len(strict),
         "median_final_last": float(np.median([r["final_error"] for r in tail])),
         "collisions_per_epoch_last": float(np.mean([sum(collisions(r)) for r in tail])),

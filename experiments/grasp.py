@@ -2,7 +2,7 @@
 
 Trains the swarm with the default reward (`shaped`: the grasp agent sends each finger a contact goal, the
 tip position where its contact carries a balancing force, and the fingers move with fine steps near it) on
-every seed, and Eq. 12 as printed (`paper`), its contact-gated variant (`contact`), round 1's per-finger
+every seed, and Eq. 12 as printed (`paper`), its contact-gated variant (`contact`), study 1's per-finger
 force-error reward (`force`) and the same paid globally (`global`) on the first seed, then scores each
 epoch's last step: all three fingertips in
 contact (fn > 0) inside their friction cones, |net force| < 10 % of the mean normal force and |net torque|
@@ -107,8 +107,8 @@ def run(ctx: Context) -> dict[str, Any]:
         f"within {GraspParams.D_fine} of the contact goal).",
         "",
         "Rewards: `shaped` (default): the grasp agent sends each finger a contact goal, the tip position where its "
-        "contact carries a force that balances the object, and rewards reaching it; `force`: round 1's per-finger "
-        "normal-force error (round 1's default, then named `shaped`); `global`: `force` averaged over the fingers; "
+        "contact carries a force that balances the object, and rewards reaching it; `force`: study 1's per-finger "
+        "normal-force error (study 1's default, then named `shaped`); `global`: `force` averaged over the fingers; "
         "`paper`: Eq. 12 as printed; `contact`: Eq. 12 with its force, torque and slip terms paid only while all "
         "three touch (docs/notebook/grasp.md).",
         "",

@@ -1,4 +1,4 @@
-"""Issue 3's Done-means on full training runs (slow: `pytest -m slow tests/test_faults_acceptance.py`).
+"""The fault-tolerance acceptance checks on full training runs (slow: `pytest -m slow tests/test_faults_acceptance.py`).
 
 Each compares a faulted run with the fault-free run of the same seed; the numbers go into the note."""
 

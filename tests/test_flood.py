@@ -1,4 +1,4 @@
-"""Issue 3, done-means: 10,000 garbage, truncated, wrong-version and wrong-step messages published on every
+"""10,000 garbage, truncated, wrong-version and wrong-step messages published on every
 key under the run's prefix during a run: no actor crashes, each rejection is counted, and the learning
 curve matches the undisturbed run with the same seed.
 

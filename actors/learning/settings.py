@@ -78,7 +78,7 @@ class LearnerSettings:
     lr: float = 0.5  # learning rate lambda of Eq. 5 in epoch 0
     lr_decay: float = 1.0 / 1050.0  # lr(epoch) = lr (1 - lr_decay) ** epoch (the paper's 1/1050)
     # (first, last): lr also scaled linearly to 0 over these epochs and 0 after, so training's last epochs run the
-    # greedy policy a frozen swarm runs (docs/notebook/corridor.md, round 9); (0, 0): off
+    # greedy policy a frozen swarm runs (docs/notebook/corridor.md, study 9); (0, 0): off
     lr_anneal: tuple[int, int] = (0, 0)
     T_max: float = 10.0  # T(t) = 1 + T_max e^(-s t) (§4.2); must exceed 1
     s: float = 0.05  # decay of T(t), t = step within the epoch: exploration tapers within the epoch
@@ -86,7 +86,7 @@ class LearnerSettings:
     epsilon_decay: float = 0.0  # epsilon(epoch) = epsilon (1 - epsilon_decay) ** epoch: exploration fades
     count_prior: float = 1.0  # initial fictitious-play count of every action, so Eq. 7 is defined at the start
     # from this epoch on the fictitious-play counts (Eq. 7) stay as they are, as in a frozen swarm (with lr_anneal,
-    # the anneal's lr-0 epochs are then the frozen epoch step for step; corridor round 10); 0: they always count
+    # the anneal's lr-0 epochs are then the frozen epoch step for step; corridor study 10); 0: they always count
     count_freeze: int = 0
     g3: str = "signed"  # "unsigned": |g3|, so a goal straight behind the tip is one case, not both ends of g3
     extra_state: tuple[StateVariable, ...] = ()  # variables appended to S_i (a task's come first)

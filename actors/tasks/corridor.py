@@ -201,7 +201,7 @@ def corridor_reward(
       that touches is always worse than the same move clear of the walls and the gradient is kept.
     graded: as shaped, with Eq. 10 graded.
     settle: Eq. 10 settle, and the collision term for a refused move only, not for a link nearer a wall than d_safe:
-      the success bar counts refusals, and an arrived chain has some link that near in 4-99 % of its steps (round 5
+      the success bar counts refusals, and an arrived chain has some link that near in 4-99 % of its steps (study 5
       of docs/notebook/corridor.md), where shaped then pays about -4 for sitting at the target.
     """
     if mode not in REWARD_MODES:

@@ -10,7 +10,7 @@ paper    Eq. 12 as printed, one global reward for all fingers: the reaching case
          violation (sum of max(0, -margin)). With no contact every R_i is at its maximum.
 contact  as paper, but R_f, R_tau, R_s are paid only while all fingertips touch (0 otherwise).
 global   the `force` terms below, averaged over the fingers: one global reward (no per-finger credit).
-force    (round 1's default, then named `shaped`) per finger i, from the grasp agent: out of contact,
+force    (study 1's default, then named `shaped`) per finger i, from the grasp agent: out of contact,
          the reaching reward that works for the chain (-2 + k (D_i(t-1) - D_i(t)), D_i = distance to its
          grasp point); in contact,
          -|e_i|/f_grip (capped at 1) + k_f (|e_i(t-1)| - |e_i(t)|)/f_grip - 1 if it slips, where

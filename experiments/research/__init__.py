@@ -2,7 +2,7 @@
 that every number in docs/notebook/ can be made again. Nothing in actors/, sim/ or protocol/ imports this, and
 `kinswarm experiment` does not list it.
 
-    python -m kinswarm.experiments.research corridor_rounds --quick --out runs/research
+    python -m kinswarm.experiments.research corridor_studies --quick --out runs/research
     python -m kinswarm.experiments.research successive_training --out runs/research   # ~13 min on 2 cores
     python -m kinswarm.experiments.research grasp_epsilon_decay --out runs/research   # ~6 min on 2 cores
 
