@@ -49,6 +49,7 @@ RUN_KEYS = (
     "stall_s",
     "stall_limit_s",
     "record_agents",
+    "record",
 )
 
 
@@ -100,6 +101,9 @@ class RunConfig:
     stall_limit_s: float = 300.0
     # every agent sends what it saw and chose at each step, once an epoch (AgentTrace -> agents.jsonl, the viewer)
     record_agents: bool = False
+    # at the end: motion.gif (kinswarm animate) and, with the extra kinswarm[viewer], recording.rrd (kinswarm view).
+    # Its default comes from KINSWARM_RECORD when set: the test suite sets 0 (a few seconds a run, hundreds of runs)
+    record: bool = field(default_factory=lambda: os.environ.get("KINSWARM_RECORD", "1") != "0")
     listen: str = DEFAULT_LISTEN  # the supervisor's endpoint
     # Several hosts (a deploy plan): the hosts whose heartbeats the sim must hear to step, within lease_ms
     hosts: list[str] = field(default_factory=list)

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import logging
 import os
 import signal
 import sys
@@ -19,6 +20,8 @@ from kinswarm.actors.runfile import write_resolved
 from kinswarm.actors.runtime import NetSpec, open_session
 from kinswarm.protocol.messages import EpochDone
 from kinswarm.protocol.topology import Topology
+
+log = logging.getLogger("kinswarm.launch")
 
 
 def write_net(path: Path, spec: NetSpec) -> Path:
@@ -140,7 +143,35 @@ async def _supervise(
             },
         )
         write_plots(out)
+        if cfg.record:
+            write_records(out, progress)
     return summary
+
+
+def write_records(out: Path, progress: bool) -> None:
+    """What a person watches: motion.gif always, recording.rrd when the viewer's extra is installed. Never fails
+    the run: what cannot be written is one warning."""
+    from kinswarm.actors.animate import write_animation
+
+    if progress:
+        print(f"kinswarm: drawing {out / 'motion.gif'} ...", file=sys.stderr)
+    try:
+        write_animation(out)
+    except Exception as e:  # a record of a finished run: the run itself stands
+        log.warning("motion.gif not written: %s", e)
+    try:
+        from kinswarm.actors.recording import open_stream, record_run
+    except ImportError:  # pragma: no cover -- the extra is part of the test install
+        return
+    try:
+        stream = open_stream(Path(out).name, save=out / "recording.rrd")
+        record_run(out, stream)
+        stream.flush()
+        stream.disconnect()
+    except ConfigError as e:  # the extra is not installed
+        log.info("recording.rrd not written: %s", e)
+    except Exception as e:
+        log.warning("recording.rrd not written: %s", e)
 
 
 def run_swarm(

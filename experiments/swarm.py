@@ -85,6 +85,7 @@ class Spec:
             (("run", "controller"), self.controller),
             (("run", "deadline_ms"), DEADLINE_MS),
             (("run", "checkpoint_every"), 0),  # the last epoch only: what --from needs
+            (("run", "record"), False),  # the report draws what it needs; no animation or recording per run
         ]
         if self.from_dir is not None:
             out.append((("run", "from"), self.from_dir))

@@ -321,6 +321,8 @@ class SimActor:
             else:
                 self.node.log.info("scenario: requesting %s (%s)", describe(f), f.id)
                 self.node.send(self.keys.fault("request"), f)
+                # on the timeline at its exact step: the supervisor that applies it knows the step only roughly
+                self._event("scenario", ",".join(f.targets), f"{describe(f)} requested")
 
     # -- the step ----------------------------------------------------------------------------------
     def _publish_step(self) -> None:

@@ -13,6 +13,10 @@ import pytest
 from kinswarm.actors.config import RunConfig
 from kinswarm.actors.runfile import load_run
 
+# Runs in tests draw no motion.gif and write no recording.rrd (RunConfig.record), unless a test asks: seconds a
+# run, hundreds of runs. Subprocesses inherit it.
+os.environ.setdefault("KINSWARM_RECORD", "0")
+
 ROOT = Path(__file__).resolve().parent.parent
 EXAMPLES = ROOT / "examples"
 # The step deadline of runs whose test checks that no command was missed, or compares runs for equality (placements,

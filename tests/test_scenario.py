@@ -24,6 +24,7 @@ def timeline(path: Path, topo) -> list[tuple[int | None, int, str, list[str], in
 
 def test_paper_scenarios(topo):
     assert sorted(p.name for p in SCENARIOS.glob("*.toml")) == [
+        "lock-then-reverse.toml",  # the README's animation
         "paper-fail-disturb-fail.toml",
         "paper-locked.toml",
         "paper-recovery.toml",
@@ -40,7 +41,7 @@ def test_paper_scenarios(topo):
         (None, 1000, "lock", ["a2", "a3"], None),
     ]
     assert timeline(SCENARIOS / "paper-locked.toml", topo) == [(None, 0, "lock", ["a2", "a3"], None)]
-    for p in SCENARIOS.glob("*.toml"):
+    for p in SCENARIOS.glob("paper-*.toml"):
         s = load_scenario(p, topo)
         assert s.name == p.stem and "--steps 1500" in s.description and "5.3" in p.read_text()
 

@@ -308,8 +308,9 @@ def test_scenario_applies_joint_faults_and_forwards_the_others(tmp_path, chain4)
             (sim.keys.fault("request"), "scenario-0-3-1", "kill", ["a3"])
         ], "the kill is only in epoch 0, and goes to the supervisor"
         ev = events(sim)
-        assert ev[:5] == [("lock", "a1", 0, 2), *(("free", a, 0, 4) for a in sim.dof)]
-        assert ev[5] == ("lock", "a1", 1, 2), "an entry without an epoch repeats every epoch"
+        # the kill goes to the supervisor, and on the timeline at its exact step as what the scenario asked
+        assert ev[:6] == [("lock", "a1", 0, 2), ("scenario", "a3", 0, 3), *(("free", a, 0, 4) for a in sim.dof)]
+        assert ev[6] == ("lock", "a1", 1, 2), "an entry without an epoch repeats every epoch"
         q = sim.world.joint_positions()
         q0 = sim.topo.initial_angles()
         assert q["a1"] == pytest.approx(q0["a1"] + 4 * DEG)  # locked for steps 2 and 3 of 6
