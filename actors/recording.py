@@ -32,6 +32,11 @@ GOAL = (255, 200, 0)
 ACTIONS = ("decrease", "keep", "increase")  # an agent's actions 0, 1, 2
 
 
+def up(p: Sequence[float]) -> tuple[float, float]:
+    """World (x, y) as rerun's 2D view draws it: its y axis points down, so up is -y."""
+    return (float(p[0]), -float(p[1]))
+
+
 def rerun_module() -> Any:
     """rerun, or one line saying how to get it."""
     try:
@@ -54,14 +59,37 @@ class Recorder:
         self.events: list[dict[str, Any]] = []
         self._static()
 
+    def _layout(self) -> Any:
+        """The viewer's default layout: the robot large on the left; the error, the events and the agents on the
+        right (each agent's liveliness, action and E in tabs)."""
+        import rerun.blueprint as rrb
+
+        dof = self.dof
+        agents = rrb.Tabs(
+            rrb.TimeSeriesView(name="alive", origin="/agents", contents=[f"/agents/{a}/alive" for a in dof]),
+            rrb.TimeSeriesView(name="action", origin="/agents", contents=[f"/agents/{a}/action" for a in dof]),
+            *(rrb.TimeSeriesView(name=f"{a}: E (Eq. 9)", origin=f"/agents/{a}/E") for a in dof),
+            *(rrb.TimeSeriesView(name=f"{a}: state", origin=f"/agents/{a}/state") for a in dof),
+        )
+        right = rrb.Vertical(
+            rrb.TimeSeriesView(name="error", origin="/error"),
+            rrb.TextLogView(name="events", origin="/events"),
+            agents,
+            row_shares=[2, 1, 2],
+        )
+        robot = rrb.Spatial2DView(name="robot", origin="/world")
+        return rrb.Blueprint(rrb.Horizontal(robot, right, column_shares=[3, 2]), collapse_panels=True)
+
     def _static(self) -> None:
         rr, topo = self.rr, self.topo
-        walls = [o.corners() + [o.corners()[0]] for o in self.cfg.scene_spec.obstacles]
+        self.stream.send_blueprint(self._layout())
+        walls = [[up(c) for c in [*o.corners(), o.corners()[0]]] for o in self.cfg.scene_spec.obstacles]
         if walls:
             self.stream.log("world/walls", rr.LineStrips2D(walls, colors=[(90, 90, 90)]), static=True)
         R = topo.reach
         bx, by = topo.base[0], topo.base[1]
-        box = [[bx - R, by - R], [bx + R, by - R], [bx + R, by + R], [bx - R, by + R], [bx - R, by - R]]
+        corners = ((bx - R, by - R), (bx + R, by - R), (bx + R, by + R), (bx - R, by + R), (bx - R, by - R))
+        box = [up(c) for c in corners]
         self.stream.log("world/reach", rr.LineStrips2D([box], colors=[(220, 220, 220)]), static=True)
 
     def epoch(self, row: dict[str, Any], angles_deg: Sequence[Sequence[float]], events: list[dict[str, Any]]) -> None:
@@ -88,15 +116,15 @@ class Recorder:
         goals: list[tuple[float, float]] = []
         for t, deg in enumerate(angles_deg):
             q = {a: math.radians(v) for a, v in zip(self.dof, deg, strict=True)}
-            strips += arm_points(topo, q)
+            strips += [[up(p) for p in strip] for strip in arm_points(topo, q)]
             joints = joint_points(topo, q)
             faulty = {sp.target: LASTING[sp.fault] for sp in spans if (w := sp.within(e, n)) and w[0] <= t < w[1]}
             for a, xy in joints.items():
-                points.append(xy)
+                points.append(up(xy))
                 colours.append(FAULT if a in faulty else ARM)
                 radii.append(0.3 if a in faulty else 0.15)
                 labels.append(f"{a} {faulty[a]}" if a in faulty else a)
-            goals.append(tuple(path[t]) if path else tuple(goal))  # type: ignore[arg-type]
+            goals.append(up(path[t] if path else goal))
         k, m = len(topo.end_effectors), len(topo.order)
         arm = rr.LineStrips2D.columns(strips=strips, colors=[ARM] * len(strips), radii=[0.06] * len(strips))
         s.send_columns("world/arm", indexes=times, columns=arm.partition([k] * n))
