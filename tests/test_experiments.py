@@ -297,7 +297,9 @@ def test_quick_adapt_experiment(tmp_path):
         for c in cs.values():
             assert len(c["final_error"][0]) == 4 and 0.0 <= c["within"][0] <= 1.0
     assert per["intact"]["rule"]["within"] == [1.0] and per["a1 reversed"]["rule"]["within"] == [0.0]
-    assert set(res["live"]["per"]) == {"trained, learning", "fresh, learning", "rule", "pseudo-inverse"}
+    assert set(res["live"]["per"]) == {"trained, learning", "trained, learning, exploring afresh", "fresh, learning",
+                                       "fresh, learning, the trained swarm's learner",
+                                       "rule", "pseudo-inverse"}  # fmt: skip
     text = (out / "report.md").read_text()
     assert "## Live: a motor reversed at a trained swarm's goal" in text and "quick" in text
 
