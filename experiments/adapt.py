@@ -149,48 +149,21 @@ def run(ctx: Context) -> dict[str, Any]:
     live: dict[tuple[str, int], list[Spec]] = {}
     for seed in ctx.seed_list:
         t = str(trained[seed].out)
-        live[("trained, learning", seed)] = [
-            Spec(
-                f"adapt-live-trained-g{i}",
-                seed=seed,
-                epochs=2,
-                goals=pair,
-                learner=LEARNER,
-                reward="graded",
-                from_dir=t,
-                **live_common,
-            )  # fmt: skip
-            for i, pair in enumerate(pairs)
-        ]
-        live[("trained, learning, exploring afresh", seed)] = [  # the same swarm, its exploration not faded
-            Spec(
-                f"adapt-live-trained-explore-g{i}",
-                seed=seed,
-                epochs=2,
-                goals=pair,
-                learner=NO_EPSILON_DECAY,
-                reward="graded",
-                from_dir=t,
-                **live_common,
-            )  # fmt: skip
-            for i, pair in enumerate(pairs)
-        ]
-        live[("fresh, learning", seed)] = [
-            Spec(f"adapt-live-fresh-g{i}", seed=seed, epochs=2, goals=pair, learner=FRESH, **live_common)
-            for i, pair in enumerate(pairs)
-        ]
-        live[("fresh, learning, the trained swarm's learner", seed)] = [  # what training added, learner aside
-            Spec(
-                f"adapt-live-fresh-gen-g{i}",
-                seed=seed,
-                epochs=2,
-                goals=pair,
-                learner=LEARNER,
-                reward="graded",
-                **live_common,
-            )  # fmt: skip
-            for i, pair in enumerate(pairs)
-        ]
+
+        def episodes_of(tag: str, seed: int = seed, **kw: Any) -> list[Spec]:
+            return [Spec(f"adapt-live-{tag}-g{i}", seed=seed, epochs=2, goals=pair, **kw, **live_common)
+                    for i, pair in enumerate(pairs)]  # fmt: skip
+
+        live[("trained, learning", seed)] = episodes_of("trained", learner=LEARNER, reward="graded", from_dir=t)
+        # the same swarm, its exploration not faded by the epochs it trained
+        live[("trained, learning, exploring afresh", seed)] = episodes_of(
+            "trained-explore", learner=NO_EPSILON_DECAY, reward="graded", from_dir=t
+        )
+        live[("fresh, learning", seed)] = episodes_of("fresh", learner=FRESH)
+        # what training added, the learner aside
+        live[("fresh, learning, the trained swarm's learner", seed)] = episodes_of(
+            "fresh-gen", learner=LEARNER, reward="graded"
+        )
     for name, law in (("rule", "rule"), ("pseudo-inverse", "pinv")):
         runs_ = [Spec(f"adapt-live-{law}-g{i}", epochs=2, goals=pair, controller=law, **live_common)
                  for i, pair in enumerate(pairs)]  # fmt: skip
