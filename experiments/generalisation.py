@@ -12,6 +12,7 @@ an untrained swarm *learning* within one episode per test goal (not a generalisa
 
 from __future__ import annotations
 
+import hashlib
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -121,7 +122,10 @@ class Training:
 
 def run_suffix(learner: tuple, reward: str) -> str:
     """Run names' suffix: the learner's, then the reward unless shaped (the older caches' names)."""
-    return RUN_SUFFIX[learner] + ("" if reward == "shaped" else f"-{reward}")
+    named = RUN_SUFFIX.get(learner)
+    if named is None:  # a learner of research/ (not named here): known by its settings
+        named = "-" + hashlib.sha256(repr(learner).encode()).hexdigest()[:6]
+    return named + ("" if reward == "shaped" else f"-{reward}")
 
 
 def training_spec(t: Training, seed: int, steps: int) -> Spec:
@@ -412,7 +416,7 @@ def table(rep: Report, tested: Tested) -> None:
             rows.append(
                 [
                     t.label,
-                    LEARNER_NAMES[t.learner],
+                    LEARNER_NAMES.get(t.learner, t.label),
                     t.reward,
                     t.epochs,
                     len(seeds_of(t)),

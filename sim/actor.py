@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import asyncio
 import dataclasses
+import logging
 import time
 from typing import Any
 
@@ -262,7 +263,9 @@ class SimActor:
             return
         if agent not in self.down:
             self.down.add(agent)
-            self.node.log.warning("agent %s is down; its joint holds and steps go on without it", agent)
+            # between epochs (a run ending, agents stopping first) it costs nothing: no warning
+            level = logging.WARNING if self.epoch is not None else logging.INFO
+            self.node.log.log(level, "agent %s is down; its joint holds and steps go on without it", agent)
         if self.epoch is not None and agent in self.waiting:
             self.waiting.discard(agent)
             if not self.waiting:
