@@ -61,14 +61,16 @@ def test_quick_experiment(quick_all, name):
         for block in ("test_set_0", "test_set_1"):
             for key in ("mean", "std", "median", "frac_within_0_5"):
                 assert math.isfinite(level[block][key])
-        refs = results["references"]  # the model-based controllers on the same goals
-        assert set(refs) == {"pseudo-inverse", "greedy per joint"}
+        refs = results["references"]  # the model-based controllers and the rule, on the same goals
+        successive = "rule on g_perp, successive test goals"
+        assert set(refs) == {"pseudo-inverse", "greedy per joint", "rule on g_perp", successive}
         for name in refs:
-            for block in ("test_set_0", "test_set_1"):
+            for block in ("test_set_0",) if name == successive else ("test_set_0", "test_set_1"):
                 assert len(refs[name][block]["errors"]) == len(results["test_sets"][block.rsplit("_", 1)[-1]])
+        assert set(refs[successive]) == {"test_set_0"}  # as the swarm's successive row: test set K only
     if name == "robustness":
         assert set(results["per_scenario"]) == {"paper-recovery", "paper-fail-disturb-fail", "paper-locked"}
-        assert set(results["per_scenario"]["paper-locked"]) == {"frozen", "learning", "scratch", "baseline"}
+        assert set(results["per_scenario"]["paper-locked"]) == {"frozen", "learning", "scratch", "baseline", "rule"}
     if name == "cost":
         assert results["centralised_limit_n"] == 4  # 2^24 rules per step: refused, never allocated
 
