@@ -11,7 +11,7 @@ from typing import Any
 
 from kinswarm.actors.config import ConfigError, load_run_config
 from kinswarm.actors.report import arm_points, events_by_epoch, joint_points, read_events, read_jsonl, read_metrics
-from kinswarm.actors.timeline import LASTING, fault_spans, label_groups
+from kinswarm.actors.timeline import fault_spans, faulty_at, label_groups
 
 MAX_EPOCHS = 6  # the first, the last, and the latest epochs with events up to this many
 FRAMES_PER_EPOCH = 60  # a 500-step epoch is drawn every 9th step
@@ -168,7 +168,7 @@ def write_animation(
         for line, pts in zip(chains, arm_points(topo, q), strict=True):
             xs, ys = zip(*pts, strict=True)
             line.set_data(xs, ys)
-        faulty = {sp.target: LASTING[sp.fault] for sp in spans if (w := sp.within(e, n)) and w[0] <= step < w[1]}
+        faulty = faulty_at(spans, e, n, step)
         joints = joint_points(topo, q)
         marked = [a for a in faulty if a in joints]
         faulty_marks.set_data([joints[a][0] for a in marked], [joints[a][1] for a in marked])

@@ -159,10 +159,8 @@ def write_records(out: Path, progress: bool) -> None:
         write_animation(out)
     except Exception as e:  # a record of a finished run: the run itself stands
         log.warning("motion.gif not written: %s", e)
-    try:
-        from kinswarm.actors.recording import open_stream, record_run
-    except ImportError:  # pragma: no cover -- the extra is part of the test install
-        return
+    from kinswarm.actors.recording import open_stream, record_run  # rerun itself only if the extra is there
+
     try:
         stream = open_stream(Path(out).name, save=out / "recording.rrd")
         record_run(out, stream)

@@ -21,8 +21,8 @@ from pathlib import Path
 from typing import Any
 
 from kinswarm.actors.config import ConfigError, RunConfig, load_run_config
-from kinswarm.actors.report import arm_points, joint_points, read_events, read_jsonl, read_metrics
-from kinswarm.actors.timeline import LASTING, fault_spans
+from kinswarm.actors.report import arm_points, events_by_epoch, joint_points, read_events, read_jsonl, read_metrics
+from kinswarm.actors.timeline import fault_spans, faulty_at
 
 log = logging.getLogger("kinswarm.view")
 APP = "kinswarm"
@@ -118,7 +118,7 @@ class Recorder:
             q = {a: math.radians(v) for a, v in zip(self.dof, deg, strict=True)}
             strips += [[up(p) for p in strip] for strip in arm_points(topo, q)]
             joints = joint_points(topo, q)
-            faulty = {sp.target: LASTING[sp.fault] for sp in spans if (w := sp.within(e, n)) and w[0] <= t < w[1]}
+            faulty = faulty_at(spans, e, n, t)
             for a, xy in joints.items():
                 points.append(up(xy))
                 colours.append(FAULT if a in faulty else ARM)
@@ -178,10 +178,6 @@ class Recorder:
                     column(f"agents/{a}/P/{child}/{act}", [p[j * len(ACTIONS) + i] for p in row["P"]])
 
 
-def _placed(events: list[dict[str, Any]], epoch: int) -> list[dict[str, Any]]:
-    return [ev for ev in events if ev.get("epoch") == epoch and isinstance(ev.get("step"), int) and ev["step"] >= 0]
-
-
 def record_run(run_dir: Path, stream: Any) -> int:
     """Log a finished run directory into `stream`; returns the epochs recorded."""
     from kinswarm.actors.animate import read_poses
@@ -190,13 +186,13 @@ def record_run(run_dir: Path, stream: Any) -> int:
     poses = read_poses(run_dir)
     if not poses:
         raise ConfigError(f"{run_dir}: no poses.jsonl rows to show (a run from before poses were recorded?)")
-    events = read_events(run_dir)
+    placed = events_by_epoch(read_events(run_dir))
     traces = read_agent_rows(run_dir)
     rec = Recorder(cfg, stream)
     done = 0
     for row in read_metrics(run_dir):
         if (e := row["epoch"]) in poses:
-            rec.epoch(row, poses[e], _placed(events, e))
+            rec.epoch(row, poses[e], placed.get(e, []))
             rec.agents(traces.get(e, []))
             done += 1
     return done
@@ -301,7 +297,7 @@ def _live(config: str, view: str, rows: Any) -> None:
     out = Path(config).parent
     while (row := rows.get()) is not None:
         try:
-            rec.epoch(row, row.pop("angles_deg"), _placed(read_events(out), row["epoch"]))
+            rec.epoch(row, row.pop("angles_deg"), events_by_epoch(read_events(out)).get(row["epoch"], []))
             rec.agents(read_agent_rows(out).get(row["epoch"], []))  # those in by now; `kinswarm view` has all
         except Exception as e:  # the viewer went away: the run goes on without it
             log.warning("viewer: stopped recording (%s)", e)

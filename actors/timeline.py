@@ -65,6 +65,11 @@ def fault_spans(events: Sequence[dict[str, Any]]) -> list[Span]:
     return sorted(spans, key=lambda s: (s.start, s.target, s.fault))
 
 
+def faulty_at(spans: Sequence[Span], epoch: int, steps: int, step: int) -> dict[str, str]:
+    """Joint (or agent) -> what is wrong with it at `step` of `epoch` (of `steps` steps)."""
+    return {s.target: LASTING[s.fault] for s in spans if (w := s.within(epoch, steps)) and w[0] <= step < w[1]}
+
+
 def active_at_end(events: Sequence[dict[str, Any]]) -> dict[str, list[str]]:
     """Joint -> what is wrong with it when the run ended (the faults never freed)."""
     out: dict[str, list[str]] = {}

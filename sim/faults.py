@@ -129,10 +129,11 @@ class JointFaults:
                 d[a] = float(self.rng.uniform(-dist.amplitude, dist.amplitude))
         return d
 
-    def readings(self, q: Mapping[str, float]) -> dict[str, float]:
-        """What each joint's encoder reads this step, given the true angles. Call once per step."""
+    def readings(self, q: dict[str, float]) -> dict[str, float]:
+        """What each joint's encoder reads this step, given the true angles (`q` itself when every encoder reads
+        true: no copy on the step's path). Call once per step."""
         if not any(m.offset or m.lag for m in self.model.values()):
-            return dict(q)
+            return q
         return {a: (m.read(v) if (m := self.model.get(a)) is not None else v) for a, v in q.items()}
 
     def reset(self) -> None:
