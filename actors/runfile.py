@@ -54,6 +54,7 @@ from kinswarm.protocol.keys import check_id
 from kinswarm.protocol.scene import SceneSpec, parse_scene
 from kinswarm.protocol.spec import SpecError, table
 from kinswarm.protocol.topology import ROBOT_KEYS, Topology, parse_robot
+from kinswarm.protocol.urdf_robot import URDF_KEYS
 
 SECTIONS = ("run", "robot", "scene", "task", "learner")
 MAX_BASES = 8  # how deep `base` files may nest
@@ -273,7 +274,7 @@ def _robot(data: Any, source: str) -> tuple[dict[str, Any], Topology]:
         if "robot" not in doc or not isinstance(doc["robot"], dict):
             raise SpecError(str(file), "robot", "a robot file needs a [robot] table")
         data, source = {"name": file.stem, **doc["robot"]}, str(file)
-    table(source, "robot", data, ROBOT_KEYS)
+    table(source, "robot", data, URDF_KEYS if isinstance(data, dict) and "urdf" in data else ROBOT_KEYS)
     if "name" not in data and source.endswith(".toml"):
         data = {"name": Path(source).stem, **data}
     return data, parse_robot(data, source)

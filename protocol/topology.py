@@ -48,6 +48,14 @@ class AgentSpec:
     initial: float  # radians
     offset: tuple[float, float, float]  # x, y, heading (radians) relative to the parent's link end
     compound: bool
+    # A spatial robot's joint (protocol/frames.py; planar agents leave these as they are): the joint frame on the
+    # parent's link frame (7 floats, fixed joints folded in), the axis in it, a prismatic joint's travel instead of
+    # a rotation, a leaf's tool frame on its link frame, and the URDF's name of the joint.
+    origin: tuple[float, ...] = ()
+    axis: tuple[float, float, float] = (0.0, 0.0, 1.0)
+    prismatic: bool = False
+    tool: tuple[float, ...] = ()
+    joint: str = ""
 
     @property
     def has_dof(self) -> bool:
@@ -64,8 +72,16 @@ class Topology:
     agents: dict[str, AgentSpec]
     order: tuple[str, ...]  # parents before children (breadth-first from the root)
     root: str
-    base: tuple[float, float, float]  # x, y, heading (radians)
+    # the root's base frame: x, y, heading (radians) for a planar robot, a 7-float frame for a spatial one
+    base: tuple[float, ...]
     source: str = field(default="<memory>")
+    urdf: str = ""  # a spatial robot: the URDF file it was read from (protocol/urdf_robot.py)
+    held: tuple[tuple[str, float], ...] = ()  # its movable joints that are not agents, and the value they hold
+
+    @property
+    def spatial(self) -> bool:
+        """A robot from URDF, moving in 3D: its frames are 7 floats (protocol/frames.py), not (x, y, heading)."""
+        return bool(self.urdf)
 
     @property
     def dof_agents(self) -> tuple[str, ...]:
@@ -79,12 +95,16 @@ class Topology:
     def reach(self) -> float:
         """Longest root-to-leaf sum of link lengths and offsets: the radius of the task space."""
         r = self.agents[self.root]
+        if self.spatial:
+            return self.reach_below(self.root)
         return math.hypot(r.offset[0], r.offset[1]) + self.reach_below(self.root)
 
     def reach_below(self, aid: str) -> float:
         """Longest sum of link lengths and offsets from `aid`'s joint to a leaf below it: how far from the joint
         a point it moves can lie."""
         a = self.agents[aid]
+        if self.spatial:  # a spatial joint's link_length is the distance from its joint to the next (or its tool)
+            return a.link_length + max((self.reach_below(c) for c in a.children), default=0.0)
         below = (math.hypot(*self.agents[c].offset[:2]) + self.reach_below(c) for c in a.children)
         return a.link_length + max(below, default=0.0)
 
@@ -115,6 +135,10 @@ ROBOT_KEYS = frozenset({"name", "base", "defaults", "agent"})
 def parse_robot(robot: Any, source: str = "<memory>", where: str = "robot") -> Topology:
     """Validate a `[robot]` table and build the Topology; errors name the source and the field."""
     src = source
+    if isinstance(robot, dict) and "urdf" in robot:  # a robot from URDF: protocol/urdf_robot.py
+        from .urdf_robot import parse_urdf_robot
+
+        return parse_urdf_robot(robot, src, where)
     robot = table(src, where, robot, ROBOT_KEYS)
     name = robot.get("name", "robot")
     if not isinstance(name, str) or not name:
