@@ -299,6 +299,10 @@ def _task(data: Any, topo: Topology, scene: SceneSpec, source: str) -> TaskDef:
         settings = msgspec.convert(settings_table, cls.Settings)
     except msgspec.ValidationError as e:
         raise _spec_error(e, source, "task") from None
+    if topo.spatial != cls.spatial:
+        kinds_for = ", ".join(k for k in kinds() if task_class(k).spatial == topo.spatial)
+        what = "a robot from URDF" if topo.spatial else "a planar robot"
+        raise SpecError(source, "task.kind", f"the {kind} task does not move {what}; it takes: {kinds_for}")
     task = cls(settings, topo, scene)
     if (problem := task.check()) is not None:
         field, sep, what = problem.partition(": ")

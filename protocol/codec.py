@@ -114,6 +114,18 @@ def _checker(tp: Any) -> Check:
         (inner,) = [a for a in get_args(tp) if a is not type(None)]
         check_inner = _checker(inner)
         return lambda v, where: None if v is None else check_inner(v, where)
+    if origin is tuple and get_args(tp) == (float, Ellipsis):  # Coords: a goal, frame or tip of the robot's kind
+        _finite = math.isfinite
+        sizes = messages.COORD_SIZES
+
+        def check_coords(value: Any, where: str) -> tuple:
+            if not isinstance(value, (list, tuple)) or len(value) not in sizes:
+                raise DecodeError(f"{where}: expected a list of {' or '.join(map(str, sizes))}, got {value!r:.60}")
+            if all(type(v) is float and _finite(v) for v in value):
+                return tuple(value)
+            return tuple(_number(v, f"{where}[{i}]") for i, v in enumerate(value))
+
+        return check_coords
     if origin is tuple:
         checks = [_checker(a) for a in get_args(tp)]
         n = len(checks)
@@ -173,6 +185,13 @@ def _fast_field(name: str, tp: Any, lines: list[str]) -> bool:
             f"if not ({checks}): return None",
         ]
 
+    def coords(x: str) -> list[str]:  # Coords: one of COORD_SIZES finite floats
+        return [
+            f"if type({x}) is not list or len({x}) not in {messages.COORD_SIZES!r}: return None",
+            f"for c in {x}:",
+            f"    if not ({finite.format(x='c')}): return None",
+        ]
+
     def vec_len(t: Any) -> int | None:
         args = get_args(t)
         return len(args) if get_origin(t) is tuple and args and all(a is float for a in args) else None
@@ -189,6 +208,15 @@ def _fast_field(name: str, tp: Any, lines: list[str]) -> bool:
     elif (n := vec_len(tp)) is not None:
         lines += vec(name, n)
         lines.append(f"{name} = tuple({name})")
+    elif origin is tuple and get_args(tp) == (float, Ellipsis):
+        lines += coords(name)
+        lines.append(f"{name} = tuple({name})")
+    elif origin is dict and get_args(tp)[0] is str and get_args(tp)[1] == messages.Coords:
+        lines.append(f"if type({name}) is not dict: return None")
+        lines.append(f"for k, v in {name}.items():")
+        lines.append("    if type(k) is not str or not is_name(k): return None")
+        lines += ["    " + line for line in coords("v")]
+        lines.append(f"{name} = {{k: tuple(v) for k, v in {name}.items()}}")
     elif origin is dict and get_args(tp) == (str, float):
         lines.append(f"if type({name}) is not dict: return None")
         lines.append(f"for k, v in {name}.items():")

@@ -28,6 +28,8 @@ Quat = tuple[float, float, float, float]
 Vec = tuple[float, float, float]
 
 IDENTITY: Frame = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0)
+#: Metres per radian where a pose's distance adds its orientation's: a 10° turn weighs like 1.7 cm of position.
+POSE_WEIGHT = 0.1
 
 
 def quat_mul(a: Sequence[float], b: Sequence[float]) -> Quat:

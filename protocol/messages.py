@@ -1,7 +1,8 @@
 """Typed messages of the step protocol and of supervision (DESIGN §3).
 
 Every message travels as a msgpack map: the envelope `v` (schema version), `kind`, `run`, `src`,
-then the fields below. Frames and tips are (x, y, heading) in the world frame; angles in radians.
+then the fields below. Frames and tips are (x, y, heading) in the world frame for a planar robot, 7-float frames
+for a spatial one (`Coords`); angles in radians.
 The codec (`codec.py`) validates every field against these annotations.
 """
 
@@ -10,17 +11,23 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import ClassVar
 
-SCHEMA_VERSION = 8  # 2: faults, events, status, bye; payloads carry a MAC (codec.py). 3: Up.action is the
+SCHEMA_VERSION = 9  # 2: faults, events, status, bye; payloads carry a MAC (codec.py). 3: Up.action is the
 # sender's action of the step before (sent before it learns), plus a closing Up after an epoch's last step.
 # 4: scenes with obstacles and the grasp scene: `sense` maps, `traces` on EpochDone. 5: several hosts (deploy
 # plans): Setup, Heartbeat. 6: Up.clearance. 7: every scene reading and task aggregate travels in the one `sense`
 # route (Readings: Obs, Task, Down, Up; the clearance/collided/collisions fields are gone), EpochDone's scene series
 # only in `traces`, and EpochStart.path, the goal of every step when it moves. 8: faults in the robot's model
 # (reverse, scale, deadzone, offset, lag) and their sizes, Fault.factor and Fault.degrees; EpochDone.angles, the
-# robot's pose after every step; AgentTrace, what each agent saw and chose.
+# robot's pose after every step; AgentTrace, what each agent saw and chose. 9: spatial robots (from URDF): goals,
+# frames and tips are `Coords`, of the robot's kind; EpochStart.start, a task's start pose.
 
 Vec2 = tuple[float, float]
 Vec3 = tuple[float, float, float]
+#: A goal, frame or tip of the robot's kind (COORD_SIZES: the lengths the codec takes): a planar robot's goal (x, y)
+#: and frames and tips (x, y, heading); a spatial robot's (protocol/frames.py) goal point (x, y, z) or pose
+#: (x, y, z, qx, qy, qz, qw), and frames and tips (x, y, z, qx, qy, qz, qw).
+Coords = tuple[float, ...]
+COORD_SIZES = (2, 3, 7)
 #: Named readings: the one route for what a scene senses (Obs.sense: an agent's own, Task.sense: the task's) and what
 #: a task passes along the tree (Down.sense: context from above, Up.sense: a subtree's aggregate). Keys are names
 #: (READING_NAME in codec.py: letters, digits and ``_ + - . /``, at most 64), values finite floats; which names a
@@ -49,8 +56,8 @@ class Task:
     KIND: ClassVar[str] = "task"
     epoch: int
     step: int
-    goal: Vec2
-    tips: dict[str, Vec3]
+    goal: Coords
+    tips: dict[str, Coords]
     sense: Readings = field(default_factory=dict)
 
 
@@ -62,8 +69,8 @@ class Down:
     KIND: ClassVar[str] = "down"
     epoch: int
     step: int
-    base: Vec3
-    goal: Vec2
+    base: Coords
+    goal: Coords
     reward: float | None
     sense: Readings = field(default_factory=dict)
 
@@ -81,7 +88,7 @@ class Up:
     KIND: ClassVar[str] = "up"
     epoch: int
     step: int
-    tips: dict[str, Vec3]
+    tips: dict[str, Coords]
     action: int
     sense: Readings = field(default_factory=dict)
 
@@ -99,13 +106,15 @@ class Cmd:
 @dataclass(frozen=True)
 class EpochStart:
     """supervisor -> sim (ctl/epoch): run one epoch of `steps` lockstep steps towards `goal`; when the goal moves
-    (a task's goal path), `path` holds the goal of every step (path[t]; `goal` is path[0])."""
+    (a task's goal path), `path` holds the goal of every step (path[t]; `goal` is path[0]). `start`: the joint angles
+    (rad) the epoch starts from, when the task gives them (else the robot's home)."""
 
     KIND: ClassVar[str] = "epoch"
     epoch: int
     steps: int
-    goal: Vec2
-    path: list[Vec2] = field(default_factory=list)
+    goal: Coords
+    path: list[Coords] = field(default_factory=list)
+    start: dict[str, float] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)

@@ -211,7 +211,11 @@ class SimActor:
         self.epoch = e
         self.last_epoch = e.epoch
         if not (self.cfg.successive and e.epoch > 0):
-            self.world.reset()  # faults persist, angles do not: a locked joint is locked at its initial angle
+            try:  # faults persist, angles do not: a locked joint is locked at the epoch's start angle
+                self.world.reset(e.start or None)
+            except ValueError as err:  # a start pose this robot cannot take: its home instead, said once
+                self.node.log.warning("epoch %d: %s; starting from the robot's home", e.epoch, err)
+                self.world.reset()
             self.faults.reset()
         self.tips = self.world.tip_poses()
         self.scene.reset()

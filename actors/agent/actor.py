@@ -27,13 +27,13 @@ from dataclasses import dataclass, field
 import numpy as np
 from kinswarm.actors.config import RunConfig
 from kinswarm.actors.learning.learner import Learner
-from kinswarm.actors.learning.state import agent_state, joint_frame, link_end, own_extras
 from kinswarm.actors.runfile import learner_settings, task_of
 from kinswarm.actors.runtime import Node
-from kinswarm.actors.tasks.base import StepView, centroid
+from kinswarm.actors.tasks.base import StepView
 from kinswarm.protocol.messages import Bye, Checkpoint, Cmd, Down, Fault, Obs, Readings, Stop, Task, Up
 from kinswarm.protocol.topology import Topology
 
+from .geometry import geometry_of
 from .memory import Memory
 from .standin import StandIn
 from .trace import StepTrace
@@ -49,13 +49,13 @@ def agent_seed(seed: int, agent: str) -> list[int]:
 @dataclass
 class _Step:
     key: Key
-    frame: tuple[float, float, float]
-    end: tuple[float, float, float]
+    frame: tuple[float, ...]  # frames, goals and tips of the robot's kind (geometry.py)
+    end: tuple[float, ...]
     q: float
-    goal: tuple[float, float]
+    goal: tuple[float, ...]
     reward: float | None
     waiting: frozenset[str]  # the live agents whose `up` this step needs: children, or adopted ones' children
-    tips: dict[str, tuple[float, float, float]]  # end effectors of adopted leaves, computed here
+    tips: dict[str, tuple[float, ...]]  # end effectors of adopted leaves, computed here
     ups: dict[str, Up] = field(default_factory=dict)  # by sender
     sense: Readings = field(default_factory=dict)  # my Obs.sense over the context from above
 
@@ -64,6 +64,7 @@ class Agent:
     def __init__(self, cfg: RunConfig, topo: Topology, agent_id: str, node: Node) -> None:
         self.cfg, self.topo, self.node, self.id = cfg, topo, node, agent_id
         self.spec = topo.agents[agent_id]
+        self.geom = geometry_of(topo)
         self.keys = node.keys
         self.is_root = self.spec.parent is None
         # The paper's neighbourhood: an agent sees the agents one level below it (its DOF children).
@@ -212,15 +213,15 @@ class Agent:
             self.learner.resync(step)  # a missed step: no TD update across the gap
         self.standin.announce(adopted)
 
-        children: dict[str, tuple[tuple[float, float], float | None, Readings]] = {}
+        children: dict[str, tuple[tuple[float, ...], float | None, Readings]] = {}
         if isinstance(head, Task):  # the root: the world's base; its task turns the observation into the reward
             h = self.task.head(head)
             base, goal, reward, context, children = self.topo.base, h.goal, h.reward, {}, dict(h.children)
         else:
             base, goal, reward, context = head.base, head.goal, head.reward, head.sense
-        frame = joint_frame(base, self.spec.offset, q.get(self.id, 0.0))
-        end = link_end(frame, self.spec.link_length)
-        tips: dict[str, tuple[float, float, float]] = {}
+        frame = self.geom.joint_frame(self.spec, base, q.get(self.id, 0.0))
+        end = self.geom.link_end(self.spec, frame)
+        tips: dict[str, tuple[float, ...]] = {}
         for child, child_base in self.standin.frames_below(self.id, end, q, tips):
             c_goal, c_reward, c_context = children.get(child, (goal, reward, context))
             self.node.send(
@@ -266,14 +267,14 @@ class Agent:
         self.current = None
         epoch, step = cur.key
         if self.spec.is_leaf:
-            tips = {self.id: cur.end}
+            tips = {self.id: self.geom.tip(self.spec, cur.end)}
         else:
             tips = dict(cur.tips)
             for c in cur.waiting:
                 tips.update(cur.ups[c].tips)
         d = self.decided
         last = d[1] if d is not None and d[0] == (epoch, step - 1) else None
-        tip = centroid([tips[leaf] for leaf in self.leaves if leaf in tips])
+        tip = self.geom.centroid([tips[leaf] for leaf in self.leaves if leaf in tips])
         ups = {c: cur.ups[c] for c in cur.waiting}
         view = StepView(epoch, step, cur.frame, cur.end, tip, cur.goal, cur.sense, ups, last)
         if not self.is_root:  # first: the parent's state needs only the tips (and the task's aggregate)
@@ -281,10 +282,10 @@ class Agent:
             self.node.send(self.keys.up(self.spec.parent), up)  # type: ignore[arg-type]
         if self.learner is not None:
             self._observe(cur)
-            s = agent_state(cur.frame, cur.q, tip, cur.goal, self.unsigned_g3)
+            s = self.geom.state(self.spec, cur.frame, cur.q, tip, cur.goal, self.unsigned_g3)
             values = self.task.state(view)
             if self.extra_names:  # the learner's own extra variables: from my geometry, else from my readings
-                local = {**cur.sense, **own_extras(self.extra_names, cur.frame, tip, cur.goal)}
+                local = {**cur.sense, **self.geom.extras(self.extra_names, cur.frame, tip, cur.goal)}
                 values += [local.get(n, 0.0) for n in self.extra_names]
             if values:
                 s = np.concatenate([s, values])

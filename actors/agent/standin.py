@@ -12,7 +12,6 @@ from __future__ import annotations
 from collections.abc import Iterator
 from typing import TYPE_CHECKING, Any
 
-from kinswarm.actors.learning.state import joint_frame, link_end
 from kinswarm.protocol.messages import Event, Up
 
 if TYPE_CHECKING:
@@ -80,8 +79,8 @@ class StandIn:
         return adopted, waiting
 
     def frames_below(
-        self, agent: str, end: tuple[float, float, float], q: dict[str, float], tips: dict
-    ) -> Iterator[tuple[str, tuple[float, float, float]]]:
+        self, agent: str, end: tuple[float, ...], q: dict[str, float], tips: dict
+    ) -> Iterator[tuple[str, tuple[float, ...]]]:
         """(child, its base frame) for my children and, through lost agents, for theirs (composing the lost agents'
         frames from their encoders, as they would have); tips of lost leaves go to `tips`."""
         topo = self.agent.topo
@@ -89,9 +88,10 @@ class StandIn:
             yield c, end
             if c in self.down:
                 spec = topo.agents[c]
-                c_end = link_end(joint_frame(end, spec.offset, q.get(c, 0.0)), spec.link_length)
+                geom = self.agent.geom
+                c_end = geom.link_end(spec, geom.joint_frame(spec, end, q.get(c, 0.0)))
                 if spec.is_leaf:
-                    tips[c] = c_end
+                    tips[c] = geom.tip(spec, c_end)
                 yield from self.frames_below(c, c_end, q, tips)
 
     def announce(self, adopted: list[str]) -> None:

@@ -13,6 +13,10 @@ from dataclasses import dataclass, replace
 
 #: Names of the six state variables S_i = <q_i, theta_i, d_i, g1, g2, g3> (paper §3.3).
 STATE_NAMES: tuple[str, ...] = ("q", "theta", "d", "g1", "g2", "g3")
+#: The rotation-plane state of a spatial joint (state.plane_state): S_i = <q, d, g_perp, g_axial, g_radial, |w|>.
+PLANE_STATE_NAMES: tuple[str, ...] = ("q", "d", "g_perp", "g_axial", "g_radial", "w")
+#: The state kinds: the paper's planar S_i, and the rotation plane of a joint of a robot from URDF.
+STATE_KINDS: dict[str, tuple[str, ...]] = {"planar": STATE_NAMES, "plane": PLANE_STATE_NAMES}
 #: g3 as the bearing of the goal from the end effector (signed, the default) or its size only (unsigned).
 G3_MODES: tuple[str, ...] = ("signed", "unsigned")
 #: Own actions: 0 decrease, 1 keep, 2 increase the joint angle by the run's action size.
@@ -90,10 +94,11 @@ class LearnerSettings:
     count_freeze: int = 0
     g3: str = "signed"  # "unsigned": |g3|, so a goal straight behind the tip is one case, not both ends of g3
     extra_state: tuple[StateVariable, ...] = ()  # variables appended to S_i (a task's come first)
+    state: str = "planar"  # which six variables S_i holds (STATE_KINDS): the paper's, or a spatial joint's "plane"
 
     @property
     def state_names(self) -> tuple[str, ...]:
-        return STATE_NAMES + tuple(v.name for v in self.extra_state)
+        return STATE_KINDS[self.state] + tuple(v.name for v in self.extra_state)
 
     @property
     def state_sets(self) -> tuple[int, ...]:
@@ -112,6 +117,33 @@ class LearnerSettings:
         kwargs.update(overrides)
         return cls(**kwargs)  # type: ignore[arg-type]
 
+    @classmethod
+    def for_plane(cls, reach: float, lever: float, limits: tuple[float, float], **overrides: object) -> LearnerSettings:
+        """Settings of a spatial joint's rotation-plane state (state.plane_state) on a robot of `reach` (m) whose
+        tip can lie up to `lever` from this joint: q over its limits (5 sets), d over [0, lever] (5), g_perp over
+        ±reach/10 (9: the fine sets decide the direction near the goal), g_axial and g_radial over ±reach/3 (5), |w|
+        over [0, reach/2.4] (6). On the iiwa (reach 1.2 m): ±0.12, ±0.4, ±0.4 and [0, 0.5] m, the ranges an
+        independent prototype measured frozen skills with (docs/results/reach3d)."""
+        for name, v in (("reach", reach), ("lever", lever)):
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
+                raise ValueError(f"{name} must be a positive finite number, got {v!r}")
+        lo, hi = limits
+        r = float(reach)
+        kwargs: dict[str, object] = {
+            "state": "plane",
+            "n_sets": (5, 5, 9, 5, 5, 6),
+            "ranges": (
+                (lo, hi),
+                (0.0, float(lever)),
+                (-r / 10, r / 10),
+                (-r / 3, r / 3),
+                (-r / 3, r / 3),
+                (0.0, r / 2.4),
+            ),
+        }
+        kwargs.update(overrides)
+        return cls(**kwargs)  # type: ignore[arg-type]
+
     def replace(self, **changes: object) -> LearnerSettings:
         return replace(self, **changes)  # type: ignore[arg-type]
 
@@ -120,15 +152,18 @@ class LearnerSettings:
         return self.replace(extra_state=(*variables, *self.extra_state)) if variables else self
 
     def __post_init__(self) -> None:
-        n = len(STATE_NAMES)
+        if self.state not in STATE_KINDS:
+            raise ValueError(f"state must be one of {', '.join(STATE_KINDS)}, got {self.state!r}")
+        base_names = STATE_KINDS[self.state]
+        n = len(base_names)
         object.__setattr__(self, "n_sets", tuple(int(m) for m in self.n_sets))
         object.__setattr__(self, "ranges", tuple((float(lo), float(hi)) for lo, hi in self.ranges))
         object.__setattr__(self, "extra_state", tuple(_variable(v) for v in self.extra_state))
         if len(self.n_sets) != n:
-            raise ValueError(f"n_sets needs {n} entries {STATE_NAMES}, got {len(self.n_sets)}")
+            raise ValueError(f"n_sets needs {n} entries {base_names}, got {len(self.n_sets)}")
         if len(self.ranges) != n:
-            raise ValueError(f"ranges needs {n} (lo, hi) pairs {STATE_NAMES}, got {len(self.ranges)}")
-        for name, m, (lo, hi) in zip(STATE_NAMES, self.n_sets, self.ranges, strict=True):
+            raise ValueError(f"ranges needs {n} (lo, hi) pairs {base_names}, got {len(self.ranges)}")
+        for name, m, (lo, hi) in zip(base_names, self.n_sets, self.ranges, strict=True):
             if m < 1:
                 raise ValueError(f"n_sets[{name}] must be >= 1, got {m}")
             if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
@@ -171,7 +206,7 @@ class LearnerSettings:
             raise ValueError(f"count_freeze must be an epoch (int >= 0; 0 for never), got {self.count_freeze!r}")
         if self.g3 not in G3_MODES:
             raise ValueError(f"g3 must be one of {G3_MODES}, got {self.g3!r}")
-        if self.g3 == "unsigned" and self.ranges[5][0] < 0.0:
+        if self.g3 == "unsigned" and self.state == "planar" and self.ranges[5][0] < 0.0:
             raise ValueError(
                 f"g3 'unsigned' lies in [0, pi], but ranges[g3] starts at {self.ranges[5][0]:g}: "
                 "the sets below 0 would never fire (use e.g. (0, pi))"

@@ -70,3 +70,40 @@ def own_extras(
     """The extra state variables among `names` that an agent computes from its own geometry: "g_perp"
     (goal_along_motion). The others come from its task or its readings."""
     return {"g_perp": goal_along_motion(frame, tip, goal)} if "g_perp" in names else {}
+
+
+def plane_state(
+    q: float,
+    joint: Sequence[float],
+    axis: Sequence[float],
+    tip: Sequence[float],
+    goal: Sequence[float],
+    prismatic: bool = False,
+) -> np.ndarray:
+    """The rotation-plane state of a spatial robot's joint: S_i = <q_i, d_i, g_perp, g_axial, g_radial, |w|>.
+
+    With the joint at p turning about the unit world axis a, the tip e and the goal g: r = e - p, w = g - e,
+    r_perp = r - (r.a) a (the tip's lever about the axis). d = |r_perp|; g_perp = w . (a x r) / |r_perp|, the goal
+    along the direction this joint moves the tip (> 0: increasing q brings the tip towards it); g_axial = w . a
+    (along the axis, which this joint cannot change); g_radial = w . r_perp / |r_perp| (towards or away from the
+    axis); |w|, how far the goal is. In the plane (a = z everywhere) d and g_perp are the planar d and g_perp; a
+    joint whose axis passes through the tip (d = 0) has g_perp = g_radial = 0. A prismatic joint moves the tip
+    along a: its g_perp is w . a, its d 0, its g_axial and g_radial the goal across that motion.
+    """
+    ax, ay, az = axis
+    wx, wy, wz = goal[0] - tip[0], goal[1] - tip[1], goal[2] - tip[2]
+    w_len = math.sqrt(wx * wx + wy * wy + wz * wz)
+    along = wx * ax + wy * ay + wz * az
+    if prismatic:
+        across = math.sqrt(max(w_len * w_len - along * along, 0.0))
+        return np.array([q, 0.0, along, 0.0, across, w_len])
+    rx, ry, rz = tip[0] - joint[0], tip[1] - joint[1], tip[2] - joint[2]
+    ra = rx * ax + ry * ay + rz * az
+    px, py, pz = rx - ra * ax, ry - ra * ay, rz - ra * az  # r_perp
+    d = math.sqrt(px * px + py * py + pz * pz)
+    if d == 0.0:
+        return np.array([q, 0.0, 0.0, along, 0.0, w_len])
+    mx, my, mz = ay * rz - az * ry, az * rx - ax * rz, ax * ry - ay * rx  # a x r: the tip's motion per radian
+    g_perp = (wx * mx + wy * my + wz * mz) / d
+    g_radial = (wx * px + wy * py + wz * pz) / d
+    return np.array([q, d, g_perp, along, g_radial, w_len])

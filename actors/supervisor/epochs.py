@@ -47,7 +47,8 @@ class EpochLoop:
     def epoch_start(self, epoch: int) -> EpochStart:
         """The epoch's start: its goal, and each step's when the task's goal moves."""
         goal, path = self.sup.task.goal(epoch, self.sup.cfg.steps)
-        return EpochStart(epoch=epoch, steps=self.sup.cfg.steps, goal=goal, path=path)
+        start = self.sup.task.start(epoch)
+        return EpochStart(epoch=epoch, steps=self.sup.cfg.steps, goal=goal, path=path, start=start)
 
     async def run_epoch(self, epoch: int) -> EpochDone:
         from .core import NoMessage

@@ -3,6 +3,7 @@
 A task is a module of this package holding a `TaskDef` subclass (its settings are the run file's `[task]` table):
 
   supervisor    `goal(epoch)`: the goal of each epoch, and the goal of every step when it moves (a path);
+                `start(epoch)`: the pose it starts from (default: the robot's home);
   every agent   `learner(agent)`: the agent's LearnerSettings (the task's state variables first among the extras);
                 `agent(agent)`: the agent's `AgentTask`, which the agent calls at each step:
     root          head(task observation)    -> Head: the goal, the reward r(t-1), what each child is sent;
@@ -90,6 +91,7 @@ class TaskDef:
     scenes: ClassVar[tuple[str, ...]]  # the scene kinds it runs in
     Settings: ClassVar[type]  # a frozen dataclass: the [task] table's fields; __post_init__ validates them
     rewards: ClassVar[tuple[str, ...]]  # its reward modes (settings.reward), the first the default
+    spatial: ClassVar[bool] = False  # True: it moves robots from URDF (3D frames), else planar robots
 
     def __init__(self, settings: Any, topo: Topology, scene: SceneSpec) -> None:
         self.settings, self.topo, self.scene = settings, topo, scene
@@ -115,6 +117,10 @@ class TaskDef:
     def goal(self, epoch: int, steps: int) -> tuple[Vec2, list[Vec2]]:
         """The goal of epoch `epoch`, and the goal of each of its `steps` steps when it moves (else [])."""
         raise NotImplementedError
+
+    def start(self, epoch: int) -> dict[str, float]:
+        """The joint angles (rad, every DOF agent) epoch `epoch` starts from; {}: the robot's home."""
+        return {}
 
     def reach(self, agent: str) -> float:
         """The length scale of the agent's default state ranges (LearnerSettings.for_reach)."""

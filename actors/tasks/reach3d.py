@@ -1,0 +1,177 @@
+"""Reach in 3D: bring a spatial robot's tool (a robot from URDF) to a point, or to a pose (a point and the tool's
+orientation). The root pays the graded reward on the distance (Eq. 10's variant, at the robot's scale); every joint
+sees its rotation plane (actors/learning/state.py plane_state), and for a pose also how far the tool must still turn
+about its own axis ("g_rot").
+
+```toml
+[task]
+kind = "reach3d"
+goal = [0.5, 0.2, 0.6]            # a point (x, y, z, m); or a pose [x, y, z, roll, pitch, yaw (deg)]; or
+goals = [[0.5, 0.2, 0.6], ...]    # a goal per epoch, cycled (all points, or all poses)
+starts = [[0, 30, 0, -60, 0, 45, 0], ...]  # optional: the joint angles (deg, agent order) each epoch starts from,
+                                  # cycled with the goals; default: the robot's home
+reward = "graded"                 # graded | shaped | paper | strict (reach.reach_reward)
+d_min = 0.3                       # m: Eq. 10's D_min; outside it a step pays -2 + k (D(t-1) - D(t))
+c = 10.0                          # 1/m: e^(-c D) inside D_min
+k = 200.0                         # 1/m: the shaping gradient
+```
+
+For a pose the distance is |tip - goal| + POSE_WEIGHT x the angle between the tool's orientation and the goal's
+(protocol/frames.py: 0.1 m per radian, a 10° turn weighs like 1.7 cm); the metrics' error stays the position's.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
+from kinswarm.actors.learning.settings import LearnerSettings, StateVariable
+from kinswarm.protocol import frames
+from kinswarm.protocol.messages import Task
+from kinswarm.protocol.topology import AgentSpec
+
+from .base import AgentTask, Head, StepView, TaskDef
+from .reach import reach_reward
+
+REWARDS = ("graded", "shaped", "paper", "strict")
+#: g_rot: how far (rad) the tool must still turn about this joint's axis, over ±45° (5 sets)
+G_ROT = StateVariable("g_rot", 5, (-math.pi / 4, math.pi / 4))
+
+Coords = tuple[float, ...]
+
+
+@dataclass(frozen=True)
+class Reach3dSettings:
+    goal: tuple[float, ...] | None = None  # (x, y, z) or (x, y, z, roll, pitch, yaw deg)
+    goals: tuple[tuple[float, ...], ...] = ()  # a goal per epoch, cycled
+    starts: tuple[tuple[float, ...], ...] = ()  # joint angles (deg, agent order) per epoch, cycled; () = home
+    reward: str = "graded"
+    d_min: float = 0.3
+    c: float = 10.0
+    k: float = 200.0
+
+    def __post_init__(self) -> None:
+        pts = ((self.goal,) if self.goal is not None else ()) + tuple(self.goals)
+        if not pts:
+            raise ValueError("goal: missing (give goal = [x, y, z], or goals = [[x, y, z], ...])")
+        sizes = {len(p) for p in pts}
+        if not sizes <= {3, 6}:
+            raise ValueError("goal: each goal is [x, y, z] or [x, y, z, roll, pitch, yaw] (deg)")
+        if len(sizes) != 1:
+            raise ValueError("goals: all points or all poses, not both")
+        if not all(math.isfinite(c) for p in pts for c in p):
+            raise ValueError("goal: expected finite numbers")
+        for name in ("d_min", "c", "k"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v > 0):
+                raise ValueError(f"{name}: must be > 0, got {v}")
+
+    @property
+    def pose(self) -> bool:
+        return len(self.goal if self.goal is not None else self.goals[0]) == 6
+
+
+def wire_goal(g: tuple[float, ...]) -> Coords:
+    """A goal as it travels: a point (x, y, z), or a pose (x, y, z, qx, qy, qz, qw)."""
+    if len(g) == 3:
+        return (float(g[0]), float(g[1]), float(g[2]))
+    return (float(g[0]), float(g[1]), float(g[2]), *frames.rpy_quat(*(math.radians(a) for a in g[3:6])))
+
+
+def distance(tip: Coords, goal: Coords) -> float:
+    """D_goal: the tool's distance to the goal point, plus POSE_WEIGHT x its angle to a pose goal's orientation."""
+    D = math.dist(tip[:3], goal[:3])
+    if len(goal) == 7:
+        D += frames.POSE_WEIGHT * frames.angle_between(tip[3:7], goal[3:7])
+    return D
+
+
+class Reach3dTask(TaskDef):
+    kind = "reach3d"
+    scenes = ("free",)
+    Settings = Reach3dSettings
+    rewards = REWARDS
+    spatial = True
+
+    def check(self) -> str | None:
+        s, topo = self.settings, self.topo
+        if s.reward not in REWARDS:
+            return f"reward: {s.reward!r} is not one of {', '.join(REWARDS)}"
+        if len(topo.end_effectors) != 1:
+            return f"kind: reach3d moves one end effector; this robot has {len(topo.end_effectors)}"
+        base = topo.base[:3]
+        for name, pts in (("goal", [s.goal] if s.goal is not None else []), ("goals", list(s.goals))):
+            for p in pts:
+                if (d := math.dist(p[:3], base)) > topo.reach + 1e-9:
+                    return (
+                        f"{name}: {list(p[:3])} lies {d:.3g} m from the robot's base, beyond its reach {topo.reach:.3g}"
+                    )
+        n = len(topo.dof_agents)
+        for i, st in enumerate(s.starts):
+            if len(st) != n:
+                return f"starts[{i}]: expected {n} angles (deg, agents {', '.join(topo.dof_agents)}), got {len(st)}"
+            for a, v in zip(topo.dof_agents, st, strict=True):
+                lo, hi = topo.agents[a].limits
+                if not lo - 1e-9 <= math.radians(v) <= hi + 1e-9:
+                    return f"starts[{i}]: {v:g} deg for {a} lies outside its limits"
+        return None
+
+    def goal(self, epoch: int, steps: int) -> tuple[Coords, list[Coords]]:
+        s = self.settings
+        g = s.goals[epoch % len(s.goals)] if s.goals else s.goal
+        return wire_goal(g), []  # type: ignore[arg-type]
+
+    def start(self, epoch: int) -> dict[str, float]:
+        s = self.settings
+        if not s.starts:
+            return {}
+        st = s.starts[epoch % len(s.starts)]
+        out = {}
+        for a, v in zip(self.topo.dof_agents, st, strict=True):
+            lo, hi = self.topo.agents[a].limits
+            out[a] = min(max(math.radians(v), lo), hi)
+        return out
+
+    def state_variables(self, agent: str) -> tuple[StateVariable, ...]:
+        return (G_ROT,) if self.settings.pose else ()
+
+    def learner(self, agent: str, overrides: Mapping[str, Any]) -> LearnerSettings:
+        topo = self.topo
+        base = LearnerSettings.for_plane(
+            topo.reach, topo.reach_below(agent), topo.agents[agent].limits, **dict(overrides)
+        )
+        return base.with_task_state(self.state_variables(agent))
+
+    def agent(self, agent: str, settings: LearnerSettings | None) -> AgentTask:
+        return Reach3dAgent(self.settings, self.topo.agents[agent])
+
+
+class Reach3dAgent(AgentTask):
+    """The root pays the reward on D_goal; with a pose goal every joint also sees g_rot."""
+
+    def __init__(self, settings: Reach3dSettings, spec: AgentSpec) -> None:
+        self.s, self.spec = settings, spec
+        self.D_prev: float | None = None
+
+    def start_epoch(self) -> None:
+        self.D_prev = None
+
+    def head(self, obs: Task) -> Head:
+        (tip,) = obs.tips.values()
+        D = distance(tip, obs.goal)
+        s = self.s
+        reward = None if self.D_prev is None else reach_reward(D, self.D_prev, s.reward, D_min=s.d_min, c=s.c, k=s.k)
+        self.D_prev = D
+        return Head(obs.goal, reward)
+
+    def state(self, view: StepView) -> list[float]:
+        if len(view.goal) != 7:
+            return []
+        turn = frames.orientation_error(view.tip[3:7], view.goal[3:7])  # world axis x angle still to turn
+        a = frames.joint_axis(self.spec, view.frame)
+        return [turn[0] * a[0] + turn[1] * a[1] + turn[2] * a[2]]
+
+
+TASK = Reach3dTask
