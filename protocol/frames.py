@@ -100,9 +100,10 @@ def orientation_error(current: Sequence[float], goal: Sequence[float]) -> Vec:
 
 
 def angle_between(a: Sequence[float], b: Sequence[float]) -> float:
-    """The angle (rad, in [0, pi]) of the rotation between two orientations."""
-    d = abs(a[0] * b[0] + a[1] * b[1] + a[2] * b[2] + a[3] * b[3])
-    return 2.0 * math.acos(min(d, 1.0))
+    """The angle (rad, in [0, pi]) of the rotation between two orientations (atan2 of the relative rotation's parts:
+    acos of their dot product loses half the digits near 0)."""
+    x, y, z, w = quat_mul(a, (-b[0], -b[1], -b[2], b[3]))
+    return 2.0 * math.atan2(math.sqrt(x * x + y * y + z * z), abs(w))
 
 
 def motion(spec: AgentSpec, q: float) -> Frame:

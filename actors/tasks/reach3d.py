@@ -111,11 +111,13 @@ class Reach3dTask(TaskDef):
         n = len(topo.dof_agents)
         for i, st in enumerate(s.starts):
             if len(st) != n:
-                return f"starts[{i}]: expected {n} angles (deg, agents {', '.join(topo.dof_agents)}), got {len(st)}"
+                return (
+                    f"starts: entry {i} has {len(st)} angles; expected {n} (deg, agents {', '.join(topo.dof_agents)})"
+                )
             for a, v in zip(topo.dof_agents, st, strict=True):
                 lo, hi = topo.agents[a].limits
                 if not lo - 1e-9 <= math.radians(v) <= hi + 1e-9:
-                    return f"starts[{i}]: {v:g} deg for {a} lies outside its limits"
+                    return f"starts: entry {i}: {v:g} deg for {a} lies outside its limits"
         return None
 
     def goal(self, epoch: int, steps: int) -> tuple[Coords, list[Coords]]:
