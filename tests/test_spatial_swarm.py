@@ -1,0 +1,50 @@
+"""Robots from URDF as a real swarm: the iiwa, the Panda and the xArm6 example files train in both placements with the
+same results for the same seed, and faults (lock, kill, freeze) reach an iiwa's agents live."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+from conftest import EXAMPLES, free_port, swarm_pids
+from kinswarm.actors.cli import main
+from test_faults import Run
+
+SMALL = ["--epochs", "2", "--steps", "40", "--no-progress", "--deadline-ms", "10000"]
+
+
+def _run(file: Path, placement: str, out: Path) -> dict:
+    listen = f"tcp/127.0.0.1:{free_port()}"
+    args = ["run", str(file), "--placement", placement, "--out", str(out), "--run-id", out.name, "--listen", listen]
+    assert main([*args, *SMALL]) == 0
+    return json.loads((out / "summary.json").read_text())
+
+
+@pytest.mark.parametrize("name", ["iiwa", "panda", "xarm6"])
+def test_a_urdf_arm_trains_alike_in_both_placements(tmp_path, name):
+    single = _run(EXAMPLES / f"{name}.toml", "single", tmp_path / "single")
+    process = _run(EXAMPLES / f"{name}.toml", "process", tmp_path / "process")
+    assert single["final_error"] == process["final_error"]
+    assert single["mean_error"] == process["mean_error"]
+    assert all(0.0 <= e < 2.0 for e in single["final_error"])  # metres: the tool stayed within the arm's reach
+    assert swarm_pids(str(tmp_path / "process")) == []
+
+
+def test_faults_reach_an_iiwa_swarm_live(tmp_path):
+    run = Run(tmp_path, EXAMPLES / "iiwa.toml", "--epochs", "15", "--steps", "100", "--seed", "1")
+    run.wait_epochs(1, timeout=120)
+    r = run.fault("lock", "a2")
+    assert r.returncode == 0, r.stderr
+    run.wait_event("lock", "a2")
+    r = run.fault("kill", "a5")
+    assert r.returncode == 0, r.stderr
+    run.wait_event("exited", "a5")
+    r = run.fault("freeze", "a3", "--seconds", "0.5")
+    assert r.returncode == 0, r.stderr
+    run.wait_event("freeze", "a3")
+    code, text = run.finish(timeout=120)
+    assert code == 0, text
+    events = {(e["event"], e["target"]) for e in run.events()}
+    assert ("alive", "a5") in events  # the killed agent came back
+    assert swarm_pids(str(run.out)) == []
