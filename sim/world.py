@@ -1,4 +1,6 @@
-"""The PyBullet robot world: a kinematic planar chain or tree loaded from a generated URDF.
+"""The PyBullet robot world: a kinematic planar chain or tree loaded from a generated URDF, or a robot's own URDF
+(a spatial robot, protocol/urdf_robot.py: its joints found by name, the joints that are not agents held at their
+value, the tips its leaves' link frames with their tool frames on).
 
 Joints are set kinematically (resetJointStatesMultiDof) -- discrete 1-degree increments need no dynamics,
 and stepSimulation would only converge asymptotically. Every call passes physicsClientId, so several
@@ -17,6 +19,7 @@ from contextlib import contextmanager
 from pathlib import Path
 from types import TracebackType
 
+from kinswarm.protocol import frames
 from kinswarm.protocol.topology import Topology
 from kinswarm.sim import urdf
 
@@ -39,7 +42,43 @@ def _quiet_fd2() -> Iterator[None]:
 with _quiet_fd2():
     import pybullet as pb
 
-Pose = tuple[float, float, float]
+Pose = tuple[float, ...]  # a planar robot's tip (x, y, heading); a spatial one's a 7-float frame
+
+
+def _joints_by_name(body: int, client: int) -> dict[str, int]:
+    return {
+        pb.getJointInfo(body, j, physicsClientId=client)[1].decode(): j
+        for j in range(pb.getNumJoints(body, physicsClientId=client))
+    }
+
+
+def _load_planar(topo: Topology, path: Path, client: int) -> tuple[int, dict[str, int]]:
+    """The generated URDF of a planar robot, its base at (x, y) turned by its heading."""
+    bx, by, bh = topo.base
+    body = pb.loadURDF(
+        str(path),
+        basePosition=(bx, by, 0.0),
+        baseOrientation=pb.getQuaternionFromEuler((0.0, 0.0, bh)),
+        useFixedBase=True,
+        physicsClientId=client,
+    )
+    return body, _joints_by_name(body, client)
+
+
+def _load_spatial(topo: Topology, path: Path, client: int) -> tuple[int, dict[str, int]]:
+    """A robot's own URDF, fixed at its base frame; the joints that are not agents set to the value they hold."""
+    with _quiet_fd2():  # PyBullet prints what it makes of the file's inertias and materials
+        body = pb.loadURDF(
+            str(path),
+            basePosition=topo.base[:3],
+            baseOrientation=topo.base[3:7],
+            useFixedBase=True,
+            physicsClientId=client,
+        )
+    by_name = _joints_by_name(body, client)
+    for name, value in topo.held:
+        pb.resetJointState(body, by_name[name], value, physicsClientId=client)
+    return body, by_name
 
 
 class World:
@@ -52,36 +91,37 @@ class World:
     def __init__(self, topo: Topology, *, urdf_dir: Path | None = None, radius: float = 0.1) -> None:
         self.topo = topo
         self._tmpdir: str | None = None
+        self._written: Path | None = None  # the URDF this world generated (a spatial robot's own file is not)
         self.client = -1
-        if urdf_dir is None:
-            self._tmpdir = tempfile.mkdtemp(prefix="kinswarm-urdf-")
-            urdf_dir = Path(self._tmpdir)
-        self.radius = radius  # the links' capsule radius
-        self.urdf_path = urdf.write_urdf(topo, urdf_dir, radius=radius)
+        self.radius = radius  # the links' capsule radius (a planar robot's)
+        if topo.spatial:
+            self.urdf_path = Path(topo.urdf)
+        else:
+            if urdf_dir is None:
+                self._tmpdir = tempfile.mkdtemp(prefix="kinswarm-urdf-")
+                urdf_dir = Path(self._tmpdir)
+            self.urdf_path = self._written = urdf.write_urdf(topo, urdf_dir, radius=radius)
         with _quiet_fd2():
             self.client = pb.connect(pb.DIRECT)
         if self.client < 0:
             raise RuntimeError("pybullet.connect(DIRECT) failed")
         try:
-            bx, by, bh = topo.base
-            self.body = pb.loadURDF(
-                str(self.urdf_path),
-                basePosition=(bx, by, 0.0),
-                baseOrientation=pb.getQuaternionFromEuler((0.0, 0.0, bh)),
-                useFixedBase=True,
-                physicsClientId=self.client,
-            )
-            by_name = {}
-            for j in range(pb.getNumJoints(self.body, physicsClientId=self.client)):
-                by_name[pb.getJointInfo(self.body, j, physicsClientId=self.client)[1].decode()] = j
+            load = _load_spatial if topo.spatial else _load_planar
+            self.body, by_name = load(topo, self.urdf_path, self.client)
             # Link index == index of the joint that creates it.
-            self.joint_index: dict[str, int] = {a: by_name[urdf.joint_name(a)] for a in topo.order}
+            self.joint_index: dict[str, int] = {
+                a: by_name[topo.agents[a].joint if topo.spatial else urdf.joint_name(a)] for a in topo.order
+            }
             self.agent_of_joint: dict[int, str] = {j: a for a, j in self.joint_index.items()}
             self._dof = topo.dof_agents
             self._dof_idx = [self.joint_index[a] for a in self._dof]
             self._limits = {a: topo.agents[a].limits for a in self._dof}
             self._leaves = topo.end_effectors
-            self._tip_idx = [by_name[urdf.tip_joint_name(leaf)] for leaf in self._leaves]
+            # A spatial leaf's tip is its tool frame on its own link frame; a planar leaf has a tip link.
+            self._tools = [topo.agents[leaf].tool for leaf in self._leaves] if topo.spatial else None
+            self._tip_idx = [
+                self.joint_index[leaf] if topo.spatial else by_name[urdf.tip_joint_name(leaf)] for leaf in self._leaves
+            ]
             self._q: dict[str, float] = {}
             self.reset()
         except BaseException:
@@ -138,10 +178,14 @@ class World:
         return applied
 
     def tip_poses(self) -> dict[str, Pose]:
-        """(x, y, heading) of every end effector from PyBullet's link frames ([4], float32 precision).
-        The heading comes from a quaternion, so it is wrapped to (-pi, pi]."""
+        """Every end effector's pose from PyBullet's link frames ([4], [5]): a planar robot's (x, y, heading), the
+        heading from a quaternion, so wrapped to (-pi, pi]; a spatial robot's 7-float frame (protocol/frames.py)."""
         states = pb.getLinkStates(self.body, self._tip_idx, computeForwardKinematics=1, physicsClientId=self.client)
         out: dict[str, Pose] = {}
+        if self._tools is not None:
+            for leaf, st, tool in zip(self._leaves, states, self._tools, strict=True):
+                out[leaf] = frames.compose((*st[4], *st[5]), tool)
+            return out
         for leaf, st in zip(self._leaves, states, strict=True):
             (x, y, _), (qx, qy, qz, qw) = st[4], st[5]
             out[leaf] = (x, y, math.atan2(2.0 * (qw * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz)))
@@ -154,8 +198,8 @@ class World:
         if self._tmpdir is not None:
             shutil.rmtree(self._tmpdir, ignore_errors=True)
             self._tmpdir = None
-        elif getattr(self, "urdf_path", None) is not None:
-            self.urdf_path.unlink(missing_ok=True)
+        elif getattr(self, "_written", None) is not None:
+            self._written.unlink(missing_ok=True)
 
     def __enter__(self) -> World:
         return self

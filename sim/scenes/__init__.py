@@ -10,10 +10,14 @@ from kinswarm.sim.world import World
 
 from .base import Scene
 
+SPATIAL_KINDS = ("free",)  # the scenes a spatial robot (from URDF) can be in
+
 
 def build_scene(world: World, spec: SceneSpec, action_rad: float) -> Scene:
     if spec.kind not in SCENE_KINDS:
         raise ValueError(f"unknown scene kind {spec.kind!r}; expected one of {', '.join(SCENE_KINDS)}")
+    if world.topo.spatial and spec.kind not in SPATIAL_KINDS:  # walls and objects lie in the plane z = 0
+        raise ValueError(f"the {spec.kind} scene is planar; a robot from URDF ({world.topo.name}) runs in free space")
     return importlib.import_module(f"{__name__}.{spec.kind}").SCENE(world, spec, action_rad)
 
 

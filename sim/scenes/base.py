@@ -8,8 +8,9 @@
   traces()          the epoch's per-step series for EpochDone
 
 The base class is free space: moves happen as asked, nothing is sensed, the error is the end effector's distance
-to the goal (the centroid of several). A scene is a module of this package named by its kind (`[scene] kind`);
-the actor names none.
+to the goal point (the centroid of several): in the plane for a planar robot's goal (x, y), in 3D for a spatial one's
+(a point, or a pose's point: its orientation is the task's business, not the metrics'). A scene is a module of this
+package named by its kind (`[scene] kind`); the actor names none.
 """
 
 from __future__ import annotations
@@ -21,7 +22,7 @@ from kinswarm.protocol.messages import Readings
 from kinswarm.protocol.scene import SceneSpec
 from kinswarm.sim.world import World
 
-Pose = tuple[float, float, float]
+Pose = tuple[float, ...]  # a tip: planar (x, y, heading), spatial a 7-float frame
 
 
 class Scene:
@@ -40,11 +41,14 @@ class Scene:
     def task_sense(self) -> Readings:
         return {}
 
-    def error(self, tips: Mapping[str, Pose], goal: tuple[float, float]) -> float:
+    def error(self, tips: Mapping[str, Pose], goal: tuple[float, ...]) -> float:
         pts = list(tips.values())
         x = sum(p[0] for p in pts) / len(pts)
         y = sum(p[1] for p in pts) / len(pts)
-        return math.hypot(x - goal[0], y - goal[1])
+        if len(goal) == 2:
+            return math.hypot(x - goal[0], y - goal[1])
+        z = sum(p[2] for p in pts) / len(pts)
+        return math.dist((x, y, z), goal[:3])
 
     def traces(self) -> dict[str, list[float]]:
         return {}
