@@ -1,23 +1,47 @@
 """The paper's model-based baseline (section 5.1): resolved-rate control with the Jacobian pseudo-inverse.
 
-It knows the kinematic model (sim.kinematics) that the learning agents never see, and moves with the same
-action size as they do (at most 1 degree per joint per step) so step counts are comparable.
+It knows the kinematic model (sim.kinematics; a spatial robot's protocol/frames.py) that the learning agents never
+see, and moves with the same action size as they do (at most 1 degree per joint per step) so step counts are
+comparable.
+
+A planar robot's goal is a point (x, y). A spatial robot's (from URDF) is a point (x, y, z), or a pose (x, y, z, qx,
+qy, qz, qw): the tool's position and orientation, the orientation's error (rad) weighed as frames.POSE_WEIGHT metres
+per radian wherever it meets the position's.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 
 import numpy as np
+from kinswarm.protocol import frames
 from kinswarm.protocol.topology import Topology
 from kinswarm.sim import kinematics
+
+Goal = Sequence[float]  # planar (x, y); spatial (x, y, z) or (x, y, z, qx, qy, qz, qw)
+
+
+def _spatial_error(topo: Topology, angles: Mapping[str, float], goal: Goal) -> tuple[np.ndarray, np.ndarray]:
+    """A spatial robot's stacked error (3 rows a leaf for a point goal; 6 for a pose, the orientation's error
+    weighed by POSE_WEIGHT) and the matching rows of its leaves' Jacobians."""
+    pose = len(goal) == 7
+    rows = 6 if pose else 3
+    weight = np.array([1.0, 1.0, 1.0, frames.POSE_WEIGHT, frames.POSE_WEIGHT, frames.POSE_WEIGHT])[:rows]
+    errs, jacs = [], []
+    for leaf, tip in frames.tips(topo, angles).items():
+        err = [goal[0] - tip[0], goal[1] - tip[1], goal[2] - tip[2]]
+        if pose:
+            err += frames.orientation_error(tip[3:7], goal[3:7])
+        errs.append(weight * np.array(err))
+        jacs.append(weight[:, None] * np.array(frames.jacobian(topo, angles, leaf))[:rows])
+    return np.concatenate(errs), np.vstack(jacs)
 
 
 def pinv_increments(
     topo: Topology,
     angles: Mapping[str, float],
-    goal_xy: tuple[float, float],
+    goal_xy: Goal,
     *,
     max_step: float = math.radians(1),
     gain: float = 1.0,
@@ -29,16 +53,24 @@ def pinv_increments(
     leaves all aim at one point; joints shared by several leaves get the LS compromise. The uniform scaling
     keeps the direction of the pseudo-inverse step. Joint limits are not modelled here: World clips.
     Returns an increment (rad) for every DOF agent; all zeros once the stacked error norm is <= 1e-9.
+
+    A spatial robot: the 3 position rows of each leaf for a point goal; for a pose, 6 rows, the orientation's
+    (frames.orientation_error) and its Jacobian rows weighed by POSE_WEIGHT (a least-squares compromise in metres).
     """
     if max_step <= 0:
         raise ValueError(f"max_step must be > 0, got {max_step}")
-    tip = kinematics.tips(topo, angles)
-    gx, gy = goal_xy
-    err = np.array([c for leaf in topo.end_effectors for c in (gx - tip[leaf][0], gy - tip[leaf][1])])
     zero = dict.fromkeys(topo.dof_agents, 0.0)
-    if not topo.dof_agents or float(np.linalg.norm(err)) <= 1e-9:
-        return zero
-    jac = np.vstack([kinematics.jacobian(topo, angles, leaf) for leaf in topo.end_effectors])
+    if topo.spatial:
+        err, jac = _spatial_error(topo, angles, goal_xy)
+        if not topo.dof_agents or float(np.linalg.norm(err)) <= 1e-9:
+            return zero
+    else:
+        tip = kinematics.tips(topo, angles)
+        gx, gy = goal_xy
+        err = np.array([c for leaf in topo.end_effectors for c in (gx - tip[leaf][0], gy - tip[leaf][1])])
+        if not topo.dof_agents or float(np.linalg.norm(err)) <= 1e-9:
+            return zero
+        jac = np.vstack([kinematics.jacobian(topo, angles, leaf) for leaf in topo.end_effectors])
     dq = np.linalg.pinv(jac) @ (gain * err)
     biggest = float(np.max(np.abs(dq)))
     if biggest > max_step:
@@ -49,7 +81,7 @@ def pinv_increments(
 def greedy_increments(
     topo: Topology,
     angles: Mapping[str, float],
-    goal_xy: tuple[float, float],
+    goal_xy: Goal,
     *,
     max_step: float = math.radians(1),
 ) -> dict[str, float]:
@@ -61,13 +93,21 @@ def greedy_increments(
     tip alone, greedily in the distance (what the shaped reward pays for). It can fold into a configuration
     where no single joint's move helps (a local minimum of the distance); the pseudo-inverse moves all joints
     together, though it too can end folded against a joint limit.
+
+    A spatial robot: the squared 3D distance; for a pose goal plus (POSE_WEIGHT x the angle to its orientation)².
     """
     if max_step <= 0:
         raise ValueError(f"max_step must be > 0, got {max_step}")
-    gx, gy = goal_xy
+    if topo.spatial:
 
-    def cost(q: Mapping[str, float]) -> float:
-        return sum((gx - x) ** 2 + (gy - y) ** 2 for x, y, _ in kinematics.tips(topo, q).values())
+        def cost(q: Mapping[str, float]) -> float:
+            return sum(_pose_distance2(tip, goal_xy) for tip in frames.tips(topo, q).values())
+
+    else:
+        gx, gy = goal_xy
+
+        def cost(q: Mapping[str, float]) -> float:
+            return sum((gx - x) ** 2 + (gy - y) ** 2 for x, y, _ in kinematics.tips(topo, q).values())
 
     now = cost(angles)
     out = {}
@@ -88,7 +128,7 @@ RULE_DEADBAND = 1.0  # in moves: keep while the goal is within one move's arc of
 def rule_increments(
     topo: Topology,
     angles: Mapping[str, float],
-    goal_xy: tuple[float, float],
+    goal_xy: Goal,
     *,
     max_step: float = math.radians(1),
     deadband: float = RULE_DEADBAND,
@@ -101,9 +141,14 @@ def rule_increments(
     lengths, and the tip), no Jacobian, no model of the other joints. The control every learning result is
     measured against: what learning adds beyond it. Several end effectors: the g_perp of the tips the joint
     moves are summed, against the largest arc.
+
+    A spatial robot (spatial_rule): a revolute joint's direction of motion is a x r (a its world axis, r its
+    joint -> tip), |a x r| = |r_perp| the lever; a prismatic joint's is a, a move's arc max_step.
     """
     if max_step <= 0:
         raise ValueError(f"max_step must be > 0, got {max_step}")
+    if topo.spatial:
+        return _spatial_rule(topo, angles, goal_xy, max_step, deadband)
     gx, gy = goal_xy
     tip = kinematics.tips(topo, angles)
     along = np.zeros(len(topo.dof_agents))
@@ -121,28 +166,87 @@ def rule_increments(
     }
 
 
+def _spatial_rule(
+    topo: Topology, angles: Mapping[str, float], goal: Goal, max_step: float, deadband: float
+) -> dict[str, float]:
+    """The rule on a spatial robot: each revolute joint (world axis a at p, tip e, goal g; r = e - p, w = g - e)
+    moves one step along sign(g_perp), g_perp = w . (a x r) / |r_perp|, when |g_perp| > deadband x |r_perp| x
+    max_step, else keeps. A pose goal adds POSE_WEIGHT x (the tool's orientation error . a) to the signal and
+    POSE_WEIGHT x max_step to the arc. A prismatic joint: w . a against max_step."""
+    pose = len(goal) == 7
+    n = len(topo.dof_agents)
+    along = np.zeros(n)
+    arc = np.zeros(n)
+    prismatic = np.array([topo.agents[a].prismatic for a in topo.dof_agents], dtype=bool)
+    for leaf, tip in frames.tips(topo, angles).items():
+        jac = np.array(frames.jacobian(topo, angles, leaf))  # revolute: (a x r, a); prismatic: (a, 0); 0 off path
+        w = np.array([goal[0] - tip[0], goal[1] - tip[1], goal[2] - tip[2]])
+        lever = np.linalg.norm(jac[:3], axis=0)  # |a x r| = |r_perp|; a prismatic joint's: |a| = 1
+        on_path = np.linalg.norm(jac, axis=0) > 0
+        moved = lever > 0
+        along[moved] += (w @ jac[:3])[moved] / lever[moved]
+        leaf_arc = np.where(prismatic, max_step, lever * max_step)
+        if pose:
+            turn = np.array(frames.orientation_error(tip[3:7], goal[3:7]))
+            along += frames.POSE_WEIGHT * (turn @ jac[3:])  # a prismatic joint's rotation rows are 0
+            leaf_arc = leaf_arc + np.where(prismatic, 0.0, frames.POSE_WEIGHT * max_step)
+        arc = np.maximum(arc, np.where(on_path, leaf_arc, 0.0))
+    return {
+        a: float(math.copysign(max_step, along[i])) if abs(along[i]) > deadband * arc[i] and arc[i] > 0 else 0.0
+        for i, a in enumerate(topo.dof_agents)
+    }
+
+
+def _pose_distance2(tip: Sequence[float], goal: Goal) -> float:
+    """A spatial tip's squared distance to a goal: 3D, plus (POSE_WEIGHT x angle)² for a pose."""
+    d2 = (goal[0] - tip[0]) ** 2 + (goal[1] - tip[1]) ** 2 + (goal[2] - tip[2]) ** 2
+    if len(goal) == 7:
+        d2 += (frames.POSE_WEIGHT * frames.angle_between(tip[3:7], goal[3:7])) ** 2
+    return d2
+
+
+def reached(topo: Topology, angles: Mapping[str, float], goal: Goal, tol: float) -> bool:
+    """Every tip within `tol` of the goal: planar, in the plane; spatial, in 3D, and for a pose goal its distance
+    plus POSE_WEIGHT x the angle to the goal's orientation (the reach3d task's D_goal)."""
+    if not topo.spatial:
+        return all(math.hypot(goal[0] - x, goal[1] - y) <= tol for x, y, _ in kinematics.tips(topo, angles).values())
+    for tip in frames.tips(topo, angles).values():
+        d = math.dist(tip[:3], goal[:3])
+        if len(goal) == 7:
+            d += frames.POSE_WEIGHT * frames.angle_between(tip[3:7], goal[3:7])
+        if d > tol:
+            return False
+    return True
+
+
 def run_baseline(
     topo: Topology,
-    goal_xy: tuple[float, float],
+    goal_xy: Goal,
     *,
     angles: Mapping[str, float] | None = None,
     tol: float = 0.01,
     max_steps: int = 10_000,
     max_step: float = math.radians(1),
     gain: float = 1.0,
+    law: str = "pinv",
 ) -> tuple[int | None, dict[str, float]]:
-    """Iterate pinv_increments on the model (clipping to limits) until every tip is within `tol` of the goal.
+    """Iterate a law's increments (default pinv_increments) on the model (clipping to limits) until every tip is
+    within `tol` of the goal (`reached`).
 
     Returns (steps taken, or None if not reached within max_steps; final angles).
     """
+    step_of = {
+        "pinv": lambda q: pinv_increments(topo, q, goal_xy, max_step=max_step, gain=gain),
+        "greedy": lambda q: greedy_increments(topo, q, goal_xy, max_step=max_step),
+        "rule": lambda q: rule_increments(topo, q, goal_xy, max_step=max_step),
+    }[law]
     q = dict(topo.initial_angles() if angles is None else angles)
     for step in range(max_steps + 1):
-        tip = kinematics.tips(topo, q)
-        if all(math.hypot(goal_xy[0] - x, goal_xy[1] - y) <= tol for x, y, _ in tip.values()):
+        if reached(topo, q, goal_xy, tol):
             return step, q
         if step == max_steps:
             break
-        for a, d in pinv_increments(topo, q, goal_xy, max_step=max_step, gain=gain).items():
+        for a, d in step_of(q).items():
             lo, hi = topo.agents[a].limits
             q[a] = min(max(q[a] + d, lo), hi)
     return None, q

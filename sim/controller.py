@@ -2,7 +2,8 @@
 same encoder readings and task observation, and sends one `cmd` per joint — so learned and
 model-based runs go through the same simulator, deadlines and metrics. Its control law is the run's
 `controller`: "pinv" (the pseudo-inverse), "greedy" (each joint alone, greedy in the distance) or "rule" (each joint
-along sign(g_perp), the hand-written control on the agents' own state)."""
+along sign(g_perp), the hand-written control on the agents' own state). The goal is the task's as it travels: a
+planar robot's point, a spatial robot's point or pose (sim/baseline.py)."""
 
 from __future__ import annotations
 
