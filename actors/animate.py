@@ -10,7 +10,16 @@ from pathlib import Path
 from typing import Any
 
 from kinswarm.actors.config import ConfigError, load_run_config
-from kinswarm.actors.report import arm_points, events_by_epoch, joint_points, read_events, read_jsonl, read_metrics
+from kinswarm.actors.report import (
+    arm_axes,
+    arm_points,
+    error_line,
+    events_by_epoch,
+    joint_points,
+    read_events,
+    read_jsonl,
+    read_metrics,
+)
 from kinswarm.actors.timeline import fault_spans, faulty_at, label_groups
 
 MAX_EPOCHS = 6  # the first, the last, and the latest epochs with events up to this many
@@ -24,6 +33,13 @@ def read_poses(run_dir: Path) -> dict[int, list[list[float]]]:
     path = run_dir / "poses.jsonl"
     rows = read_jsonl(path) if path.exists() else []
     return {int(r["epoch"]): r["angles_deg"] for r in rows if isinstance(r.get("angles_deg"), list)}
+
+
+def put(line: Any, pts: list[Any]) -> None:
+    """A line's points, (x, y) or (x, y, z) each: set_data in 2D, set_data_3d in 3D."""
+    three = hasattr(line, "set_data_3d")
+    cols = [[p[i] for p in pts] for i in range(3 if three else 2)]
+    (line.set_data_3d if three else line.set_data)(*cols)
 
 
 def pick_epochs(have: list[int], with_events: list[int], most: int = MAX_EPOCHS) -> list[int]:
@@ -79,7 +95,8 @@ def write_animation(
     def angles(e: int, t: int) -> dict[str, float]:
         if t < 0:
             prev = poses.get(e - 1)
-            deg = prev[-1] if cfg.successive and prev else [start[a] for a in dof]
+            first = {a: math.degrees(v) for a, v in task.start(e).items()} or start  # the task's start pose, or home
+            deg = prev[-1] if cfg.successive and prev else [first[a] for a in dof]
         else:
             deg = poses[e][t]
         return {a: math.radians(v) for a, v in zip(dof, deg, strict=True)}
@@ -90,7 +107,14 @@ def write_animation(
     R = topo.reach
     bx, by = topo.base[0], topo.base[1]
     scene = cfg.scene_spec
-    if scene.obstacles:
+    dim = 3 if topo.spatial else 2
+    if topo.spatial:  # 3D: a cube about every pose and goal on show
+        where = ax.get_subplotspec()
+        ax.remove()
+        on_show = [p for e, t in plan for line in arm_points(topo, angles(e, t)) for p in line]
+        on_show += [g[:3] for e in epochs for g in (task.goal(e, len(poses[e]))[0],)]
+        ax = arm_axes(fig, (where,), on_show)
+    elif scene.obstacles:
         from kinswarm.actors.scene_plot import draw_scene
 
         draw_scene(ax, topo, scene.obstacles, None)
@@ -100,23 +124,28 @@ def write_animation(
         ax.set_aspect("equal")
         ax.grid(alpha=0.25)
     # The artists are made once and moved each frame (a redraw from scratch costs ~5x more per frame).
-    (path_line,) = ax.plot([], [], ":", color="0.6", lw=0.8)
-    chains = [ax.plot([], [], "-o", color="C0", lw=2.2, ms=4)[0] for _ in topo.end_effectors]
-    (faulty_marks,) = ax.plot([], [], "X", ms=13, color=FAULT_COLOUR, zorder=6, ls="none")
-    (goal_mark,) = ax.plot([], [], "r*", ms=14, zorder=5)
+    none = [[]] * dim
+    (path_line,) = ax.plot(*none, ":", color="0.6", lw=0.8)
+    chains = [ax.plot(*none, "-o", color="C0", lw=2.2, ms=4)[0] for _ in topo.end_effectors]
+    (faulty_marks,) = ax.plot(*none, "X", ms=13, color=FAULT_COLOUR, zorder=6, ls="none")
+    (goal_mark,) = ax.plot(*none, "r*", ms=14, zorder=5)
+    # 3D: the arm's shadow on the floor and the goal's drop line, to read where in depth they are
+    shadows = [ax.plot(*none, color="0.75", lw=1.0)[0] for _ in chains] if topo.spatial else []
+    drop = [ax.plot(*none, ":", color="r", lw=0.8)[0], ax.plot(*none, "x", color="r", ms=6)[0]] if topo.spatial else []
+    floor = ax.get_zlim()[0] if topo.spatial else 0.0
     arm_title = ax.set_title("", fontsize=10)
     notes: list[Any] = []
     (curve,) = ax_err.plot([], [], color="C0", lw=1.0)
     cursor = ax_err.axvline(0, color="k", lw=0.8)
     (dot,) = ax_err.plot([], [], "o", color="k", ms=4)
-    ax_err.axhline(0.5, color="grey", ls="--", lw=0.8)
+    ax_err.axhline(error_line(topo), color="grey", ls="--", lw=0.8)
     ax_err.set_xlabel("step")
     ax_err.set_ylabel("distance from the tip to the goal")
     ax_err.grid(alpha=0.3)
     err_title = ax_err.set_title("", fontsize=9)
     per_epoch: list[Any] = []  # the error axes' marks of the epoch on show
     shown = {"epoch": -1}
-    moving = [path_line, *chains, faulty_marks, goal_mark, arm_title, cursor, dot, err_title]
+    moving = [*shadows, *drop, path_line, *chains, faulty_marks, goal_mark, arm_title, cursor, dot, err_title]
     for artist in moving:
         artist.set_animated(True)
     background: list[Any] = [None]
@@ -147,7 +176,7 @@ def write_animation(
                 )  # fmt: skip
             )
         ax_err.set_xlim(0, n)
-        ax_err.set_ylim(0, max(max(errs, default=1.0) * 1.4, 0.6))
+        ax_err.set_ylim(0, max(max(errs, default=1.0) * 1.4, 1.2 * error_line(topo)))
         shown["epoch"] = e
         # Blitting: what stays for the epoch (axes, ticks, the error curve, its events) is drawn once here; each
         # frame puts it back and draws only what moves. Drawing the whole figure per frame cost ~10x more.
@@ -164,21 +193,30 @@ def write_animation(
         q = angles(e, t)
         goal, path = task.goal(e, n)
         g = path[step] if path else goal
-        path_line.set_data([p[0] for p in path], [p[1] for p in path])
-        for line, pts in zip(chains, arm_points(topo, q), strict=True):
-            xs, ys = zip(*pts, strict=True)
-            line.set_data(xs, ys)
+        put(path_line, [p[:dim] for p in path])
+        arms = arm_points(topo, q)
+        for line, pts in zip(chains, arms, strict=True):
+            put(line, pts)
+        if topo.spatial:
+            for line, pts in zip(shadows, arms, strict=True):
+                put(line, [(p[0], p[1], floor) for p in pts])
         faulty = faulty_at(spans, e, n, step)
         joints = joint_points(topo, q)
         marked = [a for a in faulty if a in joints]
-        faulty_marks.set_data([joints[a][0] for a in marked], [joints[a][1] for a in marked])
+        put(faulty_marks, [joints[a] for a in marked])
         for note in notes:
             note.remove()
         notes.clear()
         for a in marked:
+            if topo.spatial:
+                notes.append(ax.text(*joints[a], f"  {a} {faulty[a]}", fontsize=8, color=FAULT_COLOUR, animated=True))
+                continue
             notes.append(ax.annotate(f"{a} {faulty[a]}", joints[a], xytext=(6, 6), textcoords="offset points",
                                      fontsize=8, color=FAULT_COLOUR, animated=True))  # fmt: skip
-        goal_mark.set_data([g[0]], [g[1]])
+        put(goal_mark, [g[:dim]])
+        if drop:
+            put(drop[0], [(g[0], g[1], floor), g[:3]])
+            put(drop[1], [(g[0], g[1], floor)])
         arm_title.set_text(f"epoch {e}, step {step}")
         cursor.set_xdata([step, step])
         if errs:

@@ -16,9 +16,15 @@ from typing import Any
 from kinswarm.actors.config import RunConfig, load_run_config
 from kinswarm.actors.learning.state import joint_frame, link_end
 from kinswarm.actors.timeline import Span, active_at_end, fault_spans, label_groups
+from kinswarm.protocol import frames
 from kinswarm.protocol.topology import Topology
 
 TRACKED_EPOCHS = 4  # tracking.png: at most this many epochs with events (else the last epoch)
+
+
+def error_line(topo: Topology) -> float:
+    """The error the plots mark: 0.5 on a planar robot's scale; 5 cm on a spatial one (metres: a real arm)."""
+    return 0.05 if topo.spatial else 0.5
 
 
 def read_metrics(run_dir: Path) -> list[dict[str, Any]]:
@@ -56,8 +62,11 @@ def torn_rows(run_dir: Path) -> list[str]:
     return skipped
 
 
-def joint_points(topo: Topology, angles: dict[str, float]) -> dict[str, tuple[float, float]]:
-    """Where each agent's joint sits, from the agents' own frame composition."""
+def joint_points(topo: Topology, angles: dict[str, float]) -> dict[str, tuple[float, ...]]:
+    """Where each agent's joint sits, from the agents' own frame composition: (x, y) for a planar robot, (x, y, z)
+    for a spatial one (its link frame's origin, on the joint's axis)."""
+    if topo.spatial:
+        return {a: f[:3] for a, f in frames.link_frames(topo, angles).items()}
     return {a: f[:2] for a, f in _frames(topo, angles)[0].items()}
 
 
@@ -74,8 +83,12 @@ def _frames(
     return starts, ends
 
 
-def arm_points(topo: Topology, angles: dict[str, float]) -> list[list[tuple[float, float]]]:
-    """Polylines of the robot, one per root-to-leaf path, from the agents' own frame composition."""
+def arm_points(topo: Topology, angles: dict[str, float]) -> list[list[tuple[float, ...]]]:
+    """Polylines of the robot, one per root-to-leaf path, from the agents' own frame composition: (x, y) points
+    of a planar robot's joints and link ends; (x, y, z) of a spatial one's base, joints and tool point."""
+    if topo.spatial:
+        links, tips = frames.link_frames(topo, angles), frames.tips(topo, angles)
+        return [[topo.base[:3], *(links[a][:3] for a in _path(topo, leaf)), tips[leaf][:3]] for leaf in tips]
     starts, ends = _frames(topo, angles)
     lines = []
     for leaf in topo.end_effectors:
@@ -88,6 +101,86 @@ def arm_points(topo: Topology, angles: dict[str, float]) -> list[list[tuple[floa
             pts += [starts[b][:2], ends[b][:2]]
         lines.append(pts)
     return lines
+
+
+def _path(topo: Topology, leaf: str) -> list[str]:
+    """The agents from the root down to `leaf`."""
+    path, a = [], leaf
+    while a is not None:
+        path.append(a)
+        a = topo.agents[a].parent
+    return path[::-1]
+
+
+def arm_axes(fig: Any, where: tuple[int, ...], points: list[tuple[float, ...]]) -> Any:
+    """The axes a spatial robot is drawn in (`fig.add_subplot(*where)`): 3D, equal scales, a cube about the
+    `points` it must show (the arm's, the goal's), the view from the front-right above."""
+    ax = fig.add_subplot(*where, projection="3d")
+    lo = [min(p[i] for p in points) for i in range(3)]
+    hi = [max(p[i] for p in points) for i in range(3)]
+    half = max(0.55 * max(h - low for h, low in zip(hi, lo, strict=True)), 0.05)
+    for (low, h), set_lim in zip(zip(lo, hi, strict=True), (ax.set_xlim, ax.set_ylim, ax.set_zlim), strict=True):
+        set_lim((low + h) / 2 - half, (low + h) / 2 + half)
+    ax.set_box_aspect((1.0, 1.0, 1.0))
+    ax.view_init(elev=22, azim=-60)
+    for set_label, name in zip((ax.set_xlabel, ax.set_ylabel, ax.set_zlabel), "xyz", strict=True):
+        set_label(f"{name} (m)", fontsize=8, labelpad=-6)
+    ax.tick_params(labelsize=6, pad=-2)
+    return ax
+
+
+def floor_shadow(ax: Any, arm: list[list[tuple[float, ...]]], goal: tuple[float, ...]) -> list[Any]:
+    """Where the arm and the goal lie over the floor of a 3D axes: the arm's shadow, a drop line from the goal."""
+    z0 = ax.get_zlim()[0]
+    out = [ax.plot([p[0] for p in pts], [p[1] for p in pts], z0, color="0.75", lw=1.0)[0] for pts in arm]
+    out += ax.plot([goal[0], goal[0]], [goal[1], goal[1]], [z0, goal[2]], ":", color="r", lw=0.8)
+    out += ax.plot([goal[0]], [goal[1]], [z0], "x", color="r", ms=6)
+    return out
+
+
+def draw_axes(ax: Any, frame: tuple[float, ...], length: float, style: str = "-") -> list[Any]:
+    """A frame's x, y, z axes (red, green, blue) as lines of `length` in a 3D axes."""
+    lines = []
+    for axis, colour in zip(((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0)), ("r", "g", "b"), strict=True):
+        end = [p + length * c for p, c in zip(frame[:3], frames.rotate(frame[3:7], axis), strict=True)]
+        lines += ax.plot(*([p, e] for p, e in zip(frame[:3], end, strict=True)), style, color=colour, lw=1.2)
+    return lines
+
+
+def goal_text(goal: tuple[float, ...]) -> str:
+    """A goal in a legend: its point, and "pose" when it names an orientation too."""
+    pt = ", ".join(f"{c:.2f}" for c in goal[: 3 if len(goal) > 2 else 2])
+    return f"({pt})" + (" pose" if len(goal) == 7 else "")
+
+
+def _arm_3d(
+    fig: Any,
+    topo: Topology,
+    start: dict[str, float],
+    final: dict[str, float],
+    goal: tuple[float, ...],
+    label: str,
+    faulty: dict[str, list[str]],
+) -> Any:
+    """arm.png of a spatial robot: the start (dotted) and final arm in 3D, the tool's point, the goal."""
+    lines = {"start": arm_points(topo, start), label: arm_points(topo, final)}
+    ax = arm_axes(fig, (1, 1, 1), [goal[:3], *(p for pts in lines.values() for line in pts for p in line)])
+    for (name, arm), style, colour in zip(lines.items(), (":", "-"), ("grey", "C0"), strict=True):
+        for pts in arm:
+            ax.plot(*zip(*pts, strict=True), style, marker="o", ms=3, color=colour, label=name)
+            ax.plot(*([c] for c in pts[-1]), "s", ms=5, color=colour)  # the tool point
+    ax.plot([goal[0]], [goal[1]], [goal[2]], "r*", ms=14, label=f"goal {goal_text(goal)}")
+    floor_shadow(ax, lines[label], goal)
+    if len(goal) == 7:  # a pose: the goal's axes and the tool's, x red, y green, z blue
+        for frame, style in ((goal, "-"), *((tip, "--") for tip in frames.tips(topo, final).values())):
+            draw_axes(ax, frame, 0.1 * topo.reach, style)
+        ax.plot([], [], "-", color="0.3", label="goal's x, y, z (red, green, blue)")
+        ax.plot([], [], "--", color="0.3", label="the tool's")
+    joints = joint_points(topo, final)
+    for i, (a, what) in enumerate(sorted(faulty.items())):
+        if a in joints:
+            ax.plot(*([c] for c in joints[a]), "X", ms=11, color=f"C{3 + i}", label=f"{a}: {', '.join(what)}")
+    return ax
 
 
 def write_plots(run_dir: Path, log: bool = False) -> list[Path]:
@@ -122,7 +215,8 @@ def write_plots(run_dir: Path, log: bool = False) -> list[Path]:
                 color="C3",
                 label="epoch with events (faults, restarts, ...)",
             )
-        ax.axhline(0.5, color="grey", ls="--", lw=0.8, label="0.5")
+        line = error_line(topo)
+        ax.axhline(line, color="grey", ls="--", lw=0.8, label=f"{line:g}")
         if log:
             ax.set_yscale("log")
         else:
@@ -138,23 +232,29 @@ def write_plots(run_dir: Path, log: bool = False) -> list[Path]:
         written.append(run_dir / "learning_curve.png")
 
         final = {a: math.radians(v) for a, v in rows[-1]["final_angles_deg"].items()}
-        fig, ax = plt.subplots(figsize=(7, 5))
-        for i, (angles, style) in enumerate(((topo.initial_angles(), ":"), (final, "-"))):
-            for pts in arm_points(topo, angles):
-                xs, ys = zip(*pts, strict=True)
-                label = "start" if i == 0 else f"epoch {rows[-1]['epoch']} final"
-                ax.plot(xs, ys, style, marker="o", ms=4, color="grey" if i == 0 else "C0", label=label)
-        ax.plot(*goal, "r*", ms=14, label=f"goal ({goal[0]:.2f}, {goal[1]:.2f})")
-        joints = joint_points(topo, final)
-        for i, (a, what) in enumerate(sorted(active_at_end(events).items())):
-            if a in joints:  # a joint still faulty when the run ended
-                ax.plot(*joints[a], "X", ms=11, color=f"C{3 + i}", label=f"{a}: {', '.join(what)}")
-        R = topo.reach
-        ax.set_xlim(topo.base[0] - R * 1.05, topo.base[0] + R * 1.05)
-        ax.set_ylim(topo.base[1] - R * 1.05, topo.base[1] + R * 1.05)
-        ax.set_aspect("equal")
-        ax.grid(alpha=0.3)
-        _legend_beside(ax)
+        start = cfg_start(cfg, rows[-1]["epoch"], topo)
+        if topo.spatial:
+            fig = plt.figure(figsize=(9, 5.8))
+            ax = _arm_3d(fig, topo, start, final, goal, f"epoch {rows[-1]['epoch']} final", active_at_end(events))
+            _legend_beside(ax)
+        else:
+            fig, ax = plt.subplots(figsize=(7, 5))
+            for i, (angles, style) in enumerate(((start, ":"), (final, "-"))):
+                for pts in arm_points(topo, angles):
+                    xs, ys = zip(*pts, strict=True)
+                    label = "start" if i == 0 else f"epoch {rows[-1]['epoch']} final"
+                    ax.plot(xs, ys, style, marker="o", ms=4, color="grey" if i == 0 else "C0", label=label)
+            ax.plot(*goal, "r*", ms=14, label=f"goal ({goal[0]:.2f}, {goal[1]:.2f})")
+            joints = joint_points(topo, final)
+            for i, (a, what) in enumerate(sorted(active_at_end(events).items())):
+                if a in joints:  # a joint still faulty when the run ended
+                    ax.plot(*joints[a], "X", ms=11, color=f"C{3 + i}", label=f"{a}: {', '.join(what)}")
+            R = topo.reach
+            ax.set_xlim(topo.base[0] - R * 1.05, topo.base[0] + R * 1.05)
+            ax.set_ylim(topo.base[1] - R * 1.05, topo.base[1] + R * 1.05)
+            ax.set_aspect("equal")
+            ax.grid(alpha=0.3)
+            _legend_beside(ax)
         ax.set_title(f"{_controller(cfg)}: final error {rows[-1]['final_error']:.3f}", fontsize=10)
         fig.tight_layout()
         fig.savefig(run_dir / "arm.png", dpi=110)
@@ -174,7 +274,7 @@ def write_plots(run_dir: Path, log: bool = False) -> list[Path]:
     if chosen:
         fig, axes = plt.subplots(len(chosen), 1, figsize=(10, 2.8 * len(chosen) + 0.6), squeeze=False, sharex=True)
         for ax, r in zip(axes[:, 0], chosen, strict=True):
-            _tracking(ax, r, by_epoch.get(r["epoch"], []), spans)
+            _tracking(ax, r, by_epoch.get(r["epoch"], []), spans, error_line(topo))
         axes[-1, 0].set_xlabel("step (error after the step's joint actions)")
         fig.suptitle(f"{cfg.run_id}: end-effector error within an epoch ({_controller(cfg)})", fontsize=10)
         fig.tight_layout()
@@ -202,7 +302,7 @@ SPAN_COLOURS = {"locked": "C3", "disturbed": "C1", "reversed": "C4", "scaled": "
                 "reads offset": "C8", "reads late": "C9", "lost": "C7"}  # fmt: skip
 
 
-def _tracking(ax: Any, row: dict[str, Any], events: list[dict[str, Any]], spans: list[Span]) -> None:
+def _tracking(ax: Any, row: dict[str, Any], events: list[dict[str, Any]], spans: list[Span], line: float = 0.5) -> None:
     """One epoch's error per step (the paper's Figs. 13-21): each lasting joint fault a shaded span (a lock
     from an earlier epoch shades the whole epoch), a line at every event step, one label per group of close
     events so no two labels overlap."""
@@ -213,8 +313,8 @@ def _tracking(ax: Any, row: dict[str, Any], events: list[dict[str, Any]], spans:
             colour = SPAN_COLOURS.get(s.label.split(" ", 1)[1], "C7")
             ax.axvspan(*steps, color=colour, alpha=0.10, lw=0, label=s.label)
     ax.plot(range(n), errors, lw=1.0, color="C0", label="error")
-    ax.axhline(0.5, color="grey", ls="--", lw=0.8)
-    ax.set_ylim(bottom=0, top=max(max(errors, default=1.0) * 1.45, 0.6))  # room above the curve for the labels
+    ax.axhline(line, color="grey", ls="--", lw=0.8)
+    ax.set_ylim(bottom=0, top=max(max(errors, default=1.0) * 1.45, 1.2 * line))  # room above the curve for the labels
     for ev in events:
         ax.axvline(ev["step"], color="C3", lw=0.7, alpha=0.6)
     for step, label in label_groups(events, n):
@@ -285,6 +385,13 @@ def _goal(cfg: RunConfig, rows: list[dict[str, Any]]) -> tuple[float, float]:
 
     epoch = rows[-1]["epoch"] if rows else 0
     return task_of(cfg).goal(epoch, cfg.steps)[0]
+
+
+def cfg_start(cfg: RunConfig, epoch: int, topo: Topology) -> dict[str, float]:
+    """The joint angles epoch `epoch` started from: the task's start pose, else the robot's home."""
+    from kinswarm.actors.runfile import task_of
+
+    return task_of(cfg).start(epoch) or topo.initial_angles()
 
 
 LAW_NAMES = {
