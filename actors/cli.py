@@ -19,6 +19,7 @@ from kinswarm.actors.cli_parser import build_parser, joined, sets_of
 from kinswarm.actors.config import ConfigError, RunConfig
 from kinswarm.actors.launch import run_swarm
 from kinswarm.actors.plan import Plan, PlanError, load_plan
+from kinswarm.actors.report import error_line
 from kinswarm.actors.rundir import check_dir
 from kinswarm.actors.runfile import load_run
 from kinswarm.actors.runtime import setup_logging
@@ -242,9 +243,10 @@ def _main(argv: list[str] | None) -> int:
     fe = summary["final_error"]
     if fe:
         last = fe[-20:]
-        within = sum(e <= 0.5 for e in last)
+        line = error_line(cfg.topo())  # 0.5 on a planar robot's scale, 5 cm on an arm from URDF
+        within = sum(e <= line for e in last)
         print(
-            f"{cfg.run_id}: {len(fe)} epochs, final error {fe[-1]:.3f} (last {len(last)}: {within} within 0.5), "
+            f"{cfg.run_id}: {len(fe)} epochs, final error {fe[-1]:.3f} (last {len(last)}: {within} within {line:g}), "
             f"{summary['steps_per_second']:.0f} steps/s, {summary['wall_seconds']:.1f} s -> {cfg.out}"
         )
     if lost := sum(summary.get("tokens_lost", {}).values()):

@@ -37,6 +37,11 @@ def up(p: Sequence[float]) -> tuple[float, float]:
     return (float(p[0]), -float(p[1]))
 
 
+def as_is(p: Sequence[float]) -> tuple[float, ...]:
+    """A spatial robot's (x, y, z): rerun's 3D view takes the world as it is (z up, logged once as static)."""
+    return tuple(float(c) for c in p[:3])
+
+
 def rerun_module() -> Any:
     """rerun, or one line saying how to get it."""
     try:
@@ -57,6 +62,12 @@ class Recorder:
         self.task = task_of(cfg)
         self.dof = self.topo.dof_agents
         self.events: list[dict[str, Any]] = []
+        # a planar robot in rerun's 2D view (y flipped), a robot from URDF in its 3D view
+        rr = self.rr
+        if self.topo.spatial:
+            self.place, self.Strips, self.Points, self.scale = as_is, rr.LineStrips3D, rr.Points3D, 0.1
+        else:
+            self.place, self.Strips, self.Points, self.scale = up, rr.LineStrips2D, rr.Points2D, 1.0
         self._static()
 
     def _layout(self) -> Any:
@@ -77,12 +88,21 @@ class Recorder:
             agents,
             row_shares=[2, 1, 2],
         )
-        robot = rrb.Spatial2DView(name="robot", origin="/world")
+        view = rrb.Spatial3DView if self.topo.spatial else rrb.Spatial2DView
+        robot = view(name="robot", origin="/world")
         return rrb.Blueprint(rrb.Horizontal(robot, right, column_shares=[3, 2]), collapse_panels=True)
 
     def _static(self) -> None:
         rr, topo = self.rr, self.topo
         self.stream.send_blueprint(self._layout())
+        if topo.spatial:  # z up, metres; the base's plane as a square of the arm's reach
+            self.stream.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
+            R, (bx, by, bz) = topo.reach, topo.base[:3]
+            square = [(bx - R, by - R, bz), (bx + R, by - R, bz), (bx + R, by + R, bz), (bx - R, by + R, bz)]
+            self.stream.log(
+                "world/reach", rr.LineStrips3D([[*square, square[0]]], colors=[(220, 220, 220)]), static=True
+            )
+            return
         walls = [[up(c) for c in [*o.corners(), o.corners()[0]]] for o in self.cfg.scene_spec.obstacles]
         if walls:
             self.stream.log("world/walls", rr.LineStrips2D(walls, colors=[(90, 90, 90)]), static=True)
@@ -108,29 +128,30 @@ class Recorder:
             rr.TimeColumn("epoch", sequence=[e] * n),
             rr.TimeColumn("step_in_epoch", sequence=range(n)),
         ]
-        strips: list[list[tuple[float, float]]] = []
-        points: list[tuple[float, float]] = []
+        place, size = self.place, self.scale  # 2D (y flipped) or 3D; sizes in the robot's units
+        strips: list[list[tuple[float, ...]]] = []
+        points: list[tuple[float, ...]] = []
         colours: list[tuple[int, int, int]] = []
         radii: list[float] = []
         labels: list[str] = []
-        goals: list[tuple[float, float]] = []
+        goals: list[tuple[float, ...]] = []
         for t, deg in enumerate(angles_deg):
             q = {a: math.radians(v) for a, v in zip(self.dof, deg, strict=True)}
-            strips += [[up(p) for p in strip] for strip in arm_points(topo, q)]
+            strips += [[place(p) for p in strip] for strip in arm_points(topo, q)]
             joints = joint_points(topo, q)
             faulty = faulty_at(spans, e, n, t)
             for a, xy in joints.items():
-                points.append(up(xy))
+                points.append(place(xy))
                 colours.append(FAULT if a in faulty else ARM)
-                radii.append(0.3 if a in faulty else 0.15)
+                radii.append((0.3 if a in faulty else 0.15) * size)
                 labels.append(f"{a} {faulty[a]}" if a in faulty else a)
-            goals.append(up(path[t] if path else goal))
+            goals.append(place(path[t] if path else goal))
         k, m = len(topo.end_effectors), len(topo.order)
-        arm = rr.LineStrips2D.columns(strips=strips, colors=[ARM] * len(strips), radii=[0.06] * len(strips))
+        arm = self.Strips.columns(strips=strips, colors=[ARM] * len(strips), radii=[0.06 * size] * len(strips))
         s.send_columns("world/arm", indexes=times, columns=arm.partition([k] * n))
-        joints_cols = rr.Points2D.columns(positions=points, colors=colours, radii=radii, labels=labels)
+        joints_cols = self.Points.columns(positions=points, colors=colours, radii=radii, labels=labels)
         s.send_columns("world/joints", indexes=times, columns=joints_cols.partition([m] * n))
-        goal_cols = rr.Points2D.columns(positions=goals, colors=[GOAL] * n, radii=[0.25] * n)
+        goal_cols = self.Points.columns(positions=goals, colors=[GOAL] * n, radii=[0.25 * size] * n)
         s.send_columns("world/goal", indexes=times, columns=goal_cols.partition([1] * n))
         if len(errors) >= n:
             s.send_columns("error/step", indexes=times, columns=rr.Scalars.columns(scalars=errors[:n]))

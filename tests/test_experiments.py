@@ -324,3 +324,24 @@ def test_all_experiments_full(tmp_path):
     assert kinswarm(["experiment", "all", "--seeds", "3", "--jobs", "2", "--out", str(tmp_path)]) == 0
     gen = json.loads((tmp_path / "generalisation" / "results.json").read_text())
     assert gen["per_level"]["Level-3"]["test_set_0"]["frac_within_0_5"] > 0.5
+
+
+@pytest.mark.timeout(600)
+def test_quick_reach3d_experiment(tmp_path):
+    """The 3D report's smoke version: points and poses, every control on both test sets, and the locked shoulder."""
+    from kinswarm.experiments import run_experiment
+
+    res = run_experiment("reach3d", seeds=1, quick=True, out=tmp_path, jobs=2)["reach3d"]
+    out = tmp_path / "reach3d"
+    for f in ("report.md", "results.json", "within.png"):
+        assert (out / f).is_file(), f
+    controls = ["trained, frozen", "untrained, frozen", "blind (q only), frozen", "rule", "pseudo-inverse",
+                "greedy per joint"]  # fmt: skip
+    for kind in ("points", "poses"):
+        assert set(res[kind]) == {f"{c} | {s}" for c in controls for s in ("A", "B")}
+        for row in res[kind].values():
+            assert all(0.0 <= w <= 100.0 for w in row["within_pct"]) and all(m >= 0.0 for m in row["mean"])
+    assert set(res["locked_a2"]) == {"trained, frozen", "trained, learning", "untrained, learning", "rule",
+                                     "pseudo-inverse"}  # fmt: skip
+    text = (out / "report.md").read_text()
+    assert "## Points: frozen on 5 unseen goals" in text and "quick" in text

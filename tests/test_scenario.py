@@ -24,6 +24,7 @@ def timeline(path: Path, topo) -> list[tuple[int | None, int, str, list[str], in
 
 def test_paper_scenarios(topo):
     assert sorted(p.name for p in SCENARIOS.glob("*.toml")) == [
+        "iiwa-locked-a2.toml",  # experiments/reach3d.py
         "lock-then-reverse.toml",  # the README's animation
         "paper-fail-disturb-fail.toml",
         "paper-locked.toml",

@@ -40,6 +40,8 @@ REWARDS = ("graded", "shaped", "paper", "strict")
 G_ROT = StateVariable("g_rot", 5, (-math.pi / 4, math.pi / 4))
 
 Coords = tuple[float, ...]
+#: metres per radian of the action size for a prismatic joint: an action of 1 (degree) moves it 1 mm
+PRISMATIC_SCALE = 180.0 / (1000.0 * math.pi)
 
 
 @dataclass(frozen=True)
@@ -167,6 +169,10 @@ class Reach3dAgent(AgentTask):
         reward = None if self.D_prev is None else reach_reward(D, self.D_prev, s.reward, D_min=s.d_min, c=s.c, k=s.k)
         self.D_prev = D
         return Head(obs.goal, reward)
+
+    def scale(self, view: StepView) -> float:
+        """A prismatic joint moves its action size in millimetres (1° -> 1 mm), not as metres of radians (17 mm)."""
+        return PRISMATIC_SCALE if self.spec.prismatic else 1.0
 
     def state(self, view: StepView) -> list[float]:
         if len(view.goal) != 7:
