@@ -15,6 +15,9 @@ class SpecError(ValueError):
         super().__init__(f"{source}: {where}: {what}")
         self.source, self.where, self.what = source, where, what
 
+    def __reduce__(self) -> tuple:  # pickled with its three parts: a worker process's error reaches its parent whole
+        return (type(self), (self.source, self.where, self.what))
+
 
 def number(src: str, where: str, v: Any) -> float:
     if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):

@@ -95,8 +95,8 @@ class Topology:
     def reach(self) -> float:
         """Longest root-to-leaf sum of link lengths and offsets: the radius of the task space."""
         r = self.agents[self.root]
-        if self.spatial:
-            return self.reach_below(self.root)
+        if self.spatial:  # from the base: the root joint's own offset, then the longest path below it
+            return math.dist(r.origin[:3], (0.0, 0.0, 0.0)) + self.reach_below(self.root)
         return math.hypot(r.offset[0], r.offset[1]) + self.reach_below(self.root)
 
     def reach_below(self, aid: str) -> float:

@@ -55,7 +55,7 @@ class Reach3dSettings:
     k: float = 200.0
 
     def __post_init__(self) -> None:
-        pts = ((self.goal,) if self.goal is not None else ()) + tuple(self.goals)
+        pts = tuple(self.goals) or ((self.goal,) if self.goal is not None else ())  # goals, when given, replace goal
         if not pts:
             raise ValueError("goal: missing (give goal = [x, y, z], or goals = [[x, y, z], ...])")
         sizes = {len(p) for p in pts}
@@ -72,7 +72,7 @@ class Reach3dSettings:
 
     @property
     def pose(self) -> bool:
-        return len(self.goal if self.goal is not None else self.goals[0]) == 6
+        return len(self.goals[0] if self.goals else self.goal) == 6  # type: ignore[arg-type]
 
 
 def wire_goal(g: tuple[float, ...]) -> Coords:
@@ -104,7 +104,7 @@ class Reach3dTask(TaskDef):
         if len(topo.end_effectors) != 1:
             return f"kind: reach3d moves one end effector; this robot has {len(topo.end_effectors)}"
         base = topo.base[:3]
-        for name, pts in (("goal", [s.goal] if s.goal is not None else []), ("goals", list(s.goals))):
+        for name, pts in (("goals", list(s.goals)),) if s.goals else (("goal", [s.goal]),):
             for p in pts:
                 if (d := math.dist(p[:3], base)) > topo.reach + 1e-9:
                     return (
