@@ -40,9 +40,9 @@ def test_faults_reach_an_iiwa_swarm_live(tmp_path):
     r = run.fault("kill", "a5")
     assert r.returncode == 0, r.stderr
     run.wait_event("exited", "a5")
-    r = run.fault("freeze", "a3", "--seconds", "0.5")
+    r = run.fault("freeze", "a3", "--for", "0.5s")
     assert r.returncode == 0, r.stderr
-    run.wait_event("freeze", "a3")
+    run.wait_event("thaw", "a3")  # frozen (SIGSTOP) for half a second, then SIGCONT
     code, text = run.finish(timeout=120)
     assert code == 0, text
     events = {(e["event"], e["target"]) for e in run.events()}
