@@ -125,3 +125,18 @@ def test_a_faulted_run_writes_a_recording_with_every_step_and_event(tmp_path, ch
         # the sim's joint faults land on their step; the supervisor's process faults at the step it last knew
         assert min(abs(s - (epoch * steps + step)) for s in at) <= (0 if fault == "lock" else 5), (fault, at)
     assert (out / "motion.gif").stat().st_size > 10_000
+
+
+def test_a_robot_from_urdf_is_recorded_in_3d(tmp_path):
+    """An iiwa run saved as a recording: the arm, its joints and the goal in 3D, the error of every step."""
+    from conftest import EXAMPLES
+
+    out, rrd = tmp_path / "run", tmp_path / "iiwa.rrd"
+    args = ["run", str(EXAMPLES / "iiwa.toml"), "--epochs", "1", "--steps", "30", "--placement", "single"]
+    args += ["--no-progress", "--listen", f"tcp/127.0.0.1:{free_port()}", "--out", str(out)]
+    assert cli_main(args) == 0
+    assert cli_main(["view", str(out), "--save", str(rrd)]) == 0
+    seen = entities(rrd)
+    assert {"/world/arm", "/world/joints", "/world/goal", "/error/step"} <= set(seen)
+    printed = subprocess.run([str(RERUN), "rrd", "print", "--verbose", str(rrd)], capture_output=True, text=True)
+    assert "LineStrips3D" in printed.stdout and "Points3D" in printed.stdout and "LineStrips2D" not in printed.stdout
