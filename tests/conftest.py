@@ -74,3 +74,21 @@ def swarm_pids(marker: str) -> list[int]:
         if marker in cmd and state != "Z":
             pids.append(int(d))
     return pids
+
+
+# The arms from URDF the tests build (protocol/urdf_robot.py), as [robot] tables: the example files' robots.
+IIWA = {"urdf": "kuka_iiwa/model.urdf", "tool": [0.0, 0.05, 0.1]}
+PANDA = {
+    "urdf": "franka_panda/panda.urdf",
+    "joints": [f"panda_joint{i}" for i in range(1, 8)],
+    "tool": [0.0, 0.0, 0.1034],
+    "tool_link": "panda_hand",
+}
+XARM6 = {"urdf": "xarm/xarm6_robot.urdf"}
+
+
+def urdf_robot(table: dict):
+    """The Topology of a [robot] table from URDF (paths as from a run file in /tmp)."""
+    from kinswarm.protocol.topology import parse_robot
+
+    return parse_robot(dict(table), "/tmp/x.toml")

@@ -8,6 +8,7 @@ import random
 
 import numpy as np
 import pytest
+from conftest import IIWA, PANDA, XARM6, urdf_robot
 from kinswarm.actors.agent.geometry import Spatial
 from kinswarm.actors.learning.state import goal_along_motion, plane_state
 from kinswarm.actors.runfile import load_run, task_of
@@ -16,19 +17,10 @@ from kinswarm.protocol.messages import Down, EpochStart, Up
 from kinswarm.protocol.spec import SpecError
 from kinswarm.protocol.topology import parse_robot
 
-IIWA = {"urdf": "kuka_iiwa/model.urdf", "tool": [0.0, 0.05, 0.1]}
-PANDA = {
-    "urdf": "franka_panda/panda.urdf",
-    "joints": [f"panda_joint{i}" for i in range(1, 8)],
-    "tool": [0.0, 0.0, 0.1034],
-    "tool_link": "panda_hand",
-}
-XARM6 = {"urdf": "xarm/xarm6_robot.urdf"}
 KEY = b"k" * 32
 
 
-def robot(table: dict):
-    return parse_robot(dict(table), "/tmp/x.toml")
+robot = urdf_robot
 
 
 @pytest.mark.parametrize(

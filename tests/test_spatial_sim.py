@@ -10,36 +10,29 @@ import math
 import random
 from pathlib import Path
 
+import conftest
 import numpy as np
 import pytest
-from conftest import EXAMPLES, run_config
+from conftest import EXAMPLES, PANDA, XARM6, run_config, urdf_robot
 from kinswarm.actors.animate import write_animation
 from kinswarm.actors.learning.state import plane_state
 from kinswarm.actors.report import arm_points, joint_points, write_plots
 from kinswarm.protocol import frames
 from kinswarm.protocol.scene import SceneSpec
-from kinswarm.protocol.topology import load_robot, parse_robot
+from kinswarm.protocol.topology import load_robot
 from kinswarm.sim import kinematics
 from kinswarm.sim.baseline import greedy_increments, pinv_increments, reached, rule_increments, run_baseline
 from kinswarm.sim.scenes import Scene, build_scene
 from kinswarm.sim.world import World, pb
 
 HOME = [0, 30, 0, -60, 0, 45, 0]  # examples/iiwa.toml's
-IIWA = {"urdf": "kuka_iiwa/model.urdf", "tool": [0.0, 0.05, 0.1], "home_deg": HOME}
-PANDA = {
-    "urdf": "franka_panda/panda.urdf",
-    "joints": [f"panda_joint{i}" for i in range(1, 8)],
-    "tool": [0.0, 0.0, 0.1034],
-    "tool_link": "panda_hand",
-}
-XARM6 = {"urdf": "xarm/xarm6_robot.urdf"}
+IIWA = {**conftest.IIWA, "home_deg": HOME}
 # goals in front of the iiwa that the rule reaches within 1 cm from HOME (measured: 23-45 steps); from further goals
 # it can stall at 1-6 cm, every joint within its one-move dead band (test_the_rule_stalls_in_its_dead_band)
 POINTS = [(0.45, 0.3, 0.55), (0.5, -0.2, 0.4), (0.3, 0.4, 0.7), (0.4, 0.1, 0.9), (0.0, 0.6, 0.3)]
 
 
-def robot(table: dict):
-    return parse_robot(dict(table), "/tmp/x.toml")
+robot = urdf_robot
 
 
 def random_angles(topo, rng: random.Random, share: float = 1.0) -> dict[str, float]:
