@@ -38,6 +38,7 @@ STEPS = 400
 # Training: each goal PASSES times, in a seeded order. The same loop, 300 steps, set A: 48 goals 89 %, 96 goals 92 %,
 # 128 goals x 3 passes 89 %; q out of the state 78 %, g_perp in 11 sets 96 % / 90 % (400 steps, seed 1: 92 / 86).
 TRAIN_GOALS, PASSES = 96, 4
+QUICK_TRAINING = (6, 2)
 # The controls (untrained, blind) and the pose protocol run on this many seeds (the first), for the machine's time:
 # the trained swarm's points, the claim, run on every seed of --seeds.
 CONTROL_SEEDS = 1
@@ -86,8 +87,10 @@ def _rpy(q: tuple[float, ...]) -> tuple[float, float, float]:
     return roll, pitch, yaw
 
 
-def training_set(topo: Topology, pose: bool, quick: bool) -> tuple[list[list[float]], list[list[float]]]:
-    n, passes = (6, 2) if quick else (TRAIN_GOALS, PASSES)
+def training_set(
+    topo: Topology, pose: bool, n: int = TRAIN_GOALS, passes: int = PASSES
+) -> tuple[list[list[float]], list[list[float]]]:
+    """n goals (and start poses), each `passes` times in a seeded order."""
     goals, starts = sample(topo, 1000, n, pose)
     order = np.random.default_rng(1001).permutation(np.tile(np.arange(n), passes))
     return [goals[i] for i in order], [starts[i] for i in order]
@@ -171,7 +174,7 @@ def _protocol(
     ctx: Context, topo: Topology, pose: bool, steps: int, n_test: int
 ) -> tuple[list[list[Any]], dict[str, Any], list[RunOutcome]]:
     tag = "pose" if pose else "pt"
-    t_goals, t_starts = training_set(topo, pose, ctx.quick)
+    t_goals, t_starts = training_set(topo, pose, *QUICK_TRAINING if ctx.quick else ())
     file = str(ROBOT)
     train = {
         (name, s): Spec(
@@ -237,7 +240,7 @@ def _protocol(
 
 def _locked(ctx: Context, topo: Topology, steps: int, n_test: int) -> tuple[list[list[Any]], dict[str, Any], list]:
     goals, starts = sample(topo, SETS["A"], n_test, False)
-    t_goals, t_starts = training_set(topo, False, ctx.quick)
+    t_goals, t_starts = training_set(topo, False, *QUICK_TRAINING if ctx.quick else ())
     file = str(ROBOT)
     trained = run_specs(
         ctx,

@@ -6,6 +6,7 @@ that every number in docs/notebook/ can be made again. Nothing in actors/, sim/ 
     python -m kinswarm.experiments.research successive_training --out runs/research   # ~13 min on 2 cores
     python -m kinswarm.experiments.research beat_the_rule --out runs/full   # shares the generalisation runs
     python -m kinswarm.experiments.research grasp_epsilon_decay --out runs/research   # ~6 min on 2 cores
+    python -m kinswarm.experiments.research reach3d_loop --out runs/research   # the 3D settings, no wire; ~20 min
 
 Each module has a `run(ctx)` like the experiments' (experiments/common.py `Context`); options of the learner or
 the tasks that were measured and not kept are deleted from the code, so the configurations that used them are
