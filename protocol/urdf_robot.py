@@ -22,6 +22,7 @@ a robot with no movable joint left. What is not an agent has no say: it stays wh
 from __future__ import annotations
 
 import math
+import re
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 from pathlib import Path
@@ -138,8 +139,8 @@ def parse_urdf_robot(robot: dict[str, Any], source: str, where: str = "robot") -
         raise SpecError(src, f"{where}.urdf", f"expected a file name, got {robot.get('urdf')!r}")
     path = find_urdf(robot["urdf"], src)
     robot_name, root_link, joints = _read(path, src)
-    name = robot.get("name", robot_name)
-    if not isinstance(name, str) or not ID_RE.match(name.replace(".", "_")):
+    name = robot.get("name", re.sub(r"[^A-Za-z0-9_-]", "_", robot_name)[:64] or "robot")
+    if not isinstance(name, str) or not ID_RE.match(name):
         raise SpecError(src, f"{where}.name", f"expected a short name (letters, digits, '_', '-'), got {name!r}")
     movable = [j for j in joints if j.kind in MOVABLE]
     chosen = robot.get("joints", [j.name for j in movable])
@@ -207,6 +208,8 @@ def parse_urdf_robot(robot: dict[str, Any], source: str, where: str = "robot") -
             walk(j.child)
 
     walk(root_link)
+    if unreached := [n for n, a in ids.items() if a not in specs]:
+        raise SpecError(src, "robot.urdf", f"joints {unreached} do not hang from the root link {root_link!r}")
     roots = [a for a, s in specs.items() if s["parent"] is None]
     if len(roots) != 1:
         raise SpecError(
