@@ -1,11 +1,23 @@
-"""Pure-numpy learning core: fuzzy Q-learning with joint action selection (paper §4)."""
+"""The learning core: fuzzy Q-learning with joint action selection (paper §4), in numpy, its per-step arithmetic
+compiled with numba (kernels.py).
 
-from .fuzzy import FuzzyPartition, memberships_1d
+The parts that run compiled code (FuzzyPartition, SparseFuzzyQ, Learner) are imported when first asked for, so that
+a process that only reads settings or states (the supervisor, the command line) does not load numba (~0.15 s)."""
+
+from importlib import import_module
+
 from .jasm import boltzmann, expected_values, explore_probability, probabilities, select_action, temperature
-from .learner import Learner
-from .qlearning import SparseFuzzyQ
 from .settings import STATE_NAMES, LearnerSettings, StateVariable
 from .state import agent_state, goal_along_motion, joint_frame, link_end
+
+_COMPILED = {"FuzzyPartition": "fuzzy", "memberships_1d": "fuzzy", "SparseFuzzyQ": "qlearning", "Learner": "learner"}
+
+
+def __getattr__(name: str) -> object:
+    if name in _COMPILED:
+        return getattr(import_module(f".{_COMPILED[name]}", __name__), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
 
 __all__ = [
     "STATE_NAMES",

@@ -16,6 +16,7 @@ import itertools
 
 import numpy as np
 
+from . import kernels
 from .settings import LearnerSettings
 
 
@@ -41,7 +42,11 @@ def memberships_1d(x: float, m: int, lo: float, hi: float, slope: float) -> np.n
 
 
 class FuzzyPartition:
-    """Vectorised membership evaluation (Eq. 3) and sparse rule activation (Eq. 4) for one agent."""
+    """Membership evaluation (Eq. 3) and sparse rule activation (Eq. 4) for one agent.
+
+    activate() is the learner's path, compiled (kernels.py) around numpy's exp; memberships() and
+    activate_reference() are the same arithmetic in plain numpy, the reference the tests hold it to.
+    """
 
     def __init__(self, settings: LearnerSettings) -> None:
         n_sets, ranges = settings.state_sets, settings.state_ranges  # the six of §3.3, plus scene variables
@@ -73,32 +78,20 @@ class FuzzyPartition:
             strides[v] = strides[v + 1] * self.n_sets[v + 1]
         self.strides = strides
         self.n_rules = int(np.prod(self.n_sets))
-        # Which of the k kept sets each of the k^n combinations takes, per variable.
+        self.n_fired = self.top_k**n_vars
+        # Which of the k kept sets each of the k^n combinations takes, per variable (activate_reference).
         self._combos = np.array(list(itertools.product(range(self.top_k), repeat=n_vars)), dtype=np.int64)
         self._rows = np.arange(n_vars)
-        # Buffers of activate()'s membership evaluation: the same Eq. 3 arithmetic as memberships() in fewer
-        # calls. L is written only at real boundaries (_real); per variable, the columns after b_{m-2} hold the
-        # constants 0, 1, 2, ... so that mu_j = L_{b_{j-1}} - L_{b_j} is L_{b_{m-2}} for the last real set and
-        # -1 for padded sets, as in memberships(). (memberships() has ~1e-304 rather than 0 at b_{m-1}; that
-        # cannot change L_{b_{m-2}} - L_{b_{m-1}} while L_{b_{m-2}} > 1e-280, which _exact_fast checks.)
-        self._real = np.arange(bounds.shape[1])[None, :] < (self.n_sets - 1)[:, None]
-        self._L = np.zeros((n_vars, width + 1))
-        self._L[:, 0] = 1.0  # L_{b_{-1}} = 1
-        for v, m in enumerate(n_sets):
-            self._L[v, m + 1 :] = np.arange(1, width + 1 - m)  # L at b_m, b_{m+1}, ... = 1, 2, ...
-        self._L_real = self._L[:, 1:-1]  # view: L at b_0 .. b_{width-2}
-        self._L_lo, self._L_hi = self._L[:, :-1], self._L[:, 1:]  # views: mu_j = L_lo[j] - L_hi[j]
+        # activate(), compiled: per variable (lo, hi, sigma) and (n_sets, strides), stacked (each argument of a
+        # compiled call costs time); the real boundaries one after the other, variable v's m_v - 1 after variable
+        # v - 1's; L at a padded boundary as memberships() computes it (exponent capped at 700), which the last real
+        # set's membership subtracts.
+        self._lo_hi_sigma = np.stack((lo, hi, sigma))
+        self.grid = np.stack((self.n_sets, strides))
+        self._bounds_real = np.concatenate([bounds[v, : m - 1] for v, m in enumerate(n_sets)])
+        self.L_pad = float((1.0 / (1.0 + np.exp(np.full(1, 700.0))))[0])
+        self._e = np.empty(len(self._bounds_real))
         self._mu = np.empty((n_vars, width))
-        self._arg = np.empty(bounds.shape)
-        smallest_L = 1.0 / (1.0 + np.exp(np.where(self._real, sigma[:, None] * (bounds - lo[:, None]), 0.0)))
-        self._exact_fast = width >= 2 and bool(smallest_L.min() > 1e-280)
-        # Index tables for activate(): entry (v, j) of a (n_vars, width) array sits at flat position
-        # v * width + j, so "kept set c of variable v in fired rule i" is flat position _combo_at[v, i]
-        # of the argpartition result, and set j of variable v is flat position v * width + j of mu.
-        # Variables run along axis 0 so the product of Eq. 4 is 5 elementwise multiplies, left to right.
-        self._row_start = (self._rows * width)[:, None]
-        self._combo_at = np.ascontiguousarray((self._rows * width + self._combos).T)
-        self._rule_offset = int((self._rows * width) @ strides)
 
     def memberships(self, state: np.ndarray) -> np.ndarray:
         """Memberships (n_vars, max(n_sets)) of each variable in its sets (Eq. 3); padded sets hold -1."""
@@ -111,16 +104,33 @@ class FuzzyPartition:
         # set j = L_{b_{j-1}} - L_{b_j} with L_{b_{-1}} = 1 and L_{b_{m-1}} = 0: a partition of unity.
         return (buf[:, :-1] - buf[:, 1:])[:, : self._width] + self._pad_offset
 
+    def exponentials(self, state: np.ndarray) -> np.ndarray:
+        """e^(sigma (b - x)) at every real boundary (Eq. 3), into a reused buffer: the exponents compiled, the exp
+        numpy's (kernels.py says why)."""
+        x = np.ascontiguousarray(state, dtype=np.float64)
+        if x.shape != self._lo.shape:
+            raise ValueError(f"state must have {self._lo.size} variables, got shape {x.shape}")
+        e = self._e
+        kernels.exponents(x, self._lo_hi_sigma, self._bounds_real, self.grid, e)
+        return np.exp(e, out=e)
+
     def _memberships_fast(self, state: np.ndarray) -> np.ndarray:
-        """memberships() bit for bit in fewer numpy calls, into a reused buffer (valid until the next call)."""
-        if not self._exact_fast:
-            return self.memberships(state)
-        x = np.minimum(np.maximum(np.asarray(state, dtype=np.float64), self._lo), self._hi)[:, None]
-        arg = np.multiply(self._sigma, np.subtract(self._bounds, x, out=self._arg), out=self._arg)
-        e = np.exp(arg, out=arg)
-        e += 1.0
-        np.divide(1.0, e, out=self._L_real, where=self._real)  # Eq. 3: 1 / (1 + rho e^(-sigma x))
-        return np.subtract(self._L_lo, self._L_hi, out=self._mu)  # set j = L_{b_{j-1}} - L_{b_j}
+        """memberships() the way activate() computes them (into a reused buffer, valid until the next call)."""
+        kernels.memberships(self.exponentials(state), self.n_sets, self.L_pad, self._mu)
+        return self._mu
+
+    def activate_into(self, state: np.ndarray, rules: np.ndarray, O: np.ndarray) -> None:  # noqa: E741
+        """activate() into rules (int64[k^n]) and O (float64[k^n])."""
+        e = self.exponentials(state)
+        if not kernels.activate(e, self.grid, self.L_pad, self.top_k, rules, O):
+            self.fire_tied(e, rules, O)
+
+    def fire_tied(self, e: np.ndarray, rules: np.ndarray, O: np.ndarray) -> None:  # noqa: E741
+        """activate() from the exponentials e when kept sets tie (kernels.kept_sets): numpy's order of them."""
+        mu = self._mu
+        kernels.memberships(e, self.n_sets, self.L_pad, mu)
+        top = np.ascontiguousarray((-mu).argpartition(self.top_k - 1, axis=1)[:, : self.top_k])
+        kernels.fire(mu, top, self.strides, rules, O)
 
     def activate(self, state: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Sparse rule activation: (flat rule indices int64[k^n], O float64[k^n]) for the fired rules.
@@ -128,19 +138,12 @@ class FuzzyPartition:
         O^i is the product over variables of the kept memberships (Eq. 4); the index is row-major in
         the full grid over n_sets.
         """
-        mu = self._memberships_fast(state)
-        if self.top_k < mu.shape[1]:
-            top = (-mu).argpartition(self.top_k - 1, axis=1)  # the first top_k columns hold the kept sets
-        else:
-            top = np.broadcast_to(np.arange(mu.shape[1]), mu.shape)
-        # flat mu position of the set each fired rule takes per variable: (n_vars, k^n)
-        at = (top + self._row_start).take(self._combo_at)
-        O = mu.take(at).prod(axis=0)  # noqa: E741 -- Eq. 4: prod_v mu_v, same order as prod(axis=1) per rule
-        rules = self.strides @ at - self._rule_offset  # row-major index in the full grid
+        rules, O = np.empty(self.n_fired, dtype=np.int64), np.empty(self.n_fired)  # noqa: E741
+        self.activate_into(state, rules, O)
         return rules, O
 
     def activate_reference(self, state: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """activate() as first written, with explicit fancy indexing; kept as the reference for tests."""
+        """activate() in numpy, with explicit fancy indexing: the reference for tests."""
         mu = self.memberships(state)
         k = self.top_k
         if k < mu.shape[1]:

@@ -7,6 +7,7 @@ Q(s, .) reshaped to (n_actions,) * (1 + n_visible) has the agent's own action on
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -41,29 +42,42 @@ def boltzmann(E: np.ndarray, T: float) -> np.ndarray:
     return w / w.sum()
 
 
+def normalise(w: Sequence[float]) -> list[float]:
+    """w / sum w, summed as numpy sums fewer than 8 float64s (left to right from 0.0): Eq. 8's division."""
+    total = 0.0
+    for x in w:
+        total += x
+    return [x / total for x in w]
+
+
 def explore_probability(T: float, T_max: float, epsilon: float) -> float:
     """epsilon-decreasing: explore with probability epsilon (T(t) - 1) / (T_max - 1), clipped to [0, 1]."""
-    return min(max(epsilon * (T - 1.0) / (T_max - 1.0), 0.0), 1.0)
+    p = epsilon * (T - 1.0) / (T_max - 1.0)
+    return 0.0 if p < 0.0 else 1.0 if p > 1.0 else p
 
 
-def greedy(pi: np.ndarray, rng: np.random.Generator) -> int:
+def greedy(pi: np.ndarray | Sequence[float], rng: np.random.Generator) -> int:
     """argmax pi with random tie-breaking: Q starts at 0, so a fixed tie-break would always pick action 0."""
-    p = pi.tolist()
+    p = pi.tolist() if isinstance(pi, np.ndarray) else pi
     best = max(p)
-    ties = [a for a, v in enumerate(p) if v >= best - 1e-12 * abs(best)]
+    floor = best - 1e-12 * abs(best)
+    ties = [a for a, v in enumerate(p) if v >= floor]
     if len(ties) == 1:
         return ties[0]
     return ties[int(rng.integers(len(ties)))]
 
 
-def select_action(pi: np.ndarray, p_explore: float, rng: np.random.Generator, explore: bool = True) -> int:
+def select_action(
+    pi: np.ndarray | Sequence[float], p_explore: float, rng: np.random.Generator, explore: bool = True
+) -> int:
     """With probability p_explore sample from pi (Eq. 8), else take the best pi (ε-decreasing scheme)."""
     if explore and p_explore > 0.0 and rng.random() < p_explore:
         u = rng.random()
         acc = 0.0
-        for a, p in enumerate(pi.tolist()):  # inverse-CDF draw; cheaper than rng.choice for 3 actions
+        probs = pi.tolist() if isinstance(pi, np.ndarray) else pi
+        for a, p in enumerate(probs):  # inverse-CDF draw; cheaper than rng.choice for 3 actions
             acc += p
             if u < acc:
                 return a
-        return max(a for a, p in enumerate(pi.tolist()) if p > 0.0)  # rounding left u past the sum
+        return max(a for a, p in enumerate(probs) if p > 0.0)  # rounding left u past the sum
     return greedy(pi, rng)

@@ -2,11 +2,16 @@
 
 from __future__ import annotations
 
-from collections.abc import Collection, Sequence
+import fcntl
+import hashlib
+import tempfile
+from collections.abc import Collection, Iterator, Sequence
+from contextlib import contextmanager, nullcontext
+from pathlib import Path
 
 import numpy as np
 
-from . import jasm
+from . import jasm, kernels
 from .fuzzy import FuzzyPartition
 from .qlearning import SparseFuzzyQ
 from .settings import N_ACTIONS, LearnerSettings
@@ -34,20 +39,49 @@ class Learner:
         self.rng = np.random.default_rng(seed)
         self.fuzzy = FuzzyPartition(settings)
         self.q = SparseFuzzyQ(self.n_joint)
-        # Fictitious-play counts C^i(alpha_k^j) (Eq. 7), started at count_prior so P is defined.
-        self.counts = np.full((self.n_visible, self.n_actions), settings.count_prior)
-        self._no_visible = np.zeros((0, self.n_actions))  # P (Eq. 7) when no agent is visible
-        self.epoch = 0
-        self.lr = settings.lr
-        self.epsilon = settings.epsilon  # epsilon(epoch) = epsilon (1 - epsilon_decay)^epoch
-        self.t = 0
-        # (rules, their phi rows or -1, w = O / sum O, joint action or -1 until observed) of s(t-1), a(t-1);
-        # rules and rows as lists
-        self._pending: tuple[list[int], list[int], np.ndarray, int] | None = None
+        nv, n, k = self.n_visible, self.n_actions, self.fuzzy.n_fired
+        # Eqs. 7-9 in one array (each argument of a compiled call costs time): the fictitious-play counts
+        # C^i(alpha_k^j) (Eq. 7, started at count_prior so P is defined), then P (Eq. 7), E (Eq. 9) and
+        # z = (E - max E) / T (Eq. 8's exponent) that the last a(t) was chosen from.
+        sel = self._selection = np.zeros((2 * nv + 2, n))
+        self.counts, self._P, self._E, self._z = sel[:nv], sel[nv : 2 * nv], sel[2 * nv], sel[2 * nv + 1]
+        self.counts[:] = settings.count_prior
+        self._P[:] = jasm.probabilities(self.counts)
+        # s(t) and s(t-1): the rules each fires (fired[i, 0]), their phi rows (fired[i, 1]; -1: never updated) and
+        # w[i] = O / sum O. Slot _latest holds the last state decided on; decide() writes s(t) into the other.
+        self._fired = np.zeros((2, 2, k), dtype=np.int64)
+        self._fired[:, 1] = -1
+        self._w = np.zeros((2, k))
+        self._rules_and_O = [(self._fired[i, 0], self._w[i]) for i in (0, 1)]  # what activate() fills, as views
+        self._latest = 0
+        # The pending transition, s(t-1) and its joint action: -1 until observe() completes it, None when there
+        # is none to learn from.
+        self._pending: int | None = None
         self._own = 0  # a(t) of the pending transition
         self._counting = True  # fictitious play counts in this epoch (count_freeze)
-        self.E = np.zeros(self.n_actions)  # E (Eq. 9) and P (Eq. 7) the last a(t) was chosen from
-        self.P = self._no_visible
+        self.epoch = 0
+        self.lr = float(settings.lr)
+        self.epsilon = settings.epsilon  # epsilon(epoch) = epsilon (1 - epsilon_decay)^epoch
+        self.t = 0
+        self._load_compiled()
+
+    def _load_compiled(self) -> None:
+        """numba loads the compiled step from its cache on first use, or compiles it (seconds; ~7 on a busy 2-core
+        machine, when the cache is cold): here, when the learner is made, rather than within the first step's
+        deadline. decide()'s kernels run once on this learner's own arrays with nothing to learn, which fills only
+        what the first decide() writes again (P, E and z with the values they hold already), then the kernels of
+        tied memberships and of a growing phi. The first time in a process, agents starting together take turns,
+        so that one compiles and the others load what it wrote: four agents compiling at once on 2 busy cores took
+        42 s each, close to the supervisor's 60 s wait for them (one at a time: 12 s, then loads, 18 s in all)."""
+        fz, q, now = self.fuzzy, self.q, 1 - self._latest
+        with nullcontext() if kernels.decide.signatures else _taking_turns(kernels.__file__):
+            e = fz.exponentials(np.zeros(len(fz.n_sets)))
+            kernels.decide(
+                e, fz.grid, fz.L_pad, fz.top_k, False, self._fired, self._w, now, -1, False, 0.0, self.lr,
+                float(self.settings.gamma), 1.0, q.phi, q.index.table, q.index.entries, q.index.size, self._selection,
+            )  # fmt: skip
+            fz.fire_tied(e, *self._rules_and_O[now])
+            kernels.map_rehash(q.index.table, q.index.entries, len(q.index))
 
     # -- epochs ---------------------------------------------------------------------------------
     def start_epoch(self, epoch: int, t: int = 0) -> None:
@@ -91,7 +125,7 @@ class Learner:
         """Learn from the previous transition, choose this agent's action a(t) (0 dec, 1 keep, 2 inc)."""
         self._check_visible(visible_actions)  # validate before any state changes
         a = self.decide(state, reward, learn=learn, explore=explore)
-        self.observe(visible_actions, learn=learn)
+        self._observe(visible_actions, learn)
         return a
 
     def _check_visible(self, visible_actions: Sequence[int]) -> None:
@@ -111,43 +145,39 @@ class Learner:
     ) -> int:
         """(a)-(b) of step(): the TD update of the previous transition, if observe() completed its joint
         action, then the choice of a(t). The visible actions at t are for observe()."""
-        st = self.settings
-        rules, O = self.fuzzy.activate(state)  # noqa: E741 -- the paper's O^i
-        rules_list = rules.tolist()
-        P = jasm.probabilities(self.counts) if self.n_visible else self._no_visible
-        w = O / O.sum()  # O^i / sum_i O^i: the weight of rule i in Eq. 2 and its gradient in Eq. 6
-        rows = self.q.row_list(rules_list)  # phi rows, -1 for rules never updated
-        q_now = self.q.q_list(rows, w)  # Q(s(t), .), Eq. 2
-
-        # (a) TD update of the previous transition with s(t) as s' (Eqs. 5-6).
-        if learn and self.lr > 0.0 and reward is not None and self._pending is not None and self._pending[3] >= 0:
-            p_rules, p_rows_list, p_w, p_joint = self._pending
-            p_rows = self.q.touch_list(p_rules, p_rows_list)  # creates phi = 0 rows: Q(s, a) below is unchanged
-            q_sa = float(p_w @ self.q.phi[p_rows, p_joint])  # Q(s(t-1), a(t-1)), Eq. 2
-            # Eq. 5's max over what this agent can choose: max_a E(s', a) (Eq. 9), not over joint actions
-            boot = float(jasm.expected_values(q_now, P, self.n_actions).max())
-            delta = self.q.td_delta(q_sa, float(reward), boot, self.lr, st.gamma)  # Eq. 5
-            self.q.update_rows(p_rows, p_w, p_joint, delta)  # Eq. 6
-            if -1 in rows:  # s(t) may share rules just created for s(t-1)
-                rows = self.q.row_list(rules_list)
-            q_now = self.q.q_list(rows, w)
-
-        # (b) JASM: E (Eq. 9), Boltzmann pi (Eq. 8), epsilon-decreasing choice.
-        E = jasm.expected_values(q_now, P, self.n_actions)
+        st, fz, q = self.settings, self.fuzzy, self.q
+        now = 1 - self._latest  # the slot s(t) is written into
+        e = fz.exponentials(state)  # Eq. 3's e^(-sigma (x - b)) for s(t)
         T = jasm.temperature(self.t, st.T_max, st.s)
-        pi = jasm.boltzmann(E, T)
-        mask = [a for a in set(avoid) if 0 <= a < self.n_actions] if avoid else []
+        td = learn and self.lr > 0.0 and reward is not None and self._pending is not None and self._pending >= 0
+        activated = False
+        # The rules s(t) fires and their O (Eqs. 3-4), w = O / sum O and Q(s(t), .) (Eq. 2); (a) with td, the TD
+        # update of s(t-1) and its joint action with s(t) as s' (Eqs. 5-6); (b) P (Eq. 7), E (Eq. 9) and z.
+        while status := kernels.decide(
+            e, fz.grid, fz.L_pad, fz.top_k, activated, self._fired, self._w, now,
+            self._pending if td else -1, td, float(reward) if td else 0.0, self.lr, float(st.gamma), T,
+            q.phi, q.index.table, q.index.entries, q.index.size, self._selection,
+        ):  # fmt: skip
+            if status == kernels.TIED:
+                fz.fire_tied(e, *self._rules_and_O[now])
+            else:
+                q.reserve(status)  # phi rows for the rules of s(t-1) never updated
+            activated = True
+
+        # (b) JASM: Boltzmann pi (Eq. 8; numpy's exp, kernels.py says why), epsilon-decreasing choice.
+        pi = jasm.normalise(np.exp(self._z).tolist())
+        mask = {a for a in avoid if 0 <= a < self.n_actions} if avoid else ()
         if mask and len(mask) < self.n_actions:
-            pi[mask] = 0.0  # actions known to be futile now (a wall refused them): neither chosen nor sampled
-            if pi.sum() <= 0.0:  # the rest underflowed: choose among them evenly
-                pi = np.ones(self.n_actions)
-                pi[mask] = 0.0
-            pi /= pi.sum()
+            # actions known to be futile now (a wall refused them): neither chosen nor sampled
+            pi = [0.0 if a in mask else p for a, p in enumerate(pi)]
+            if sum(pi) <= 0.0:  # the rest underflowed: choose among them evenly
+                pi = [0.0 if a in mask else 1.0 for a in range(self.n_actions)]
+            pi = jasm.normalise(pi)
         a = jasm.select_action(pi, jasm.explore_probability(T, st.T_max, self.epsilon), self.rng, explore)
-        self.E, self.P = E, P  # what a(t) was chosen from: the recording shows them (AgentTrace)
 
         # (d) remember s(t) for the next update; observe() adds the joint action.
-        self._pending = (rules_list, rows, w, -1)
+        self._latest = now
+        self._pending = -1
         self._own = a
         self.t += 1
         return a
@@ -157,16 +187,28 @@ class Learner:
         fictitious-play counts stay as trained: a frozen swarm's beliefs about its neighbours are learned state
         too (counting on during a test made each test goal's outcome depend on the goals and steps before it)."""
         self._check_visible(visible_actions)
+        self._observe(visible_actions, learn)
+
+    def _observe(self, visible_actions: Sequence[int], learn: bool) -> None:
         # (c) fictitious play: count what the visible agents did (Eq. 7 next time).
         if learn and self._counting:
             for j, b in enumerate(visible_actions):
                 self.counts[j, b] += 1.0
         # (d) the joint action(t) of the pending (s(t), joint action(t)).
         if self._pending is not None:
-            p_rules, p_rows, p_w, _ = self._pending
-            self._pending = (p_rules, p_rows, p_w, self.joint_index(self._own, visible_actions))
+            self._pending = self.joint_index(self._own, visible_actions)
 
     # -- introspection / checkpoints ------------------------------------------------------------
+    @property
+    def E(self) -> np.ndarray:
+        """E (Eq. 9) the last a(t) was chosen from (a copy): the recording shows it (AgentTrace)."""
+        return self._E.copy()
+
+    @property
+    def P(self) -> np.ndarray:
+        """P (Eq. 7) the last a(t) was chosen from (a copy), (n_visible, n_actions)."""
+        return self._P.copy()
+
     @property
     def rules_used(self) -> int:
         """Number of phi rows allocated (rules touched by an update)."""
@@ -206,8 +248,18 @@ class Learner:
         if keys.size and (keys.min() < 0 or keys.max() >= self.fuzzy.n_rules):
             raise ValueError(f"phi_keys must lie in [0, {self.fuzzy.n_rules})")
         self.q.load(keys, np.asarray(d["phi"]))  # validates phi_keys / phi shapes and dtypes
-        self.counts = counts.astype(np.float64, copy=True)
+        self.counts[:] = counts
         self.lr = float(lr)
         self.epoch = int(epoch)
         self.t = 0
         self._pending = None
+
+
+@contextmanager
+def _taking_turns(name: str) -> Iterator[None]:
+    """Processes that enter together run the body one after the other: an exclusive flock on a file in the
+    temporary directory named after `name`, released when the file closes."""
+    path = Path(tempfile.gettempdir()) / f"kinswarm-{hashlib.sha1(name.encode()).hexdigest()[:16]}.lock"
+    with open(path, "a") as f:
+        fcntl.flock(f, fcntl.LOCK_EX)
+        yield

@@ -6,19 +6,80 @@ the rules the agent actually visits, never with the full grid.
 
 from __future__ import annotations
 
-from itertools import repeat
+from collections.abc import Iterator, MutableMapping
 
 import numpy as np
 
+from . import kernels
+
+
+class RuleIndex(MutableMapping[int, int]):
+    """rule index -> phi row with a dict's semantics (insertion order too), in arrays that the compiled learner reads
+    and extends (kernels.map_get, map_set). Entries are never removed."""
+
+    def __init__(self, capacity: int = 1024) -> None:
+        capacity = max(int(capacity), 1)
+        self.table = np.full((_slots_for(capacity), 2), -1, dtype=np.int64)  # hash slots: (rule, row) or (-1, -1)
+        self.entries = np.empty((2, capacity), dtype=np.int64)  # (rules, rows) in insertion order
+        self.size = np.zeros(1, dtype=np.int64)  # entries in use (an array: compiled code counts them)
+
+    @property
+    def capacity(self) -> int:
+        return self.entries.shape[1]
+
+    @property
+    def nbytes(self) -> int:
+        return int(self.table.nbytes + self.entries.nbytes)
+
+    def reserve(self, need: int) -> None:
+        """Room for need entries (the capacity at least doubles when it grows)."""
+        if need <= self.capacity:
+            return
+        n, capacity = len(self), max(need, 2 * self.capacity)
+        entries = np.empty((2, capacity), dtype=np.int64)
+        entries[:, :n] = self.entries[:, :n]
+        self.entries = entries
+        self.table = np.empty((_slots_for(capacity), 2), dtype=np.int64)
+        kernels.map_rehash(self.table, self.entries, n)
+
+    def __len__(self) -> int:
+        return int(self.size[0])
+
+    def __getitem__(self, rule: int) -> int:
+        row = kernels.map_get(self.table, int(rule))
+        if row < 0:
+            raise KeyError(rule)
+        return int(row)
+
+    def __setitem__(self, rule: int, row: int) -> None:
+        if rule < 0 or row < 0:
+            raise ValueError(f"rules and phi rows are >= 0, got {rule} -> {row}")
+        self.reserve(len(self) + 1)
+        kernels.map_set(self.table, self.entries, self.size, int(rule), int(row))
+
+    def __delitem__(self, rule: int) -> None:
+        raise TypeError("phi rows are never removed")
+
+    def __iter__(self) -> Iterator[int]:
+        return iter(self.entries[0, : len(self)].tolist())
+
+    def __contains__(self, rule: object) -> bool:
+        return isinstance(rule, (int, np.integer)) and kernels.map_get(self.table, int(rule)) >= 0
+
+
+def _slots_for(capacity: int) -> int:
+    """Hash slots for capacity entries: a power of two, at most half of them in use."""
+    return 1 << int(2 * capacity - 1).bit_length()
+
 
 class SparseFuzzyQ:
-    """phi storage: dict rule index -> row of a growable float64 array (rows, n_joint_actions)."""
+    """phi storage: rule index -> row of a growable float64 array (rows, n_joint_actions)."""
 
     def __init__(self, n_joint_actions: int, capacity: int = 1024) -> None:
         if n_joint_actions < 1:
             raise ValueError(f"n_joint_actions must be >= 1, got {n_joint_actions}")
         self.n_joint_actions = int(n_joint_actions)
-        self.index: dict[int, int] = {}
+        self.index = RuleIndex(capacity)
         self.phi = np.zeros((max(int(capacity), 1), self.n_joint_actions))
 
     @property
@@ -27,78 +88,43 @@ class SparseFuzzyQ:
 
     @property
     def memory_bytes(self) -> int:
-        # dict entries (~100 B each with the two int objects) + the allocated phi array.
-        return int(self.phi.nbytes + 100 * len(self.index))
+        return int(self.phi.nbytes + self.index.nbytes)
 
     def lookup(self, rules: np.ndarray) -> np.ndarray:
         """Rows of rules in phi, -1 for rules never touched (nothing is created)."""
-        return np.array(self.row_list(rules.tolist()), dtype=np.int64)
-
-    def row_list(self, rules: list[int]) -> list[int]:
-        """lookup() with lists of Python ints in and out."""
-        return list(map(self.index.get, rules, repeat(-1, len(rules))))
-
-    def touch(self, rules: np.ndarray, rows: np.ndarray | None = None) -> np.ndarray:
-        """Rows for rules, creating zero rows (phi = 0) for rules seen for the first time.
-
-        rows: a previous lookup() of the same rules (rows are never removed, so only -1 entries can be stale).
-        """
-        rows = self.lookup(rules) if rows is None else rows.copy()
-        missing = np.flatnonzero(rows < 0)
-        if len(missing):
-            idx = self.index
-            need = len(idx) + len(missing)
-            self._reserve(need)
-            new = rules[missing].tolist()
-            if len(set(new)) == len(new) and idx.keys().isdisjoint(new):
-                # the usual case (distinct rules, fresh rows): new rows len(idx), len(idx) + 1, ... in order
-                idx.update(zip(new, range(len(idx), need), strict=True))
-                rows[missing] = np.arange(need - len(new), need)
-            else:
-                for n in missing.tolist():
-                    rows[n] = idx[int(rules[n])] = len(idx)
+        rules = np.ascontiguousarray(rules, dtype=np.int64)
+        rows = np.empty(len(rules), dtype=np.int64)
+        kernels.lookup(self.index.table, rules, rows)
         return rows
 
-    def _reserve(self, need: int) -> None:
-        """Room for need phi rows (rows in use are kept)."""
+    def touch(self, rules: np.ndarray, rows: np.ndarray | None = None) -> np.ndarray:
+        """Rows for rules, creating zero rows (phi = 0) for rules seen for the first time, in rule order.
+
+        rows: a previous lookup() of the same rules (rows are never removed, so only -1 entries can be stale; a
+        stale entry's rule is given the next row number, as a dict assignment would).
+        """
+        rows = self.lookup(rules) if rows is None else np.array(rows, dtype=np.int64)
+        missing = np.flatnonzero(rows < 0).tolist()
+        if missing:
+            self.reserve(len(self.index) + len(missing))
+            for n in missing:
+                rows[n] = self.index[int(rules[n])] = len(self.index)
+        return rows
+
+    def reserve(self, need: int) -> None:
+        """Room for need phi rows (rows in use are kept; the capacity at least doubles when it grows)."""
         if need > self.phi.shape[0]:
             grown = np.zeros((max(need, 2 * self.phi.shape[0]), self.n_joint_actions))
-            grown[: len(self.index)] = self.phi[: len(self.index)]  # double the capacity
+            grown[: len(self.index)] = self.phi[: len(self.index)]
             self.phi = grown
+        self.index.reserve(need)
 
-    def touch_list(self, rules: list[int], rows: list[int]) -> np.ndarray:
-        """touch() for rules given as a list; returns the rows as an array, new rows numbered as touch() does.
-
-        Preconditions (the learner's pending transition meets both): the rules are distinct (distinct set
-        combinations) and rows = row_list(rules) was taken after the last change of the index.
-        """
-        new = [rule for rule, row in zip(rules, rows, strict=True) if row < 0]
-        if not new:
-            return np.array(rows, dtype=np.int64)
-        idx = self.index
-        need = len(idx) + len(new)
-        self._reserve(need)
-        idx.update(zip(new, range(len(idx), need), strict=True))  # new rows in rule order, as touch() numbers them
-        if len(new) == len(rules):
-            return np.arange(need - len(new), need)
-        return np.array(list(map(idx.__getitem__, rules)), dtype=np.int64)
-
-    def q_rows(self, rows: np.ndarray, w: np.ndarray, complete: bool | None = None) -> np.ndarray:
-        """Eq. 2 from rows already looked up (-1 = untouched rule, phi = 0) and w = O / sum O.
-
-        complete: whether every row is >= 0, when the caller already knows.
-        """
-        if complete if complete is not None else rows.min() >= 0:
-            return w @ self.phi.take(rows, axis=0)  # Eq. 2 (take = phi[rows], ~3x cheaper)
-        known = rows >= 0
-        return w[known] @ self.phi[rows[known]]  # Eq. 2
-
-    def q_list(self, rows: list[int], w: np.ndarray) -> np.ndarray:
-        """q_rows() for rows given as a list (the learner's path): skips the empty sum when no rule is known."""
-        unknown = rows.count(-1)
-        if unknown == len(rows):
-            return np.zeros(self.n_joint_actions)  # what the empty product w[known] @ phi[rows[known]] gives
-        return self.q_rows(np.array(rows, dtype=np.int64), w, complete=unknown == 0)
+    def q_rows(self, rows: np.ndarray, w: np.ndarray) -> np.ndarray:
+        """Eq. 2 from rows already looked up (-1 = untouched rule, phi = 0) and w = O / sum O."""
+        rows = np.ascontiguousarray(rows, dtype=np.int64)
+        out, gathered = np.empty(self.n_joint_actions), np.empty((len(rows), self.n_joint_actions))
+        kernels.q_values(self.phi, rows, np.ascontiguousarray(w), out, gathered, np.empty(len(rows)))
+        return out
 
     def q_values(self, rules: np.ndarray, O: np.ndarray) -> np.ndarray:  # noqa: E741
         """Q(s, .) over joint actions = sum_i O^i phi^i / sum_i O^i (Eq. 2); untouched rules count as 0."""
@@ -115,10 +141,8 @@ class SparseFuzzyQ:
         self.update_rows(self.touch(rules), O / total, action, delta)
 
     def update_rows(self, rows: np.ndarray, w: np.ndarray, action: int, delta: float) -> None:
-        """Eq. 6 on rows returned by touch(), w = O / sum O = dQ(s, a) / dphi^i."""
-        # Fired rules are distinct (distinct set combinations), so fancy-index += is exact.
-        column = self.phi[:, action]  # a view; 1-d fancy indexing is cheaper than phi[rows, action]
-        column[rows] += delta * w  # Eq. 6
+        """Eq. 6 on rows returned by touch(), w = O / sum O = dQ(s, a) / dphi^i (the fired rules are distinct)."""
+        kernels.update(self.phi, np.ascontiguousarray(rows, dtype=np.int64), np.ascontiguousarray(w), action, delta)
 
     def td_delta(self, q_sa: float, reward: float, bootstrap: float, lr: float, gamma: float) -> float:
         """delta = lambda (r + gamma * bootstrap - Q(s, a)) (Eq. 5)."""
@@ -126,8 +150,8 @@ class SparseFuzzyQ:
 
     def export(self) -> tuple[np.ndarray, np.ndarray]:
         """(keys int64[rows], phi float64[rows, n_joint_actions]) in row order, copies."""
-        keys = np.fromiter(self.index.keys(), dtype=np.int64, count=len(self.index))
-        return keys, self.phi[: len(self.index)].copy()
+        n = len(self.index)
+        return self.index.entries[0, :n].copy(), self.phi[:n].copy()
 
     def load(self, keys: np.ndarray, phi: np.ndarray) -> None:
         keys = np.asarray(keys)
@@ -140,6 +164,10 @@ class SparseFuzzyQ:
             raise ValueError(f"phi must be a float array, got {phi.dtype}")
         if len(np.unique(keys)) != len(keys):
             raise ValueError("phi_keys contains duplicates")
-        self.index = {int(k): n for n, k in enumerate(keys.tolist())}
-        self.phi = np.zeros((max(len(keys) * 2, 1024), self.n_joint_actions))
-        self.phi[: len(keys)] = phi
+        n, capacity = len(keys), max(len(keys) * 2, 1024)
+        index = RuleIndex(capacity)
+        index.entries[0, :n], index.entries[1, :n], index.size[0] = keys, np.arange(n), n
+        kernels.map_rehash(index.table, index.entries, n)
+        self.index = index
+        self.phi = np.zeros((capacity, self.n_joint_actions))
+        self.phi[:n] = phi
