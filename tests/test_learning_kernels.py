@@ -64,3 +64,32 @@ def test_rule_index_is_a_dict() -> None:
     assert 10**9 + 1 not in index and index.get(10**9 + 1, -1) == -1
     with pytest.raises(KeyError):
         index[10**9 + 1]
+
+
+def test_the_choice_from_eq8s_exponent_is_select_actions() -> None:
+    """select_from_exponent skips pi where the choice does not depend on its values: the same action from the same
+    draws, also with actions tied, nearly tied (E within 1e-15 to 1e-7 of the best), and NaN (an error either way)."""
+
+    def outcome(choose, *args):
+        try:
+            return choose(*args)
+        except ValueError as e:
+            return str(e)
+
+    rng = np.random.default_rng(4)
+    for _ in range(20_000):
+        E = np.round(rng.normal(size=3), int(rng.integers(0, 3)))  # rounded: exact ties
+        E += rng.choice([0.0, 1e-15, 1e-12, 1e-10, 1e-9, 1e-8, 1e-7], 3) * rng.choice([-1.0, 1.0], 3)
+        if rng.random() < 0.01:
+            E[int(rng.integers(3))] = np.nan
+        z = (E - E.max()) / (1.0 + 10.0 * rng.random())
+        p_explore, explore, seed = (
+            float(rng.choice([0.0, rng.random(), 1.0])),
+            bool(rng.random() < 0.8),
+            rng.integers(9),
+        )
+        a, b = np.random.default_rng(seed), np.random.default_rng(seed)
+        assert outcome(jasm.select_from_exponent, z, p_explore, a, explore) == outcome(
+            jasm.select_action, jasm.policy(z), p_explore, b, explore
+        )
+        assert a.bit_generator.state == b.bit_generator.state

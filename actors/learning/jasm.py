@@ -42,8 +42,13 @@ def boltzmann(E: np.ndarray, T: float) -> np.ndarray:
     return w / w.sum()
 
 
+def policy(z: np.ndarray) -> list[float]:
+    """pi = e^z / sum e^z (Eq. 8) from its exponent z = (E - max E) / T, as boltzmann() computes it (numpy's exp)."""
+    return normalise(np.exp(z).tolist())
+
+
 def normalise(w: Sequence[float]) -> list[float]:
-    """w / sum w, summed as numpy sums fewer than 8 float64s (left to right from 0.0): Eq. 8's division."""
+    """w / sum w, the sum of fewer than 8 float64s added as numpy adds them: left to right from 0.0."""
     total = 0.0
     for x in w:
         total += x
@@ -61,10 +66,23 @@ def greedy(pi: np.ndarray | Sequence[float], rng: np.random.Generator) -> int:
     p = pi.tolist() if isinstance(pi, np.ndarray) else pi
     best = max(p)
     floor = best - 1e-12 * abs(best)
-    ties = [a for a, v in enumerate(p) if v >= floor]
-    if len(ties) == 1:
-        return ties[0]
-    return ties[int(rng.integers(len(ties)))]
+    return break_tie([a for a, v in enumerate(p) if v >= floor], rng)
+
+
+def break_tie(ties: list[int], rng: np.random.Generator) -> int:
+    return ties[0] if len(ties) == 1 else ties[int(rng.integers(len(ties)))]
+
+
+def sample(pi: np.ndarray | Sequence[float], rng: np.random.Generator) -> int:
+    """An action drawn from pi: inverse CDF, cheaper than rng.choice for 3 actions."""
+    u = rng.random()
+    acc = 0.0
+    probs = pi.tolist() if isinstance(pi, np.ndarray) else pi
+    for a, p in enumerate(probs):
+        acc += p
+        if u < acc:
+            return a
+    return max(a for a, p in enumerate(probs) if p > 0.0)  # rounding left u past the sum
 
 
 def select_action(
@@ -72,12 +90,18 @@ def select_action(
 ) -> int:
     """With probability p_explore sample from pi (Eq. 8), else take the best pi (ε-decreasing scheme)."""
     if explore and p_explore > 0.0 and rng.random() < p_explore:
-        u = rng.random()
-        acc = 0.0
-        probs = pi.tolist() if isinstance(pi, np.ndarray) else pi
-        for a, p in enumerate(probs):  # inverse-CDF draw; cheaper than rng.choice for 3 actions
-            acc += p
-            if u < acc:
-                return a
-        return max(a for a, p in enumerate(probs) if p > 0.0)  # rounding left u past the sum
+        return sample(pi, rng)
     return greedy(pi, rng)
+
+
+def select_from_exponent(z: np.ndarray, p_explore: float, rng: np.random.Generator, explore: bool = True) -> int:
+    """select_action(policy(z), ...), the same choice from the same draws, with pi computed only when the choice
+    depends on its values: to sample from it, and when greedy()'s tie test could be close. Otherwise the greedy
+    choice is among the actions with z = 0 (pi = e^0 / sum e^z, the largest); every other z is at most -1e-9, so its
+    pi is at most (1 - 1e-9) of the largest, far outside greedy()'s 1e-12 (NaN is never "otherwise")."""
+    if explore and p_explore > 0.0 and rng.random() < p_explore:
+        return sample(policy(z), rng)
+    zs = z.tolist()
+    if not all(v == 0.0 or v <= -1e-9 for v in zs):
+        return greedy(policy(z), rng)
+    return break_tie([a for a, v in enumerate(zs) if v == 0.0], rng)

@@ -164,16 +164,17 @@ class Learner:
                 q.reserve(status)  # phi rows for the rules of s(t-1) never updated
             activated = True
 
-        # (b) JASM: Boltzmann pi (Eq. 8; numpy's exp, kernels.py says why), epsilon-decreasing choice.
-        pi = jasm.normalise(np.exp(self._z).tolist())
+        # (b) JASM: the Boltzmann policy pi (Eq. 8; numpy's exp, kernels.py says why), epsilon-decreasing choice.
+        p_explore = jasm.explore_probability(T, st.T_max, self.epsilon)
         mask = {a for a in avoid if 0 <= a < self.n_actions} if avoid else ()
         if mask and len(mask) < self.n_actions:
             # actions known to be futile now (a wall refused them): neither chosen nor sampled
-            pi = [0.0 if a in mask else p for a, p in enumerate(pi)]
+            pi = [0.0 if a in mask else p for a, p in enumerate(jasm.policy(self._z))]
             if sum(pi) <= 0.0:  # the rest underflowed: choose among them evenly
                 pi = [0.0 if a in mask else 1.0 for a in range(self.n_actions)]
-            pi = jasm.normalise(pi)
-        a = jasm.select_action(pi, jasm.explore_probability(T, st.T_max, self.epsilon), self.rng, explore)
+            a = jasm.select_action(jasm.normalise(pi), p_explore, self.rng, explore)
+        else:
+            a = jasm.select_from_exponent(self._z, p_explore, self.rng, explore)  # pi only if the choice needs it
 
         # (d) remember s(t) for the next update; observe() adds the joint action.
         self._latest = now
