@@ -44,7 +44,9 @@ from kinswarm.sim.scenes import build_scene
 from kinswarm.sim.world import World
 
 # Timers and liveliness changes go through the mailbox under keys no Zenoh key can equal (those start
-# with "ks/"), so every handler runs on the loop, in arrival order.
+# with "ks/"), so every handler but the commands' runs on the loop, in arrival order. The commands are handled on
+# Zenoh's thread as they arrive (Node.listen's `inline`; under the node's lock, so never beside the loop's handlers):
+# the last one moves the robot and publishes the next step from there, with no wake-up of the loop.
 DEADLINE, ALIVE, STATUS, PAUSE_CHECK = "__deadline__", "__alive__", "__status__", "__pause__"
 STATUS_S = 0.5
 
@@ -82,7 +84,10 @@ class SimActor:
         self.started = 0.0
         self.step_started = 0.0
         self.longest_step = 0.0
+        # The step deadline's watchdog: armed on the loop while an epoch runs, it fires when the running step is due
+        # (a step published on Zenoh's thread needs no timer of its own; see _on_watchdog)
         self._deadline: asyncio.TimerHandle | None = None
+        self._loop: asyncio.AbstractEventLoop | None = None
         # Several hosts (a deploy plan): the sim hears every host's heartbeat. While one is silent for a lease
         # the next step is held back, not run on stale or missing data, and published once all are heard again.
         # The silence itself is the signal: during a cut even local messages stalled for ~9 s (measured).
@@ -115,8 +120,9 @@ class SimActor:
         node.listen(k.ctl_all)
         if self.hosts:
             node.listen(k.host("*"))
-        node.listen(k.cmd_all)
+        node.listen(k.cmd_all, inline=self._on_cmd_sample)
         push = node.mailbox.push
+        self._loop = asyncio.get_running_loop()
 
         def on_alive(sample: Any) -> None:  # zenoh thread
             parsed = k.parse_alive(str(sample.key_expr))
@@ -130,11 +136,13 @@ class SimActor:
         try:
             await node.wait_matched(self.outputs(), timeout=30.0)
             node.declare_alive()
+            node.serve_inline()
             while True:
-                key, payload = await node.recv()
-                if self.handle(key, payload):
-                    return
+                async with node.next() as (key, payload):
+                    if self.handle(key, payload):
+                        return
         finally:
+            node.serve_inline(False)  # no command moves the robot from here on
             for timer in (self._deadline, self._status):
                 if timer is not None:
                     timer.cancel()
@@ -144,11 +152,10 @@ class SimActor:
     def handle(self, key: str, payload: bytes) -> bool:
         """Dispatch one mailbox item; True means stop."""
         node, k = self.node, self.keys
-        if key.startswith(self._cmd_prefix):  # the hot path first
-            if (m := node.decode(key, payload, Cmd)) is not None:
-                self._on_cmd(k.last_chunk(key), m)
+        if key.startswith(self._cmd_prefix):  # the hot path first (when it had to wait in the mailbox)
+            self._on_cmd_sample(key, payload)
         elif key == DEADLINE:
-            self._on_deadline(payload)
+            self._on_watchdog()
         elif key == ALIVE:
             self._on_alive(payload[1:].decode(), payload[:1] == b"+")
         elif key == STATUS:
@@ -179,7 +186,7 @@ class SimActor:
         if silent and not self._paused:
             self._paused = True
             self._event("pause", "sim", f"no heartbeat from {', '.join(silent)} for a lease; steps held")
-            asyncio.get_running_loop().call_later(0.1, self.node.mailbox.push, PAUSE_CHECK, b"")
+            self._later(0.1, self.node.mailbox.push, PAUSE_CHECK, b"")
         return self._paused
 
     def _silent(self) -> list[str]:
@@ -230,6 +237,10 @@ class SimActor:
             return
         self._publish_step()
 
+    def _on_cmd_sample(self, key: str, payload: bytes) -> None:  # Zenoh's thread (inline) or the loop
+        if (m := self.node.decode(key, payload, Cmd)) is not None:
+            self._on_cmd(self.keys.last_chunk(key), m)
+
     def _on_cmd(self, agent: str, m: Cmd) -> None:
         e = self.epoch
         if e is None or (m.epoch, m.step) != (e.epoch, self.t):
@@ -254,6 +265,32 @@ class SimActor:
                     self.late[a] = self.late.get(a, 0) + 1
                 self.node.log.warning("step %d/%d: no cmd from %s by the deadline; they hold", e.epoch, self.t, missing)
             self._advance()
+
+    def _on_watchdog(self) -> None:
+        """The deadline's watchdog fired (on the loop): the running step is past its deadline, or it re-arms for when
+        the running step will be. One timer an epoch instead of one a step, and none set off the loop."""
+        self._deadline = None
+        e = self.epoch
+        if e is None:
+            return  # between epochs: the next one arms it
+        due = self.cfg.deadline_ms / 1000
+        if not self.held and time.perf_counter() - self.step_started >= due:
+            self._on_deadline(f"{e.epoch}/{self.t}".encode())  # the step ends: a new one, or the epoch's end
+        if self._deadline is None and self.epoch is not None:
+            left = due if self.held else self.step_started + due - time.perf_counter()
+            self._arm(max(left, 0.0))
+
+    def _arm(self, delay: float) -> None:
+        self._deadline = self._later(delay, self.node.mailbox.push, DEADLINE, b"")
+
+    def _later(self, delay: float, fn: Any, *args: Any) -> asyncio.TimerHandle | None:
+        """loop.call_later from the loop, or from Zenoh's thread through the loop (None: the handle is not known)."""
+        try:
+            return asyncio.get_running_loop().call_later(delay, fn, *args)
+        except RuntimeError:  # not on the loop: a command handled on Zenoh's thread
+            if self._loop is not None:
+                self._loop.call_soon_threadsafe(self._loop.call_later, delay, fn, *args)
+            return None
 
     def _on_alive(self, agent: str, up: bool) -> None:
         """Agents never seen stay expected (the baseline's joints have no agent tokens); one that comes
@@ -350,16 +387,12 @@ class SimActor:
         self.step_started = time.perf_counter()
         # Nobody expected (every agent down): the deadline runs the step rather than the joints racing.
         self.waiting = set(self.dof_set - self.down)
-        token = f"{e.epoch}/{self.t}".encode()
-        loop = asyncio.get_running_loop()
-        self._deadline = loop.call_later(self.cfg.deadline_ms / 1000, self.node.mailbox.push, DEADLINE, token)
+        if self._deadline is None:  # the watchdog runs through the epoch (_on_watchdog): armed from the loop
+            self._arm(self.cfg.deadline_ms / 1000)
 
     def _advance(self) -> None:
         e = self.epoch
         assert e is not None
-        if self._deadline is not None:
-            self._deadline.cancel()
-            self._deadline = None
         faults = self.faults
         self.applied = self.scene.move(faults.increments(self.cmds) if faults.moves_changed else self.cmds)
         self.tips = self.world.tip_poses()

@@ -71,8 +71,9 @@ class Run:
 
 
 def test_kill_each_agent_in_turn_restarts_it_from_its_checkpoint(tmp_path, chain4):
-    # long enough that the four kills, 2.5 s apart after epoch 2, all land before the run ends
-    run = Run(tmp_path, chain4, "--epochs", "20", "--steps", "200", "--seed", "5")
+    # long enough that the four kills, 2.5 s apart after epoch 2, all land before the run ends (20 epochs were over
+    # in 14 s once the step messages were handled on Zenoh's thread: 40)
+    run = Run(tmp_path, chain4, "--epochs", "40", "--steps", "200", "--seed", "5")
     run.wait_epochs(2)
     for agent in ("a1", "a2", "a3", "a4"):
         r = run.fault("kill", agent)
@@ -95,7 +96,7 @@ def test_kill_each_agent_in_turn_restarts_it_from_its_checkpoint(tmp_path, chain
     # (a restart takes ~0.5 s, often less than one step deadline, so adoption may not show here;
     # the freeze test below checks it)
     s = run.summary()
-    assert len(s["final_error"]) == 20 and s["restarts"] == {"a1": 1, "a2": 1, "a3": 1, "a4": 1}
+    assert len(s["final_error"]) == 40 and s["restarts"] == {"a1": 1, "a2": 1, "a3": 1, "a4": 1}
     assert all(s["tokens_lost"].get(a, 0) >= 1 for a in ("a1", "a2", "a3", "a4")), s["tokens_lost"]
     assert swarm_pids(str(run.out)) == []
 

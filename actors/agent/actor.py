@@ -66,6 +66,7 @@ class Agent:
         self.spec = topo.agents[agent_id]
         self.geom = geometry_of(topo)
         self.keys = node.keys
+        self._root_len = len(node.keys.root) + 1
         self.is_root = self.spec.parent is None
         # The paper's neighbourhood: an agent sees the agents one level below it (its DOF children).
         self.visible = [c for c in self.spec.children if topo.agents[c].has_dof]
@@ -127,7 +128,7 @@ class Agent:
     async def run(self) -> None:
         node, k = self.node, self.keys
         for s in self.subscriptions():
-            node.listen(s)
+            node.listen(s, inline=self._on_step)
         watch = self.standin.watch()
         try:
             while True:  # a neighbour frozen or restarting is waited for, not a reason to leave (its stall is
@@ -145,39 +146,53 @@ class Agent:
                 watch.undeclare()
 
     async def _loop(self) -> None:
+        """Control on the loop; the step messages on Zenoh's thread as they arrive (Node.listen's `inline`), or here
+        when they had to wait in the mailbox: either way one at a time, under the node's lock."""
         node, k = self.node, self.keys
+        node.serve_inline()
         while True:
-            key, payload = await node.recv()
-            kind = key[len(k.root) + 1 :]
-            if kind.startswith("sim/obs/"):
-                if (m := node.decode(key, payload, Obs)) is not None:
-                    agent = kind[len("sim/obs/") :]
-                    if agent in self.q_in:
-                        self.q_in[agent][(m.epoch, m.step)] = m.q
-                        if m.sense and agent == self.id:
-                            self.sense_in[(m.epoch, m.step)] = m.sense
-                        self._try_begin((m.epoch, m.step))
-            elif kind.endswith("/down") or kind == "sim/task":
-                m2 = node.decode(key, payload, Task if self.is_root else Down)
-                if m2 is not None:
-                    self.head_in[(m2.epoch, m2.step)] = m2
-                    self._try_begin((m2.epoch, m2.step))
-            elif kind.endswith("/up"):
-                if (m3 := node.decode(key, payload, Up)) is not None:
-                    self._on_up(m3, kind[2:-3])
-            elif key == "__alive__":
-                self.standin.on_token(payload.decode())
-            elif kind == "ctl/fault":
-                if (f := node.decode(key, payload, Fault)) is not None:
-                    node.apply_fault(f)
-            elif kind == "ctl/checkpoint":
-                if (m4 := node.decode(key, payload, Checkpoint)) is not None:
-                    await asyncio.to_thread(self.memory.save, m4)
-            elif kind == "ctl/stop":
-                if node.decode(key, payload, Stop) is not None:
-                    node.send(k.rep("bye", self.id), Bye(steps=self.steps_done, rejected=node.rejected))
-                    return
-            # other ctl verbs are for other actors
+            async with node.next() as (key, payload):
+                if self._on_step(key, payload):
+                    continue
+                kind = key[len(k.root) + 1 :]
+                if key == "__alive__":
+                    self.standin.on_token(payload.decode())
+                elif kind == "ctl/fault":
+                    if (f := node.decode(key, payload, Fault)) is not None:
+                        node.apply_fault(f)
+                elif kind == "ctl/checkpoint":
+                    if (m4 := node.decode(key, payload, Checkpoint)) is not None:
+                        await asyncio.to_thread(self.memory.save, m4)  # the lock held: no step meanwhile
+                elif kind == "ctl/stop":
+                    if node.decode(key, payload, Stop) is not None:
+                        node.serve_inline(False)  # no step after the stop
+                        node.send(k.rep("bye", self.id), Bye(steps=self.steps_done, rejected=node.rejected))
+                        return
+                # other ctl verbs are for other actors
+
+    def _on_step(self, key: str, payload: bytes) -> bool:
+        """One step message (obs, task, down, up) handled; False if `key` is not one."""
+        node = self.node
+        kind = key[self._root_len :]
+        if kind.startswith("sim/obs/"):
+            if (m := node.decode(key, payload, Obs)) is not None:
+                agent = kind[8:]  # len("sim/obs/")
+                if agent in self.q_in:
+                    self.q_in[agent][(m.epoch, m.step)] = m.q
+                    if m.sense and agent == self.id:
+                        self.sense_in[(m.epoch, m.step)] = m.sense
+                    self._try_begin((m.epoch, m.step))
+        elif kind.endswith("/down") or kind == "sim/task":
+            m2 = node.decode(key, payload, Task if self.is_root else Down)
+            if m2 is not None:
+                self.head_in[(m2.epoch, m2.step)] = m2
+                self._try_begin((m2.epoch, m2.step))
+        elif kind.endswith("/up"):
+            if (m3 := node.decode(key, payload, Up)) is not None:
+                self._on_up(m3, kind[2:-3])
+        else:
+            return False
+        return True
 
     # -- begin: the top-down pass --------------------------------------------------------------------
     def _try_begin(self, key: Key) -> None:

@@ -2,9 +2,22 @@
 with BLOCK congestion control, readiness (every publisher matched before the liveliness token goes up),
 and clean shutdown.
 
-Zenoh callbacks run on a zenoh-owned thread. They only append `(key, bytes)` to a deque and wake the
-event loop once per burst (`call_soon_threadsafe` per message caps a subscriber near 85k msg/s; one
-wake-up per burst is an order of magnitude cheaper). Everything else happens on the loop.
+Zenoh callbacks run on a zenoh-owned thread. For most keys they only append `(key, bytes)` to a deque and wake
+the event loop once per burst (`call_soon_threadsafe` per message caps a subscriber near 85k msg/s; one wake-up per
+burst is an order of magnitude cheaper), and the loop handles them.
+
+Step messages handled where they arrive (`Node.listen(key, inline=handler)`): an actor may give its step keys a
+handler that runs on Zenoh's delivery thread itself -- decode (MAC and validation as always), the step's logic, the
+next puts -- without waking the loop: the agents' obs, task, down and up, and the sim's commands (the last of which
+moves the robot and publishes the next step). Every handler of an actor runs under its Node's `lock`: the loop takes
+it for each mailbox item (`Node.next()`), a Zenoh thread only tries it. A step message goes to the mailbox instead,
+to be handled by the loop in arrival order, when the lock is busy (the loop is handling something, maybe awaiting a
+checkpoint's save, or another Zenoh thread a step), when something already waits there (nothing is overtaken), while
+a link fault is active (faults are applied on the loop, as below), and before the actor serves (`serve_inline()`).
+Measured on the 4-joint chain in the `process` placement: a step that woke each agent's loop two or three times and
+the sim's up to four times (a command each) now wakes none; 359 -> 535 steps/s (benchmarks/floors.py,
+docs/architecture.md). The loop keeps control, faults, checkpoints and timers; a handler that raises fails the actor
+on its loop (`next()` raises it).
 
 Local delivery (the `single` placement): step messages (keys under `sim/` and `a/`) that a Node sends
 are handed straight to the Nodes of the same session that listen on them — still encoded, signed and

@@ -36,6 +36,17 @@ class Mailbox:
         if was_empty:
             self._ready.set()
 
+    async def wait(self) -> None:
+        """Until an item is in (only the loop pops, so it stays until popped)."""
+        while not self._items:
+            self._ready.clear()
+            if self._items:  # pushed between the check and the clear
+                return
+            await self._ready.wait()
+
+    def pop(self) -> tuple[str, bytes]:
+        return self._items.popleft()
+
     async def get(self) -> tuple[str, bytes]:
         while not self._items:
             self._ready.clear()

@@ -5,11 +5,13 @@ link faults, and clean shutdown. The package's doc (__init__.py) says how messag
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import dataclasses
 import logging
 import random
+import threading
 import time
-from collections.abc import Callable, Iterable
+from collections.abc import AsyncIterator, Callable, Iterable
 from dataclasses import dataclass
 from typing import Any, TypeVar
 
@@ -28,6 +30,7 @@ M = TypeVar("M")
 
 
 LINK_COUNTS = ("dropped", "delayed", "duplicated", "corrupted")
+FAILED = "__failed__"  # the mailbox item that wakes the loop when an inline step handler raised (no Zenoh key)
 
 
 @dataclass
@@ -70,6 +73,13 @@ class Node:
         self.link_counts: dict[str, int] = dict.fromkeys(LINK_COUNTS, 0)  # what the faults did, for reports
         self.on_fault_expired: Callable[[str], None] | None = None  # told the description when one expires
         self._bus = _bus(session)
+        # Step handlers on Zenoh's thread (listen(..., inline=)): whoever runs this actor's handlers holds the lock --
+        # the loop (next()) or a Zenoh thread; `inline` is off until the actor's loop serves (serve_inline)
+        self.lock = threading.Lock()
+        self.inline = False
+        self._loop_holds = False  # the loop holds `lock` (in next()); only the loop reads or writes this
+        self.inline_handled = 0  # step messages handled on a Zenoh thread (the rest went through the mailbox)
+        self._failure: BaseException | None = None  # what an inline handler raised, for the loop to raise
 
     # -- sending ---------------------------------------------------------------------------------
     def publisher(self, key: str) -> Any:
@@ -106,21 +116,84 @@ class Node:
             self._emit(key, payload)
 
     # -- receiving -------------------------------------------------------------------------------
-    def listen(self, key_expr: str) -> None:
+    def listen(self, key_expr: str, inline: Callable[[str, bytes], None] | None = None) -> None:
+        """Subscribe `key_expr` into the mailbox. `inline`: a step key's handler, run on Zenoh's delivery thread
+        itself, under `lock`, when the actor serves inline, nothing waits in the mailbox (order is kept) and no link
+        fault is active; otherwise the message waits in the mailbox and the loop hands it to the same dispatch."""
         push = self.mailbox.push
+        step = key_expr.startswith(self._step_prefixes)
 
-        def on_sample(s: Any) -> None:  # zenoh thread
-            if self._link_faults:
-                self._receive_faulty(str(s.key_expr), s.payload.to_bytes())
-            else:
-                push(str(s.key_expr), s.payload.to_bytes())
+        if inline is not None and step:
+            lock, items = self.lock, self.mailbox._items
 
-        if key_expr.startswith(self._step_prefixes):  # this session's Nodes deliver here directly (_emit)
+            def on_sample(s: Any) -> None:  # zenoh thread
+                key, payload = str(s.key_expr), s.payload.to_bytes()
+                if self._link_faults:
+                    self._receive_faulty(key, payload)
+                elif self.inline and lock.acquire(False):  # busy (the loop, or another Zenoh thread): mailbox
+                    try:
+                        if items or self._link_faults or not self.inline or self._closed:
+                            push(key, payload)
+                        else:
+                            self.inline_handled += 1
+                            inline(key, payload)
+                    except BaseException as e:  # next() raises it on the loop
+                        self._fail(e)
+                    finally:
+                        lock.release()
+                else:
+                    push(key, payload)
+
+        else:
+
+            def on_sample(s: Any) -> None:  # zenoh thread
+                if self._link_faults:
+                    self._receive_faulty(str(s.key_expr), s.payload.to_bytes())
+                else:
+                    push(str(s.key_expr), s.payload.to_bytes())
+
+        if step:  # this session's Nodes deliver here directly (_emit)
             self._bus.add(key_expr, self)
             sub = self.session.declare_subscriber(key_expr, on_sample, allowed_origin=zenoh.Locality.REMOTE)
         else:
             sub = self.session.declare_subscriber(key_expr, on_sample)
         self._subs.append(sub)
+
+    def _fail(self, e: BaseException) -> None:  # zenoh thread, lock held
+        if self._failure is None:
+            self._failure = e
+            self.inline = False
+        self.mailbox.push(FAILED, b"")  # wakes the loop, which raises it
+
+    def serve_inline(self, on: bool = True) -> None:
+        """From now on step handlers given to listen() may run on Zenoh's thread (`on`), or no longer (once this
+        returns, none runs). Call it on the loop: on once the actor dispatches (what arrived before waits in the
+        mailbox and goes first), off before what the handlers touch goes away."""
+        if on or self._loop_holds:  # the loop holds the lock (a handler of its own, maybe suspended): none runs
+            self.inline = on
+            return
+        got = self.lock.acquire(timeout=5.0)  # an inline handler in flight finishes first
+        self.inline = False
+        if got:
+            self.lock.release()
+
+    @contextlib.asynccontextmanager
+    async def next(self) -> AsyncIterator[tuple[str, bytes]]:
+        """The next mailbox item, with `lock` held while the caller handles it (the one way into an actor whose step
+        handlers may run on Zenoh's thread: the two never run at once, and nothing queued is overtaken). A handler
+        may await (the lock stays held); if it raises or is cancelled, the actor is leaving: inline handling ends."""
+        await self.mailbox.wait()
+        with self.lock:  # at most one inline handler long (a Zenoh thread only tries it)
+            self._loop_holds = True
+            try:
+                if self._failure is not None:  # an inline handler raised: the actor fails as if its loop had
+                    raise self._failure
+                yield self.mailbox.pop()
+            except BaseException:
+                self.inline = False
+                raise
+            finally:
+                self._loop_holds = False
 
     def _deliver_local(self, key: str, payload: bytes) -> None:  # the sending Node's thread
         if self._closed:
@@ -272,6 +345,7 @@ class Node:
         self._token = self.session.liveliness().declare_token(self.keys.alive(self.role, self.ident))
 
     def close(self) -> None:
+        self.serve_inline(False)
         if not self._closed:
             self._bus.remove(self)
             self._bus.nodes -= 1
