@@ -4,8 +4,9 @@
 
 Each repeat is a full `kinswarm run` (learning on, the real PyBullet world, real Zenoh sessions);
 steps/s is taken from the simulator's per-epoch timing (startup excluded), first epoch dropped as
-warm-up. The wire floor is `../shared/tools/wire_floor.py` (a bare relay down and up a chain of
-processes): the fastest any step can go here. Quote medians and ratios; these machines are noisy.
+warm-up. The wire floor is benchmarks/wire_floor.py (a bare relay down and up a chain of processes):
+the fastest any step can go here. Quote medians and ratios; these machines are noisy.
+benchmarks/floors.py prints the same rows with the in-process floor and every ratio as one table.
 """
 
 from __future__ import annotations
@@ -24,7 +25,7 @@ from kinswarm.actors.cli import _resolve, build_parser
 from kinswarm.actors.launch import run_swarm
 
 ROOT = Path(__file__).resolve().parent.parent
-FLOOR = ROOT.parent / "shared" / "tools" / "wire_floor.py"
+FLOOR = Path(__file__).resolve().parent / "wire_floor.py"
 
 
 def free_port() -> int:
@@ -60,17 +61,15 @@ def swarm_rate(placement: str, epochs: int, steps: int, seed: int) -> float:
     return sum(r["steps"] for r in rows) / sum(r["seconds"] for r in rows)
 
 
-def wire_floor(mode: str) -> float | None:
-    if not FLOOR.exists():
-        return None
-    out = subprocess.run(
-        [sys.executable, str(FLOOR), "--n", "4", "--passes", "2000", "--mode", mode],
-        capture_output=True,
-        text=True,
-        timeout=300,
-    ).stdout
-    m = re.search(r"= ~(\d+) steps/s", out)
-    return float(m.group(1)) if m else None
+def wire_floor(mode: str, passes: int = 2000, attempts: int = 3) -> float | None:
+    """Steps/s of the wire floor on a chain of 4 processes (chain4's depth); None if every attempt failed."""
+    for _ in range(attempts):  # the chain takes port..port+3: a free first port makes a clash unlikely, not impossible
+        port = str(free_port())
+        cmd = [sys.executable, str(FLOOR), "--n", "4", "--passes", str(passes), "--mode", mode, "--port", port]
+        out = subprocess.run(cmd, capture_output=True, text=True, timeout=600).stdout
+        if m := re.search(r"= ~(\d+) steps/s", out):
+            return float(m.group(1))
+    return None
 
 
 def main() -> None:

@@ -1,0 +1,123 @@
+"""The 4-joint chain's step rate next to its floors, all measured in one sitting, as one table.
+
+    python benchmarks/floors.py [--repeats 3] [--epochs 3] [--steps 500] [--passes 2000] [--json out.json]
+
+Rows (medians over the repeats, each repeat runs every row once, interleaved, so drift on a shared machine
+hits every row alike):
+  process        `kinswarm run examples/chain4.toml --placement process`: one OS process per agent plus the
+                 simulator, real Zenoh sessions, learning on, the real PyBullet world (step_rate.swarm_rate)
+  single         the same run with every actor in one process sharing one session
+  wire (async)   benchmarks/wire_floor.py --mode async: a bare msgpack relay down and up a chain of 4 processes
+                 over Zenoh, asyncio bridge; steps/s = one pass per 2*depth + 2 hops, as a swarm step needs
+  wire (block)   the same with a blocking FifoChannel receive: the fastest any step can cross the wire here
+  in-process     the same four learners (Learner.decide/observe, the run's settings and seeds) and the planar
+                 kinematics (sim/kinematics.py) in a plain loop: no messages, no processes, no PyBullet —
+                 what the step costs in computation alone
+Ratios are each rate over a floor's median. Steps/s of a swarm come from the simulator's per-epoch timing with
+the first epoch dropped (warm-up); the in-process loop is timed the same way.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import sys
+import time
+from pathlib import Path
+
+from kinswarm.actors.agent.actor import agent_seed
+from kinswarm.actors.learning import state
+from kinswarm.actors.learning.learner import Learner
+from kinswarm.actors.runfile import learner_settings, load_run, task_of
+from kinswarm.protocol.messages import Task
+from kinswarm.sim import kinematics
+from step_rate import ROOT, swarm_rate, wire_floor  # benchmarks/ is this script's directory, so first on sys.path
+
+CHAIN4 = ROOT / "examples" / "chain4.toml"
+
+
+def inprocess_rate(epochs: int, steps: int, seed: int) -> float:
+    """The chain's learners and kinematics in a plain loop, as the swarm computes a step: the root turns the
+    observation into the goal and the reward, each agent composes its state, observes its children's actions of the
+    step before (carried by their `up`), decides, and the joints move by the chosen increments within their limits."""
+    cfg = load_run(CHAIN4, [f"run.seed={seed}"])
+    topo, task = cfg.topo(), task_of(cfg)
+    settings = learner_settings(task, cfg.learner, cfg.source)
+    dof = topo.dof_agents
+    visible = {a: [c for c in topo.agents[a].children if topo.agents[c].has_dof] for a in dof}
+    learners = {a: Learner(settings[a], len(visible[a]), agent_seed(cfg.seed, a)) for a in dof}
+    if any(s.extra_state for s in settings.values()):
+        raise SystemExit("the in-process floor computes the planar state only; chain4's learners have extra variables")
+    tip_of = {a: topo.subtree_leaves(a)[0] for a in dof}  # a chain: one end effector below every agent
+    head = task.agent(topo.root, settings[topo.root])
+    order = [a for a in reversed(topo.order) if a in learners]  # leaves first, as the up pass
+    limits = {a: topo.agents[a].limits for a in dof}
+    seconds, done = 0.0, 0
+    for epoch in range(epochs):
+        angles = topo.initial_angles()
+        goal, _ = task.goal(epoch, steps)
+        for learner in learners.values():
+            learner.start_epoch(epoch)
+        head.start_epoch()
+        before: dict[str, int] | None = None
+        t0 = time.perf_counter()
+        for step in range(steps):
+            joints, ends = kinematics._walk(topo, angles)
+            tips = {leaf: ends[leaf] for leaf in topo.end_effectors}
+            h = head.head(Task(epoch=epoch, step=step, goal=goal, tips=tips, sense={}))
+            acts: dict[str, int] = {}
+            for a in order:
+                s = state.agent_state(joints[a], angles[a], tips[tip_of[a]], h.goal, settings[a].g3 == "unsigned")
+                if visible[a] and before is not None:
+                    learners[a].observe([before[c] for c in visible[a]], learn=cfg.learn)
+                acts[a] = learners[a].decide(s, h.reward, learn=cfg.learn, explore=cfg.explore)
+                if not visible[a]:
+                    learners[a].observe([], learn=cfg.learn)
+            for a in dof:
+                lo, hi = limits[a]
+                angles[a] = min(hi, max(lo, angles[a] + (acts[a] - 1) * cfg.action_rad))
+            before = acts
+        if epoch > 0 or epochs == 1:  # the first epoch warms caches, as in the swarm's rate
+            seconds += time.perf_counter() - t0
+            done += steps
+    return done / seconds
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--epochs", type=int, default=3)
+    ap.add_argument("--steps", type=int, default=500)
+    ap.add_argument("--passes", type=int, default=2000, help="round trips per wire floor measurement")
+    ap.add_argument("--json", type=Path, default=None)
+    a = ap.parse_args()
+    names = ("process", "single", "wire (async)", "wire (block)", "in-process")
+    rows: dict[str, list[float]] = {name: [] for name in names}
+    for r in range(a.repeats):
+        for name in rows:
+            if name in ("process", "single"):
+                v = swarm_rate(name, a.epochs, a.steps, seed=r)
+            elif name.startswith("wire"):
+                v = wire_floor(name[6:-1], a.passes)
+                if v is None:
+                    raise SystemExit(f"benchmarks/wire_floor.py --mode {name[6:-1]} failed")
+            else:
+                v = inprocess_rate(a.epochs, a.steps, seed=r)
+            rows[name].append(v)
+            print(f"  repeat {r + 1}/{a.repeats}: {name:13} {v:8.0f} steps/s", file=sys.stderr, flush=True)
+    med = {k: statistics.median(v) for k, v in rows.items()}
+    floors = ("wire (block)", "wire (async)", "in-process")
+    print(f"4-joint chain (examples/chain4.toml), {a.repeats} repeats, swarms {a.epochs} epochs x {a.steps} steps")
+    head = f"{'':14}{'median':>9}{'min':>9}{'max':>9}" + "".join(f"{'/ ' + f:>16}" for f in floors)
+    print(head)
+    for name, v in rows.items():
+        ratios = "".join(f"{med[name] / med[f]:16.2f}" for f in floors)
+        print(f"{name:14}{med[name]:9.0f}{min(v):9.0f}{max(v):9.0f}{ratios}")
+    print("steps/s; ratios of medians. Target: process >= 0.8 x wire (block).")
+    if a.json:
+        a.json.write_text(json.dumps({"rows": rows, "median": med, "args": vars(a) | {"json": str(a.json)}}, indent=2))
+
+
+if __name__ == "__main__":
+    main()
