@@ -39,9 +39,9 @@ STEPS = 400
 # 128 goals x 3 passes 89 %; q out of the state 78 %, g_perp in 11 sets 96 % / 90 % (400 steps, seed 1: 92 / 86).
 TRAIN_GOALS, PASSES = 96, 4
 QUICK_TRAINING = (6, 2)
-# The controls (untrained, blind) and the pose protocol run on this many seeds (the first), for the machine's time:
-# the trained swarm's points, the claim, run on every seed of --seeds.
-CONTROL_SEEDS = 1
+# The controls (untrained, blind) and the pose protocol run on this many seeds (the first), if the machine's time is
+# short: the trained swarm's points, the claim, run on every seed of --seeds.
+CONTROL_SEEDS = 3
 TEST = 100
 SETS = {"A": 2000, "B": 3000}  # sampling seeds of the two test sets (training: 1000)
 MARGIN = 0.9  # goals and starts within this share of every joint's range, about its middle
@@ -137,9 +137,8 @@ def run(ctx: Context) -> dict[str, Any]:
         f"about its middle, so far goals and goals behind the base occur), kept {MIN_Z * 100:.0f} cm or more above "
         "the base's plane; start poses are other random configurations. Two disjoint test sets ('A', 'B') check "
         f"that a number does not hang on its set. Training: {TRAIN_GOALS} goals x {PASSES} passes in a seeded order, "
-        f"{steps} steps an episode, tests as long. The controls and the poses run on the first {CONTROL_SEEDS} "
-        "seed(s) only, and the poses on set A only (the machine's time); the trained swarm on points runs on every "
-        "seed.",
+        f"{steps} steps an episode, tests as long. The controls and the poses run on the first "
+        f"{min(CONTROL_SEEDS, ctx.seeds)} seed(s), the poses on set A only (the machine's time).",
     )
     rep.results = {}
     all_runs: list[RunOutcome] = []
