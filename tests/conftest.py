@@ -92,3 +92,25 @@ def urdf_robot(table: dict):
     from kinswarm.protocol.topology import parse_robot
 
     return parse_robot(dict(table), "/tmp/x.toml")
+
+
+def fault_message(kind: str, *targets: str, **params: Any) -> Any:
+    """A Fault message with only the given sizes set (the rest None)."""
+    from kinswarm.protocol.messages import Fault
+
+    fields = dict.fromkeys(("seconds", "steps", "rate", "ms", "amplitude_deg")) | params
+    return Fault(id="t", fault=kind, targets=list(targets), **fields)
+
+
+@pytest.fixture
+def sessions(endpoint: str) -> Any:
+    """Two Zenoh sessions on loopback, the second connected to the first; both closed after the test."""
+    from kinswarm.actors.runtime import open_session
+
+    a = open_session(listen=[endpoint])
+    b = open_session(connect=[endpoint])
+    try:
+        yield a, b
+    finally:
+        b.close()
+        a.close()

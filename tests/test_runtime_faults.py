@@ -9,11 +9,11 @@ from __future__ import annotations
 import asyncio
 import math
 import time
-from collections.abc import Iterator
 
 import pytest
 import zenoh
-from kinswarm.actors.runtime import Node, open_session
+from conftest import fault_message
+from kinswarm.actors.runtime import Node
 from kinswarm.protocol import codec
 from kinswarm.protocol.keys import Keys
 from kinswarm.protocol.messages import Cmd, EpochStart, Fault
@@ -27,20 +27,7 @@ CTL = KEYS.ctl("epoch")  # a control key: never faulted
 
 
 def fault(kind: str, target: str = "a2", **params: float | None) -> Fault:
-    fields = dict.fromkeys(("seconds", "steps", "rate", "ms", "amplitude_deg"))
-    fields.update(params)
-    return Fault(id="t", fault=kind, targets=[target], **fields)  # type: ignore[arg-type]
-
-
-@pytest.fixture
-def sessions(endpoint: str) -> Iterator[tuple[zenoh.Session, zenoh.Session]]:
-    a = open_session(listen=[endpoint])
-    b = open_session(connect=[endpoint])
-    try:
-        yield a, b
-    finally:
-        b.close()
-        a.close()
+    return fault_message(kind, target, **params)
 
 
 async def wire(sessions: tuple[zenoh.Session, zenoh.Session], sender: str = "a2") -> tuple[Node, Node]:

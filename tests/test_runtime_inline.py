@@ -10,16 +10,15 @@ import asyncio
 import logging
 import threading
 import time
-from collections.abc import Iterator
 from typing import Any
 
 import pytest
 import zenoh
-from conftest import run_config
-from kinswarm.actors.runtime import Mailbox, Node, open_session
+from conftest import fault_message, run_config
+from kinswarm.actors.runtime import Mailbox, Node
 from kinswarm.protocol import codec
 from kinswarm.protocol.keys import Keys
-from kinswarm.protocol.messages import Cmd, EpochStart, Fault, Stop
+from kinswarm.protocol.messages import Cmd, EpochStart, Stop
 from kinswarm.sim.actor import DEADLINE, SimActor
 
 pytestmark = pytest.mark.timeout(60)
@@ -30,21 +29,7 @@ STEP = KEYS.cmd("a2")  # sim/cmd/a2: a step key
 STOP = KEYS.ctl("stop")  # a control key: always the loop's
 
 
-def fault(kind: str, target: str, **params: float | None) -> Fault:
-    fields = dict.fromkeys(("seconds", "steps", "rate", "ms", "amplitude_deg"))
-    fields.update(params)
-    return Fault(id="t", fault=kind, targets=[target], **fields)  # type: ignore[arg-type]
-
-
-@pytest.fixture
-def sessions(endpoint: str) -> Iterator[tuple[zenoh.Session, zenoh.Session]]:
-    a = open_session(listen=[endpoint])
-    b = open_session(connect=[endpoint])
-    try:
-        yield a, b
-    finally:
-        b.close()
-        a.close()
+fault = fault_message
 
 
 class Receiver:

@@ -13,7 +13,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from conftest import run_config
+from conftest import fault_message, run_config
 from kinswarm.actors.config import RunConfig
 from kinswarm.actors.runtime import Mailbox, Node, open_session
 from kinswarm.protocol.keys import Keys
@@ -77,9 +77,7 @@ def make_sim(tmp_path: Path, chain4: Path, *, seed: int = 0, scenario: str | Non
     return _made[-1]
 
 
-def fault(kind: str, *targets: str, **kw: Any) -> Fault:
-    args = dict.fromkeys(("seconds", "steps", "rate", "ms", "amplitude_deg")) | kw
-    return Fault(id="f", fault=kind, targets=list(targets), **args)
+fault = fault_message
 
 
 def step(sim: SimActor, delta: float = DEG, skip: tuple[str, ...] = ()) -> dict[str, float]:
