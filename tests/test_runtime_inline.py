@@ -211,6 +211,42 @@ def test_while_the_loop_holds_the_lock_step_messages_wait_and_keep_their_order(s
     asyncio.run(body())
 
 
+def test_in_one_session_a_step_message_is_handled_within_the_send_unless_it_must_wait(sessions):
+    """The `single` placement: a Node of the same session hands a step message straight to the receiver's handler,
+    which has run when send() returns (no round trip through the loop); while the receiver's loop holds its lock
+    they wait in the mailbox, in order, and once it is empty again the next is handled within the send."""
+
+    async def body() -> None:
+        tx = Node(sessions[0], KEYS, "agent", "a2", KEY)
+        rx = Receiver(sessions[0])  # the same session: local delivery
+        await tx.wait_matched([STEP, STOP], timeout=10.0)
+        serving = asyncio.create_task(rx.serve(hold=0.5))
+        try:
+            await asyncio.sleep(0.05)
+            for i in range(50):
+                tx.send(STEP, Cmd(epoch=0, step=i, delta=0.0))
+                assert [s for s, _, _ in rx.handled] == list(range(i + 1)), "not handled within the send"
+            assert rx.node.inline_handled == 50
+            tx.send(STOP, Stop(reason="test"))  # the loop takes it and holds the lock for 0.5 s
+            await until(lambda: rx.node._loop_holds)
+            for i in range(50, 60):
+                tx.send(STEP, Cmd(epoch=0, step=i, delta=0.0))
+            assert len(rx.handled) == 50, "a step handler ran while the loop held the lock"
+            await until(lambda: len(rx.handled) == 60)
+            assert [s for s, _, _ in rx.handled] == list(range(60))
+            tx.send(STEP, Cmd(epoch=0, step=60, delta=0.0))
+            assert [s for s, _, _ in rx.handled] == list(range(61))
+            assert rx.node.inline_handled == 51 and rx.overlaps == 0
+            tx.send(STOP, Stop(reason="test"))
+            await asyncio.wait_for(serving, 10.0)
+        finally:
+            serving.cancel()
+            tx.close()
+            rx.node.close()
+
+    asyncio.run(body())
+
+
 def test_a_failing_inline_handler_fails_the_actor_on_its_loop_and_nothing_runs_after(sessions):
     async def body() -> None:
         tx, rx = await wire(sessions)

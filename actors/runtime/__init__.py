@@ -23,8 +23,11 @@ Local delivery (the `single` placement): step messages (keys under `sim/` and `a
 are handed straight to the Nodes of the same session that listen on them — still encoded, signed and
 decoded by the receiver like any other message, and still faulted — instead of a round trip through
 Zenoh's local routing, whose delivery threads run the subscriber callback, take the GIL from the event
-loop and wake it through its self-pipe (measured: ~2/3 of a single-placement step). Zenoh still carries
-every such message to the other sessions (other processes, observers, `kinswarm` tools) and to
+loop and wake it through its self-pipe (measured: ~2/3 of a single-placement step). A receiver's step handler
+runs within the send, under its lock, on the same terms as on Zenoh's thread (serving inline, nothing waiting, no
+link fault; else the mailbox): a step crosses the actors of one process as calls, down the tree and, where a
+handler is busy further up, through the mailbox (chain4, single: 2183 -> ~2770 steps/s, benchmarks/floors.py).
+Zenoh still carries every such message to the other sessions (other processes, observers, `kinswarm` tools) and to
 non-Node subscribers of the same session; a Node's step subscriptions hear only other sessions through
 Zenoh (`allowed_origin=REMOTE`), so nothing arrives twice.
 

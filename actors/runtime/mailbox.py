@@ -5,12 +5,15 @@ from __future__ import annotations
 
 import asyncio
 import collections
+from collections.abc import Callable
 from typing import TYPE_CHECKING
 
 import zenoh
 
 if TYPE_CHECKING:
     from .node import Node
+
+Handler = Callable[[str, bytes], None]  # a step handler: (key, payload)
 
 
 class Mailbox:
@@ -64,25 +67,26 @@ class LocalBus:
 
     def __init__(self) -> None:
         self.nodes = 0  # open Nodes on the session; the bus goes with the last
-        self._listeners: list[tuple[zenoh.KeyExpr, Node]] = []
-        self._routes: dict[str, tuple[Node, ...]] = {}  # key -> its listeners, one entry per matching listen
+        # (key expression, listening Node, its step handler for the key if it has one: Node.listen's `inline`)
+        self._listeners: list[tuple[zenoh.KeyExpr, Node, Handler | None]] = []
+        self._routes: dict[str, tuple[tuple[Node, Handler | None], ...]] = {}  # key -> one entry per matching listen
 
-    def add(self, key_expr: str, node: Node) -> None:
-        self._listeners.append((zenoh.KeyExpr(key_expr), node))
+    def add(self, key_expr: str, node: Node, inline: Handler | None = None) -> None:
+        self._listeners.append((zenoh.KeyExpr(key_expr), node, inline))
         self._routes.clear()
 
     def remove(self, node: Node) -> None:
-        self._listeners = [(e, n) for e, n in self._listeners if n is not node]
+        self._listeners = [(e, n, h) for e, n, h in self._listeners if n is not node]
         self._routes.clear()
 
     def __bool__(self) -> bool:
         return bool(self._listeners)
 
-    def route(self, key: str) -> tuple[Node, ...]:
+    def route(self, key: str) -> tuple[tuple[Node, Handler | None], ...]:
         nodes = self._routes.get(key)
         if nodes is None:
             k = zenoh.KeyExpr(key)
-            nodes = self._routes[key] = tuple(n for e, n in self._listeners if e.intersects(k))
+            nodes = self._routes[key] = tuple((n, h) for e, n, h in self._listeners if e.intersects(k))
         return nodes
 
 

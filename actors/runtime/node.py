@@ -108,8 +108,8 @@ class Node:
         """Put on Zenoh (other sessions, observers); hand a step message to this session's listening Nodes."""
         self.publisher(key).put(payload)
         if self._bus:
-            for node in self._bus.route(key) if key.startswith(self._step_prefixes) else ():
-                node._deliver_local(key, payload)
+            for node, inline in self._bus.route(key) if key.startswith(self._step_prefixes) else ():
+                node._deliver_local(key, payload, inline)
 
     def _put_late(self, key: str, payload: bytes) -> None:
         if not self._closed:
@@ -122,27 +122,16 @@ class Node:
         fault is active; otherwise the message waits in the mailbox and the loop hands it to the same dispatch."""
         push = self.mailbox.push
         step = key_expr.startswith(self._step_prefixes)
+        handler = inline if step else None
 
-        if inline is not None and step:
-            lock, items = self.lock, self.mailbox._items
+        if handler is not None:
 
             def on_sample(s: Any) -> None:  # zenoh thread
                 key, payload = str(s.key_expr), s.payload.to_bytes()
                 if self._link_faults:
                     self._receive_faulty(key, payload)
-                elif self.inline and lock.acquire(False):  # busy (the loop, or another Zenoh thread): mailbox
-                    try:
-                        if items or self._link_faults or not self.inline or self._closed:
-                            push(key, payload)
-                        else:
-                            self.inline_handled += 1
-                            inline(key, payload)
-                    except BaseException as e:  # next() raises it on the loop
-                        self._fail(e)
-                    finally:
-                        lock.release()
                 else:
-                    push(key, payload)
+                    self._handle(key, payload, handler, push)
 
         else:
 
@@ -153,11 +142,29 @@ class Node:
                     push(str(s.key_expr), s.payload.to_bytes())
 
         if step:  # this session's Nodes deliver here directly (_emit)
-            self._bus.add(key_expr, self)
+            self._bus.add(key_expr, self, handler)
             sub = self.session.declare_subscriber(key_expr, on_sample, allowed_origin=zenoh.Locality.REMOTE)
         else:
             sub = self.session.declare_subscriber(key_expr, on_sample)
         self._subs.append(sub)
+
+    def _handle(self, key: str, payload: bytes, handler: Callable[[str, bytes], None], push: Any) -> None:
+        """Run a step handler here and now, under `lock`, when the actor serves inline, nothing waits in the mailbox
+        (order is kept) and no link fault is active; else into the mailbox (`push`) for the loop. Zenoh's thread, or
+        the thread of a Node of the same session that sent it (local delivery)."""
+        if self.inline and self.lock.acquire(False):  # busy (the loop, another thread, this very handler): mailbox
+            try:
+                if self.mailbox._items or self._link_faults or not self.inline or self._closed:
+                    push(key, payload)
+                else:
+                    self.inline_handled += 1
+                    handler(key, payload)
+            except BaseException as e:  # next() raises it on the loop
+                self._fail(e)
+            finally:
+                self.lock.release()
+        else:
+            push(key, payload)
 
     def _fail(self, e: BaseException) -> None:  # zenoh thread, lock held
         if self._failure is None:
@@ -195,16 +202,23 @@ class Node:
             finally:
                 self._loop_holds = False
 
-    def _deliver_local(self, key: str, payload: bytes) -> None:  # the sending Node's thread
+    def _deliver_local(self, key: str, payload: bytes, inline: Callable[[str, bytes], None] | None) -> None:
+        """A step message from a Node of the same session (the sending Node's thread): handled at once when `inline`
+        may run (`_handle`: a step crosses the actors of one process as calls, no mailbox round trip on the loop),
+        else into the mailbox."""
         if self._closed:
             return
         if asyncio._get_running_loop() is not self._loop:  # another loop or thread: as from Zenoh
             if self._link_faults:
                 self._receive_faulty(key, payload)
+            elif inline is not None:
+                self._handle(key, payload, inline, self.mailbox.push)
             else:
                 self.mailbox.push(key, payload)
         elif self._link_faults:
             self._deliver_faulty(key, payload)
+        elif inline is not None:
+            self._handle(key, payload, inline, self.mailbox.push_local)
         else:
             self.mailbox.push_local(key, payload)
 
