@@ -28,7 +28,7 @@ from kinswarm.actors.config import RunConfig
 from kinswarm.actors.learning.settings import LearnerSettings
 from kinswarm.actors.report import read_metrics, write_summary
 from kinswarm.actors.runfile import read_run_file, resolve, write_resolved
-from kinswarm.actors.runtime import open_session
+from kinswarm.actors.runtime import open_session, tap
 from kinswarm.actors.supervisor import RunResult, SinglePlacement, Supervisor
 from kinswarm.protocol import codec
 from kinswarm.protocol.keys import Keys
@@ -208,12 +208,12 @@ async def _supervise(
     captured: list[tuple[str, bytes]] = []
     subs = []
 
-    def keep(sample: Any) -> None:  # zenoh thread: only append; decoded after the run
-        captured.append((str(sample.key_expr), sample.payload.to_bytes()))
+    def keep(key: str, payload: bytes) -> None:  # the sender's thread or Zenoh's: only append; decoded after the run
+        captured.append((key, payload))
 
     keys = Keys(cfg.run_id)
     exprs = [*((keys.task, keys.obs("*")) if observe else ()), *record]
-    subs = [session.declare_subscriber(key, keep) for key in exprs]  # before any actor exists: no step missed
+    subs = [tap(session, key, keep) for key in exprs]  # before any actor exists: no step missed
     sup = Supervisor(cfg, topo, session, SinglePlacement(cfg, topo, session))
     try:
         result = await sup.run()

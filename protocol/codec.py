@@ -180,14 +180,14 @@ def _fast_field(name: str, tp: Any, lines: list[str]) -> bool:
         items = ", ".join(f"{x}{i}" for i in range(n))
         checks = " and ".join(finite.format(x=f"{x}{i}") for i in range(n))
         return [
-            f"if type({x}) is not list or len({x}) != {n}: return None",
+            f"if type({x}) not in seq or len({x}) != {n}: return None",
             f"{items}{',' if n == 1 else ''} = {x}",
             f"if not ({checks}): return None",
         ]
 
     def coords(x: str) -> list[str]:  # Coords: one of COORD_SIZES finite floats
         return [
-            f"if type({x}) is not list or len({x}) not in {messages.COORD_SIZES!r}: return None",
+            f"if type({x}) not in seq or len({x}) not in {messages.COORD_SIZES!r}: return None",
             f"for c in {x}:",
             f"    if not ({finite.format(x='c')}): return None",
         ]
@@ -221,6 +221,7 @@ def _fast_field(name: str, tp: Any, lines: list[str]) -> bool:
         lines.append(f"if type({name}) is not dict: return None")
         lines.append(f"for k, v in {name}.items():")
         lines.append(f"    if type(k) is not str or not is_name(k) or not ({finite.format(x='v')}): return None")
+        lines.append(f"{name} = dict({name}) if {name} else {{}}")  # the receiver's own (local(): not the sender's)
     elif origin is dict and get_args(tp)[0] is str and (n := vec_len(get_args(tp)[1])) is not None:
         lines.append(f"if type({name}) is not dict: return None")
         lines.append(f"for k, v in {name}.items():")
@@ -253,7 +254,8 @@ def _fast(cls: type) -> Any:
     # what the dataclass __init__ does, without its per-field object.__setattr__ (the messages are frozen)
     lines += ["m = new(cls)", "d = m.__dict__", *(f"d[{k!r}] = {k}" for k in hints), "return m"]
     src = "def fast(b, run):\n" + "".join(f"    {line}\n" for line in lines)
-    scope: dict[str, Any] = {"new": object.__new__, "cls": cls, "is_name": _is_name}
+    # seq: msgpack gives lists; local() hands in the sender's tuples
+    scope: dict[str, Any] = {"new": object.__new__, "cls": cls, "is_name": _is_name, "seq": (list, tuple)}
     exec(compile(src, f"<codec fast path for {cls.__name__}>", "exec"), scope)
     return scope["fast"]
 
@@ -301,6 +303,20 @@ def decode(payload: bytes, expect: type[M], run: str, key: bytes) -> M:
             raise DecodeError(f"missing field {name!r}")
         fields[name] = check(body[name], name)
     return expect(**fields)
+
+
+def local(msg: M, run: str, src: str) -> M | None:
+    """`msg` as a receiver in the sender's own process gets it, no bytes in between: checked as `decode` checks a
+    body (the same generated fast path, on the same fields and envelope), into a message of its own (fresh tuples
+    and maps). None when the fast path cannot tell (a field it leaves to the general path, e.g. a numpy float, or a
+    message it would refuse): the caller encodes and decodes it then, for the same message or the same reason."""
+    cls = type(msg)
+    fast = _fast(cls)
+    if fast is None:
+        return None
+    body = dict(msg.__dict__)
+    body.update(v=SCHEMA_VERSION, kind=cls.KIND, run=run, src=src)  # type: ignore[attr-defined]
+    return fast(body, run)
 
 
 def sender(payload: bytes) -> str:

@@ -1,5 +1,5 @@
 """Local delivery: step messages between Nodes of one session skip Zenoh's local routing (runtime.py),
-yet arrive exactly once, still reach other sessions and non-Node subscribers, and still get faulted."""
+yet arrive exactly once, still reach other sessions and taps, and still get faulted."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import asyncio
 import time
 
 import pytest
-from kinswarm.actors.runtime import Node, open_session
+from kinswarm.actors.runtime import Local, Node, open_session, tap
 from kinswarm.protocol.keys import Keys
 from kinswarm.protocol.messages import Cmd, EpochStart, Fault
 
@@ -42,7 +42,9 @@ def test_local_nodes_hear_each_other_once_and_others_still_hear_them(endpoint):
             for n in (rx, far):
                 n.listen(KEYS.cmd_all)
                 n.listen(KEYS.ctl_all)
-            sub = a.declare_subscriber(KEYS.cmd_all, lambda s: raw.append(str(s.key_expr)))  # not a Node
+            tapped = tap(a, KEYS.cmd_all, lambda key, payload: raw.append(key))  # not a Node: a tap
+            plain: list[str] = []  # a plain Zenoh subscriber of the same session: their step messages skip Zenoh here
+            sub = a.declare_subscriber(KEYS.cmd_all, lambda s: plain.append(str(s.key_expr)))
             await tx.wait_matched([STEP, CTL], timeout=10.0)
             await asyncio.sleep(0.3)  # the remote subscriptions reach tx's session
             for i in range(50):
@@ -50,9 +52,10 @@ def test_local_nodes_hear_each_other_once_and_others_still_hear_them(endpoint):
                 tx.send(CTL, EpochStart(epoch=i, steps=1, goal=(0.0, 0.0)))
             local, remote = await drain(rx), await drain(far)
             assert steps(rx, local) == list(range(50))  # once each, in order
+            assert all(type(p) is Local for k, p in local if k == STEP)  # handed over as messages, checked on decode
             assert steps(far, remote) == list(range(50))
             assert sum(k == CTL for k, _ in local) == 50 and sum(k == CTL for k, _ in remote) == 50
-            assert len(raw) == 50
+            assert len(raw) == 50 and plain == []
             # a remote sender still reaches the local Node (its step subscription hears other sessions)
             far.send(STEP, Cmd(epoch=1, step=7, delta=0.0))
             assert steps(rx, await drain(rx)) == [7]
@@ -63,6 +66,7 @@ def test_local_nodes_hear_each_other_once_and_others_still_hear_them(endpoint):
             assert steps(far, await drain(far)) == [8]
             assert await drain(rx, quiet=0.1) == []
             sub.undeclare()
+            tapped.undeclare()
         finally:
             b.close()
             a.close()

@@ -19,17 +19,21 @@ the sim's up to four times (a command each) now wakes none; 359 -> 535 steps/s (
 docs/architecture.md). The loop keeps control, faults, checkpoints and timers; a handler that raises fails the actor
 on its loop (`next()` raises it).
 
-Local delivery (the `single` placement): step messages (keys under `sim/` and `a/`) that a Node sends
-are handed straight to the Nodes of the same session that listen on them — still encoded, signed and
-decoded by the receiver like any other message, and still faulted — instead of a round trip through
-Zenoh's local routing, whose delivery threads run the subscriber callback, take the GIL from the event
-loop and wake it through its self-pipe (measured: ~2/3 of a single-placement step). A receiver's step handler
-runs within the send, under its lock, on the same terms as on Zenoh's thread (serving inline, nothing waiting, no
-link fault; else the mailbox): a step crosses the actors of one process as calls, down the tree and, where a
-handler is busy further up, through the mailbox (chain4, single: 2183 -> ~2770 steps/s, benchmarks/floors.py).
-Zenoh still carries every such message to the other sessions (other processes, observers, `kinswarm` tools) and to
-non-Node subscribers of the same session; a Node's step subscriptions hear only other sessions through
-Zenoh (`allowed_origin=REMOTE`), so nothing arrives twice.
+Local delivery (the `single` placement): step messages (keys under `sim/` and `a/`) that a Node sends are handed
+straight to the Nodes of the same session that listen on them, instead of a round trip through Zenoh's local routing
+(whose delivery threads run the subscriber callback, take the GIL from the event loop and wake it through its
+self-pipe: ~2/3 of a single-placement step). They go as messages (`Local`), not bytes: the receiver checks each as it
+checks a wire message's body (`codec.local`: the same generated checks of every field and of the envelope), into a
+message of its own; what those checks cannot tell goes the wire's way (encoded, signed, decoded), so a message is
+refused, or taken, exactly as from another process. Bytes are made only when someone needs them: another session
+listening (Zenoh's matching status: step publishers reach other sessions only), a tap (`tap()`, the way to hear step
+messages in the sender's own session: a plain Zenoh subscriber there does not), a link fault (faults act on bytes).
+A receiver's step handler runs within the send, under its lock, on the same terms as on Zenoh's thread (serving
+inline, nothing waiting, no link fault; else the mailbox): a step crosses the actors of one process as calls, down
+the tree and, where a handler is busy further up, through the mailbox. Measured on chain4, single
+(benchmarks/floors.py): 2183 steps/s with bytes through the mailbox, ~2770 handled within the send, ~3700 as
+messages. A Node's step subscriptions hear only other sessions through Zenoh (`allowed_origin=REMOTE`), so nothing
+arrives twice.
 
 Link faults (DESIGN §5, `Node.apply_fault`): drop, delay, duplicate and corrupt act on a node's step
 links only — what it sends and receives under `sim/` and `a/` — never on ctl/, rep/, metrics/, fault/ or
@@ -38,20 +42,23 @@ attribute check more than without the feature; with some active, received step m
 the loop one by one and faulted there, so the RNG, counters and timers are only ever touched on the loop.
 """
 
-from .mailbox import LocalBus, Mailbox
+from .mailbox import LocalBus, Mailbox, Tapped, tap
 from .net import HANDSHAKE_MS, LEASE_MS, NetSpec, open_session, zenoh_config
-from .node import LINK_COUNTS, LinkFault, Node, setup_logging
+from .node import LINK_COUNTS, LinkFault, Local, Node, setup_logging
 
 __all__ = [
     "HANDSHAKE_MS",
     "LEASE_MS",
     "LINK_COUNTS",
     "LinkFault",
+    "Local",
     "LocalBus",
     "Mailbox",
     "NetSpec",
     "Node",
+    "Tapped",
     "open_session",
     "setup_logging",
+    "tap",
     "zenoh_config",
 ]

@@ -21,7 +21,7 @@ from kinswarm.protocol.faults import ALL, LINK_FAULTS, check_fault, describe
 from kinswarm.protocol.keys import Keys
 from kinswarm.protocol.messages import Fault
 
-from .mailbox import _BUSES, Mailbox, _bus
+from .mailbox import Mailbox, _bus, _release
 
 #: a node logs the first rejected message on each of up to this many keys, then every 1000th: a flood on one key
 #: cannot hide a bad message on another, and the log stays bounded
@@ -31,6 +31,23 @@ M = TypeVar("M")
 
 LINK_COUNTS = ("dropped", "delayed", "duplicated", "corrupted")
 FAILED = "__failed__"  # the mailbox item that wakes the loop when an inline step handler raised (no Zenoh key)
+
+
+@dataclass(slots=True)
+class Local:
+    """A step message handed to a Node of the sender's own session as it is (local delivery): no bytes unless someone
+    needs them (a link fault, a tap, the general decode path); checked as the wire's are when decoded (Node.decode)."""
+
+    msg: Any
+    run: str
+    src: str
+    key: bytes
+    payload: bytes | None = None
+
+    def encoded(self) -> bytes:
+        if self.payload is None:
+            self.payload = codec.encode(self.msg, self.run, self.src, self.key)
+        return self.payload
 
 
 @dataclass
@@ -89,27 +106,38 @@ class Node:
             # state (heartbeats, pauses, status) is resent anyway and must never wait behind a dead link: DROP.
             periodic = key.startswith(self._periodic_prefixes)
             cc = zenoh.CongestionControl.DROP if periodic else zenoh.CongestionControl.BLOCK
-            pub = self.session.declare_publisher(key, congestion_control=cc, express=True)
+            # a step key's listeners in this session hear it through the local bus (its Nodes and taps): Zenoh
+            # carries it to other sessions only, so its matching status says whether any other session listens
+            where = zenoh.Locality.REMOTE if key.startswith(self._step_prefixes) else zenoh.Locality.ANY
+            pub = self.session.declare_publisher(key, congestion_control=cc, express=True, allowed_destination=where)
             self._pubs[key] = pub
         return pub
 
     def send(self, key: str, msg: Any) -> None:
-        payload = codec.encode(msg, self.keys.run, self.ident, self.key)
-        if self._link_faults and key.startswith(self._step_prefixes):
-            for delay, p in self._fault(payload):
+        if not key.startswith(self._step_prefixes):
+            self.publisher(key).put(codec.encode(msg, self.keys.run, self.ident, self.key))
+        elif self._link_faults:
+            for delay, p in self._fault(codec.encode(msg, self.keys.run, self.ident, self.key)):
                 if delay:  # never sleep: the loop puts it later
                     self._loop.call_later(delay, self._put_late, key, p)
                 else:
                     self._emit(key, p)
-            return
-        self._emit(key, payload)
+        else:
+            self._emit(key, Local(msg, self.keys.run, self.ident, self.key))
 
-    def _emit(self, key: str, payload: bytes) -> None:
-        """Put on Zenoh (other sessions, observers); hand a step message to this session's listening Nodes."""
-        self.publisher(key).put(payload)
-        if self._bus:
-            for node, inline in self._bus.route(key) if key.startswith(self._step_prefixes) else ():
-                node._deliver_local(key, payload, inline)
+    def _emit(self, key: str, payload: bytes | Local) -> None:
+        """A step message: to this session's Nodes and taps listening on `key` (the local bus), and on Zenoh to the
+        other sessions. Bytes only where needed: a Node of this session decodes the message itself (Local), and
+        nobody encodes it when no tap and no other session listens (the `single` placement's step)."""
+        pub = self.publisher(key)
+        nodes, taps = self._bus.route(key) if self._bus else ((), ())
+        if taps or not nodes or pub.matching_status.matching:  # no Node here: put as ever (process placement)
+            p = payload.encoded() if type(payload) is Local else payload
+            pub.put(p)
+            for tap in taps:
+                tap(key, p)
+        for node, inline in nodes:
+            node._deliver_local(key, payload, inline)
 
     def _put_late(self, key: str, payload: bytes) -> None:
         if not self._closed:
@@ -202,12 +230,14 @@ class Node:
             finally:
                 self._loop_holds = False
 
-    def _deliver_local(self, key: str, payload: bytes, inline: Callable[[str, bytes], None] | None) -> None:
+    def _deliver_local(self, key: str, payload: bytes | Local, inline: Callable[[str, bytes], None] | None) -> None:
         """A step message from a Node of the same session (the sending Node's thread): handled at once when `inline`
         may run (`_handle`: a step crosses the actors of one process as calls, no mailbox round trip on the loop),
         else into the mailbox."""
         if self._closed:
             return
+        if self._link_faults and type(payload) is Local:  # faults act on bytes (corrupt: garbage of the same length)
+            payload = payload.encoded()
         if asyncio._get_running_loop() is not self._loop:  # another loop or thread: as from Zenoh
             if self._link_faults:
                 self._receive_faulty(key, payload)
@@ -251,8 +281,14 @@ class Node:
         async with asyncio.timeout(timeout):
             return await self.mailbox.get()
 
-    def decode(self, key: str, payload: bytes, expect: type[M]) -> M | None:
-        """Decode or log why not and return None: a bad message never crashes an actor."""
+    def decode(self, key: str, payload: bytes | Local, expect: type[M]) -> M | None:
+        """Decode or log why not and return None: a bad message never crashes an actor. A Local message (from a Node
+        of this session) is checked as a wire message's body is, without its bytes (codec.local); if that cannot
+        tell, its bytes go the wire's way, so it is refused, or taken, exactly as from another process."""
+        if type(payload) is Local:
+            if type(payload.msg) is expect and (m := codec.local(payload.msg, self.keys.run, payload.src)) is not None:
+                return m
+            payload = payload.encoded()
         try:
             return codec.decode(payload, expect, self.keys.run, self.key)
         except codec.DecodeError as e:
@@ -348,12 +384,16 @@ class Node:
         pending = [k for k in keys]
         deadline = time.monotonic() + timeout
         while pending:
-            pending = [k for k in pending if not self.publisher(k).matching_status.matching]
+            pending = [k for k in pending if not (self._heard_here(k) or self.publisher(k).matching_status.matching)]
             if not pending:
                 return
             if time.monotonic() > deadline:
                 raise TimeoutError(f"{self.role}/{self.ident}: nobody subscribes to {pending}")
             await asyncio.sleep(0.005)
+
+    def _heard_here(self, key: str) -> bool:
+        """A Node or tap of this session listens on step key `key` (it hears it through the local bus)."""
+        return key.startswith(self._step_prefixes) and self._bus.heard(key)
 
     def declare_alive(self) -> None:
         self._token = self.session.liveliness().declare_token(self.keys.alive(self.role, self.ident))
@@ -362,9 +402,7 @@ class Node:
         self.serve_inline(False)
         if not self._closed:
             self._bus.remove(self)
-            self._bus.nodes -= 1
-            if not self._bus.nodes and _BUSES.get(id(self.session), (None,))[0] is self.session:
-                del _BUSES[id(self.session)]
+            _release(self._bus)
         self._closed = True  # late puts and pushes still on the loop's timers become no-ops
         self._clear_link_faults()
         for d in [self._token, *self._subs, *self._pubs.values()]:
