@@ -305,17 +305,18 @@ def decode(payload: bytes, expect: type[M], run: str, key: bytes) -> M:
     return expect(**fields)
 
 
-def local(msg: M, run: str, src: str) -> M | None:
-    """`msg` as a receiver in the sender's own process gets it, no bytes in between: checked as `decode` checks a
-    body (the same generated fast path, on the same fields and envelope), into a message of its own (fresh tuples
-    and maps). None when the fast path cannot tell (a field it leaves to the general path, e.g. a numpy float, or a
-    message it would refuse): the caller encodes and decodes it then, for the same message or the same reason."""
+def local(msg: M, sent_run: str, src: str, run: str) -> M | None:
+    """`msg`, sent by `src` of run `sent_run`, as a receiver of run `run` in the sender's own process gets it, no
+    bytes in between: checked as `decode` checks a body (the same generated fast path, on the same fields and
+    envelope), into a message of its own (fresh tuples and maps). None when the fast path cannot tell (a field it
+    leaves to the general path, e.g. a numpy float, or a message it would refuse, another run's among them): the
+    caller encodes and decodes it then, for the same message or the same reason. The MAC is the caller's to match."""
     cls = type(msg)
     fast = _fast(cls)
     if fast is None:
         return None
     body = dict(msg.__dict__)
-    body.update(v=SCHEMA_VERSION, kind=cls.KIND, run=run, src=src)  # type: ignore[attr-defined]
+    body.update(v=SCHEMA_VERSION, kind=cls.KIND, run=sent_run, src=src)  # type: ignore[attr-defined]
     return fast(body, run)
 
 

@@ -301,3 +301,38 @@ def test_the_fast_path_decides_exactly_as_the_general_path(monkeypatch):
 def test_the_fast_path_covers_the_step_messages():
     for kind in (Obs, Task, Down, Up, Cmd):
         assert codec._fast(kind) is not None, kind
+
+
+@pytest.mark.parametrize("msg", [m for m in SAMPLES if type(m) in (Obs, Task, Down, Up, Cmd)])
+def test_a_message_handed_over_in_process_is_the_one_its_bytes_decode_to(msg):
+    """codec.local (a Node of the same session, no bytes): the message decode would give, in containers of its own."""
+    got = codec.local(msg, "run1", "me", "run1")
+    assert got == codec.decode(codec.encode(msg, "run1", "me", KEY), type(msg), "run1", KEY)
+    for name, value in got.__dict__.items():
+        if isinstance(value, dict) and value:
+            assert value is not getattr(msg, name)  # the receiver's own map: the sender's stays the sender's
+
+
+@pytest.mark.parametrize(
+    "msg",
+    [
+        Obs(epoch=1, step=2, q=math.nan),
+        Down(epoch=3, step=4, base=(1.0, math.inf, 0.5), goal=(4.0, 6.0), reward=-1.5),
+        Task(epoch=0, step=7, goal=(4.16, 6.18, 1.0, 2.0), tips={"a4": (1.0, 2.0, 0.3)}),  # no Coords of 4
+        Up(epoch=0, step=1, tips={"bad key!": (1.0, 2.0, 0.3)}, action=1),
+        Obs(epoch=1, step=2, q=0.5, sense={"x": math.nan}),
+    ],
+)
+def test_in_process_a_message_the_wire_would_refuse_is_left_to_the_wire_path(msg):
+    """codec.local cannot pass what decode refuses: it says None, and the bytes' way gives the reason."""
+    assert codec.local(msg, "run1", "me", "run1") is None
+    with pytest.raises(codec.DecodeError):
+        codec.decode(codec.encode(msg, "run1", "me", KEY), type(msg), "run1", KEY)
+
+
+def test_in_process_a_message_of_another_run_is_not_taken():
+    cmd = Cmd(epoch=0, step=1, delta=0.0)
+    assert codec.local(cmd, "run1", "me", "run1") == cmd
+    assert codec.local(cmd, "run2", "me", "run1") is None  # the receiver's bytes path then says why
+    with pytest.raises(codec.DecodeError, match="run 'run2'"):
+        codec.decode(codec.encode(cmd, "run2", "me", KEY), Cmd, "run1", KEY)

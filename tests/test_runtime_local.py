@@ -4,10 +4,12 @@ yet arrive exactly once, still reach other sessions and taps, and still get faul
 from __future__ import annotations
 
 import asyncio
+import math
 import time
 
 import pytest
 from kinswarm.actors.runtime import Local, Node, open_session, tap
+from kinswarm.protocol import codec
 from kinswarm.protocol.keys import Keys
 from kinswarm.protocol.messages import Cmd, EpochStart, Fault
 
@@ -128,5 +130,32 @@ def test_a_cancel_landing_while_a_message_is_in_hand_is_not_lost(endpoint):
         finally:
             node.close()
             s.close()
+
+    asyncio.run(body())
+
+
+@pytest.mark.timeout(60)
+def test_in_one_session_a_bad_message_is_refused_as_from_another(endpoint, caplog):
+    """A message the wire would refuse (not finite, signed with another key) is refused in-process too,
+    counted and logged with the same reason: a bug in a sender shows the same in every placement."""
+
+    async def body() -> None:
+        a = open_session(listen=[endpoint])
+        try:
+            tx = Node(a, KEYS, "agent", "a2", KEY)
+            other_key = Node(a, KEYS, "agent", "a4", b"x" * 32)
+            rx = Node(a, KEYS, "sim", "sim", KEY)
+            rx.listen(KEYS.cmd_all)
+            await tx.wait_matched([STEP], timeout=10.0)
+            tx.send(STEP, Cmd(epoch=0, step=1, delta=math.nan))
+            other_key.send(STEP, Cmd(epoch=0, step=3, delta=0.0))
+            tx.send(STEP, Cmd(epoch=0, step=4, delta=0.0))
+            got = await drain(rx)
+            assert steps(rx, got) == [4]
+            assert rx.rejected == 2
+            reasons = " ".join(r.getMessage() for r in caplog.records if "rejected" in r.getMessage())
+            assert "finite" in reasons and codec.BAD_MAC in reasons
+        finally:
+            a.close()
 
     asyncio.run(body())

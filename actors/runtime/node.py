@@ -286,9 +286,11 @@ class Node:
         of this session) is checked as a wire message's body is, without its bytes (codec.local); if that cannot
         tell, its bytes go the wire's way, so it is refused, or taken, exactly as from another process."""
         if type(payload) is Local:
-            if type(payload.msg) is expect and (m := codec.local(payload.msg, self.keys.run, payload.src)) is not None:
-                return m
-            payload = payload.encoded()
+            p = payload  # signed with this run's key, of the expected kind and checked: taken; else the wire's way
+            if p.key == self.key and type(p.msg) is expect:
+                if (m := codec.local(p.msg, p.run, p.src, self.keys.run)) is not None:
+                    return m
+            payload = p.encoded()
         try:
             return codec.decode(payload, expect, self.keys.run, self.key)
         except codec.DecodeError as e:
