@@ -315,9 +315,7 @@ def local(msg: M, sent_run: str, src: str, run: str) -> M | None:
     fast = _fast(cls)
     if fast is None:
         return None
-    body = dict(msg.__dict__)
-    body.update(v=SCHEMA_VERSION, kind=cls.KIND, run=sent_run, src=src)  # type: ignore[attr-defined]
-    return fast(body, run)
+    return fast({**msg.__dict__, "v": SCHEMA_VERSION, "kind": cls.KIND, "run": sent_run, "src": src}, run)  # type: ignore[attr-defined]
 
 
 def sender(payload: bytes) -> str:

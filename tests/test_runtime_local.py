@@ -159,3 +159,37 @@ def test_in_one_session_a_bad_message_is_refused_as_from_another(endpoint, caplo
             a.close()
 
     asyncio.run(body())
+
+
+@pytest.mark.timeout(60)
+def test_a_session_that_listens_later_hears_the_next_step_messages(endpoint):
+    """Step messages between Nodes of one session are put on Zenoh only while another session listens (the
+    publisher's matching status, kept by a listener): one that starts listening mid-run hears what follows."""
+
+    async def body() -> None:
+        a, b = open_session(listen=[endpoint]), open_session(connect=[endpoint])
+        try:
+            tx, rx = Node(a, KEYS, "agent", "a2", KEY), Node(a, KEYS, "sim", "sim", KEY)
+            rx.listen(KEYS.cmd_all)
+            await tx.wait_matched([STEP], timeout=10.0)
+            tx.send(STEP, Cmd(epoch=0, step=0, delta=0.0))
+            assert not tx._heard_away[STEP]  # nobody away: no bytes, no put
+            far = Node(b, KEYS, "agent", "a1", KEY)
+            far.listen(KEYS.cmd_all)
+            deadline = time.monotonic() + 10
+            while not tx._heard_away[STEP]:
+                assert time.monotonic() < deadline, "the other session's subscription never matched"
+                await asyncio.sleep(0.01)
+            tx.send(STEP, Cmd(epoch=0, step=1, delta=0.0))
+            assert steps(far, await drain(far)) == [1]
+            assert steps(rx, await drain(rx)) == [0, 1]
+            far.close()
+            deadline = time.monotonic() + 10
+            while tx._heard_away[STEP]:  # and it goes away again
+                assert time.monotonic() < deadline, "the other session's subscription never unmatched"
+                await asyncio.sleep(0.01)
+        finally:
+            b.close()
+            a.close()
+
+    asyncio.run(body())

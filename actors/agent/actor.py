@@ -210,12 +210,15 @@ class Agent:
         needs_q += [a for a in adopted if self.topo.agents[a].has_dof]
         if any(key not in self.q_in.get(a, {}) for a in needs_q):
             return
-        q = {a: self.q_in[a][key] for a in needs_q}
-        # drop everything up to this step: newer steps supersede unfinished older ones
-        for a, readings in self.q_in.items():
-            self.q_in[a] = {kk: v for kk, v in readings.items() if kk > key}
-        self.head_in = {kk: v for kk, v in self.head_in.items() if kk > key}
+        q = {a: self.q_in[a].pop(key) for a in needs_q}
+        del self.head_in[key]
         own = self.sense_in.pop(key, {})
+        # drop everything older: newer steps supersede unfinished older ones (mostly nothing is left to look at)
+        for a, readings in self.q_in.items():
+            if readings:
+                self.q_in[a] = {kk: v for kk, v in readings.items() if kk > key}
+        if self.head_in:
+            self.head_in = {kk: v for kk, v in self.head_in.items() if kk > key}
         if self.sense_in:
             self.sense_in = {kk: v for kk, v in self.sense_in.items() if kk > key}
         self.last_begun = key

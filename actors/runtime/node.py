@@ -77,6 +77,7 @@ class Node:
         self._loop = asyncio.get_running_loop()
         self.mailbox = Mailbox(self._loop)
         self._pubs: dict[str, Any] = {}
+        self._heard_away: dict[str, bool] = {}  # step key -> another session listens (its publisher's matching)
         self._subs: list[Any] = []
         self._token: Any = None
         self._closed = False
@@ -108,9 +109,15 @@ class Node:
             cc = zenoh.CongestionControl.DROP if periodic else zenoh.CongestionControl.BLOCK
             # a step key's listeners in this session hear it through the local bus (its Nodes and taps): Zenoh
             # carries it to other sessions only, so its matching status says whether any other session listens
-            where = zenoh.Locality.REMOTE if key.startswith(self._step_prefixes) else zenoh.Locality.ANY
+            step = key.startswith(self._step_prefixes)
+            where = zenoh.Locality.REMOTE if step else zenoh.Locality.ANY
             pub = self.session.declare_publisher(key, congestion_control=cc, express=True, allowed_destination=where)
             self._pubs[key] = pub
+            if step:  # whether another session listens, kept current by Zenoh (read on every step message sent)
+                heard = self._heard_away
+                heard[key] = False
+                self._subs.append(pub.declare_matching_listener(lambda st: heard.__setitem__(key, st.matching)))
+                heard[key] = pub.matching_status.matching
         return pub
 
     def send(self, key: str, msg: Any) -> None:
@@ -131,7 +138,7 @@ class Node:
         nobody encodes it when no tap and no other session listens (the `single` placement's step)."""
         pub = self.publisher(key)
         nodes, taps = self._bus.route(key) if self._bus else ((), ())
-        if taps or not nodes or pub.matching_status.matching:  # no Node here: put as ever (process placement)
+        if taps or not nodes or self._heard_away[key]:  # no Node here: put as ever (process placement)
             p = payload.encoded() if type(payload) is Local else payload
             pub.put(p)
             for tap in taps:
