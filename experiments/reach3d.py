@@ -162,6 +162,8 @@ def run(ctx: Context) -> dict[str, Any]:
             "training": {"goals": TRAIN_GOALS, "passes": PASSES, "sampling_seed": 1000, "steps": steps},
             "test": {"goals": n_test, "sets": SETS, "steps": steps, "margin": MARGIN, "min_z": MIN_Z},
             "learner": "reach3d defaults (LearnerSettings.for_plane), reward graded (d_min 0.3, c 10, k 200)",
+            "pose_weight": f"{frames.POSE_WEIGHT} m/rad: a pose's distance |tip - goal| + this x the angle (reward, "
+            "the references' pose error, their stop test)",
             "blind": BLIND,
         },
         all_runs,

@@ -128,7 +128,7 @@ def test_pinv_brings_the_tool_to_a_pose():
         assert steps is not None
         (tip,) = frames.tips(topo, q).values()
         assert math.dist(tip[:3], goal[:3]) <= 0.01
-        assert math.degrees(frames.angle_between(tip[3:], goal[3:])) <= 5.8  # 1 cm / POSE_WEIGHT
+        assert frames.angle_between(tip[3:], goal[3:]) <= 0.01 / frames.POSE_WEIGHT
         # a point goal leaves the orientation free: it does not come out right by itself
         _, q3 = run_baseline(topo, goal[:3], tol=0.01, max_steps=2000)
         assert frames.angle_between(frames.tips(topo, q3)["a7"][3:], goal[3:]) > math.radians(10)
@@ -141,7 +141,8 @@ def test_the_pose_error_weighs_the_orientation_by_pose_weight():
     turned = (*tip[:3], *frames.quat_mul(frames.axis_angle((0.0, 0.0, 1.0), math.radians(10)), tip[3:]))
     assert pinv_increments(topo, q, tip) == dict.fromkeys(topo.dof_agents, 0.0)
     assert any(pinv_increments(topo, q, turned).values())  # the same point, turned: it moves
-    assert reached(topo, q, turned, 0.0175) and not reached(topo, q, turned, 0.017)  # 10° weighs 1.745 cm
+    weighs = frames.POSE_WEIGHT * math.radians(10)  # 10° weighs POSE_WEIGHT x 0.1745 m
+    assert reached(topo, q, turned, weighs + 1e-4) and not reached(topo, q, turned, weighs - 1e-4)
     assert reached(topo, q, tip[:3], 1e-9)
 
 

@@ -17,7 +17,7 @@ k = 200.0                         # 1/m: the shaping gradient
 ```
 
 For a pose the distance is |tip - goal| + POSE_WEIGHT x the angle between the tool's orientation and the goal's
-(protocol/frames.py: 0.1 m per radian, a 10° turn weighs like 1.7 cm); the metrics' error stays the position's.
+(protocol/frames.py: 0.3 m per radian, a 10° turn weighs like 5.2 cm); the metrics' error stays the position's.
 """
 
 from __future__ import annotations
