@@ -36,6 +36,9 @@ class ScenarioError(ValueError):
         super().__init__(f"{source}: {where}: {what}")
         self.source, self.where, self.what = source, where, what
 
+    def __reduce__(self) -> tuple[Any, ...]:  # raised in an experiment's worker process, it must come back whole
+        return (type(self), (self.source, self.where, self.what))
+
 
 @dataclass(frozen=True)
 class ScenarioEntry:

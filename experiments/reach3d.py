@@ -13,8 +13,9 @@ Goals are the tool points of random joint configurations (uniform within 90 % of
 goals and goals behind the base occur), kept when they lie 5 cm or more above the base's plane; start poses are
 other random configurations. Two disjoint test sets of 100 ("A", "B") check that a number does not hang on its set.
 Poses (position and the tool's orientation, success within 5 cm and 15°) run the same protocol. The locked-joint
-scenario locks the shoulder (a2) throughout: trained frozen, trained still learning, an untrained swarm learning,
-and the pseudo-inverse, on test set A's goals.
+scenario locks the shoulder (a2) throughout; the disturbed one shakes the elbow (a4) in steps 100-199 of every trial:
+trained frozen, trained still learning, an untrained swarm learning, the rule and the pseudo-inverse, on test set A's
+goals.
 """
 
 from __future__ import annotations
@@ -50,6 +51,20 @@ MIN_Z = 0.05  # m above the base's plane
 BLIND = {"n_sets": (5, 2, 2, 2, 2, 2), "ranges": ((-math.pi, math.pi), *((-1000.0, 1000.0),) * 5)}
 CONTROLLERS = {"rule": "rule", "pseudo-inverse": "pinv", "greedy per joint": "greedy"}
 LOCK = ROOT / "scenarios" / "iiwa-locked-a2.toml"
+DISTURB_DEG = 2.0  # the disturbed joint's random increment each step: ±2°, twice the agents' move
+
+
+def _disturbed(ctx: Context, steps: int) -> str:
+    """The elbow (a4) disturbed through the episode's second quarter (steps 100-199 of 400): a scenario file under
+    the experiment's runs (its content is part of each run's identity), its steps fitted to the episode."""
+    path = ctx.runs / "scenarios" / "r3d-disturbed-a4.toml"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(
+        'name = "r3d-disturbed-a4"\n\n[[event]]\n'
+        f'step = {steps // 4}\nfault = "disturb"\ntarget = ["a4"]\n'
+        f"steps = {steps // 4}\namplitude_deg = {DISTURB_DEG}\n"
+    )
+    return str(path)
 
 
 def sample(topo: Topology, seed: int, n: int, pose: bool) -> tuple[list[list[float]], list[list[float]]]:
@@ -150,11 +165,21 @@ def run(ctx: Context) -> dict[str, Any]:
         head = f"within {TOL * 100:.0f} cm" + (f" and {TOL_DEG:.0f}°" if pose else "")
         rep.text(f"## {kind.capitalize()}: frozen on {n_test} unseen goals from random start poses")
         rep.table(["controller", "set", f"{head} (%)", "mean error (m)", "median (m)", "seeds"], rows)
-    lock_rows, lock_results, lock_runs = _locked(ctx, topo, steps, n_test)
-    all_runs += lock_runs
-    rep.results["locked_a2"] = lock_results
-    rep.text("## The shoulder (a2) locked throughout, test set A")
-    rep.table(["condition", f"within {TOL * 100:.0f} cm (%)", "mean error (m)", "seeds"], lock_rows)
+    faults = (
+        ("locked_a2", "lock", "The shoulder (a2) locked throughout", str(LOCK)),
+        (
+            "disturbed_a4",
+            "dist",
+            f"The elbow (a4) disturbed from step {steps // 4} for {steps // 4} steps (±{DISTURB_DEG:g}° a step)",
+            _disturbed(ctx, steps),
+        ),
+    )
+    for key, tag, heading, scenario in faults:
+        f_rows, f_results, f_runs = _faulted(ctx, topo, steps, n_test, tag, scenario)
+        all_runs += f_runs
+        rep.results[key] = f_results
+        rep.text(f"## {heading}, test set A")
+        rep.table(["condition", f"within {TOL * 100:.0f} cm (%)", "mean error (m)", "seeds"], f_rows)
     _figure(ctx, rep)
     rep.write(
         {
@@ -239,7 +264,11 @@ def _protocol(
     return rows, results, [*trained.values(), *outs.values()]
 
 
-def _locked(ctx: Context, topo: Topology, steps: int, n_test: int) -> tuple[list[list[Any]], dict[str, Any], list]:
+def _faulted(
+    ctx: Context, topo: Topology, steps: int, n_test: int, tag: str, scenario: str
+) -> tuple[list[list[Any]], dict[str, Any], list]:
+    """Test set A's points with a scenario's faults in every trial: the trained swarm frozen and still learning, an
+    untrained swarm learning, the rule and the pseudo-inverse."""
     goals, starts = sample(topo, SETS["A"], n_test, False)
     t_goals, t_starts = training_set(topo, False, *QUICK_TRAINING if ctx.quick else ())
     file = str(ROBOT)
@@ -258,19 +287,19 @@ def _locked(ctx: Context, topo: Topology, steps: int, n_test: int) -> tuple[list
             )
             for s in ctx.seed_list
         ],
-        "lock train",
+        f"{tag} train",
     )
-    common = {"epochs": n_test, "steps": steps, "file": file, "task": _task(goals, starts), "scenario": str(LOCK)}
+    common = {"epochs": n_test, "steps": steps, "file": file, "task": _task(goals, starts), "scenario": scenario}
     specs: dict[tuple[str, int], Spec] = {}
     for s, t in zip(ctx.seed_list, trained, strict=True):
         specs[("trained, frozen", s)] = Spec(
-            "r3d-lock-frozen", seed=s, from_dir=str(t.out), learn=False, explore=False, **common
+            f"r3d-{tag}-frozen", seed=s, from_dir=str(t.out), learn=False, explore=False, **common
         )
-        specs[("trained, learning", s)] = Spec("r3d-lock-learning", seed=s, from_dir=str(t.out), **common)
-        specs[("untrained, learning", s)] = Spec("r3d-lock-scratch", seed=s, **common)
-    specs[("pseudo-inverse", 0)] = Spec("r3d-lock-pinv", controller="pinv", **common)
-    specs[("rule", 0)] = Spec("r3d-lock-rule", controller="rule", **common)
-    outs = dict(zip(specs, run_specs(ctx, list(specs.values()), "lock"), strict=True))
+        specs[("trained, learning", s)] = Spec(f"r3d-{tag}-learning", seed=s, from_dir=str(t.out), **common)
+        specs[("untrained, learning", s)] = Spec(f"r3d-{tag}-scratch", seed=s, **common)
+    specs[("pseudo-inverse", 0)] = Spec(f"r3d-{tag}-pinv", controller="pinv", **common)
+    specs[("rule", 0)] = Spec(f"r3d-{tag}-rule", controller="rule", **common)
+    outs = dict(zip(specs, run_specs(ctx, list(specs.values()), tag), strict=True))
     rows, results = [], {}
     for label in ("trained, frozen", "trained, learning", "untrained, learning", "rule", "pseudo-inverse"):
         keys = [k for k in outs if k[0] == label]

@@ -341,7 +341,8 @@ def test_quick_reach3d_experiment(tmp_path):
         assert set(res[kind]) == {f"{c} | {s}" for c in controls for s in sets}
         for row in res[kind].values():
             assert all(0.0 <= w <= 100.0 for w in row["within_pct"]) and all(m >= 0.0 for m in row["mean"])
-    assert set(res["locked_a2"]) == {"trained, frozen", "trained, learning", "untrained, learning", "rule",
-                                     "pseudo-inverse"}  # fmt: skip
+    for fault in ("locked_a2", "disturbed_a4"):
+        assert set(res[fault]) == {"trained, frozen", "trained, learning", "untrained, learning", "rule",
+                                   "pseudo-inverse"}  # fmt: skip
     text = (out / "report.md").read_text()
     assert "## Points: frozen on 5 unseen goals" in text and "quick" in text
