@@ -137,3 +137,13 @@ def test_joint_fault_on_compound_agent_and_missing_file(tmp_path):
     assert load_scenario(p, topo).entries[0].fault.fault == "kill"  # processes of compound agents exist
     with pytest.raises(ScenarioError, match="cannot read"):
         load_scenario(tmp_path / "nope.toml", topo)
+
+
+def test_a_scenario_error_survives_a_process_boundary():
+    """Raised in an experiment's worker process it comes back whole (an exception that does not unpickle breaks the
+    whole pool instead of naming the bad file)."""
+    import pickle
+
+    e = pickle.loads(pickle.dumps(ScenarioError("s.toml", "event[0].step", "step 100 is beyond the run's 5 steps")))
+    assert (e.source, e.where, e.what) == ("s.toml", "event[0].step", "step 100 is beyond the run's 5 steps")
+    assert str(e) == "s.toml: event[0].step: step 100 is beyond the run's 5 steps"
