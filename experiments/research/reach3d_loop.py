@@ -30,6 +30,11 @@ Poses, 2026-11-24 (96 x 4, 400 steps; within 5 cm and 15° [within 5 cm] mean cm
 - state, with the task's reward (W 0.1): g_rot 9 sets over ±60° 21 %; g_rot and |phi| 27 %.
 - state, with W 0.3: g_rot 9 sets over ±60° 55 %; + |phi| 42 %; + -dD/dq (9 sets, ±0.3 m/rad) 24 %; g_perp replaced
   by g_perp + 0.3 phi.a 42 %; (l2, W 0.3) g_perp replaced by g_perp + 0.09 phi.a/|r_perp| 59 %, |w| replaced by D 46 %.
+- limit-aware state, W 0.3 (lim = the room, rad, left toward where g_perp + 0.3 phi.a turns the joint: q_max - q if
+  it is > 0, else q - q_min): g_rot and lim 3 sets over [0, 0.5] rad (w03lim3) 52 % [62] 7.7 cm, 20°; 5 sets (w03lim5)
+  51 % [62]; q in 7 sets, not 5 (w03q7) 53 % [66]; q replaced by lim, 5 sets over [0, 0.5] (w03qlim) 61 / 51 % on A,
+  60 / 62 % on B (seeds 0/1; 6.4-7.7 cm, 13-20°), w03's 60 / 62 and 48 / 64: the same 58.5 % mean. Knowing the
+  limit is near does not get a joint out of the minimum; a variable more only thins the training (96 x 4).
 - why: one joint's 1° step moves the tip |r_perp| x 1° and turns the tool at most 1°, so with D = |w| + W angle only
   joints with a lever under W can trade position for orientation alone; at 0.1 m/rad that is the flange's joint.
   Greedy per joint on the model (sim/baseline.py's law on D, set A, 400 steps): sum W 0.1 14 %, 0.2 34 %, 0.3 48 %;
@@ -74,13 +79,16 @@ DEFAULT = ("pt300", "pt400", "pt400g11", "pose", "w03")
 @dataclass(frozen=True)
 class Geo:
     """What a joint's pose variables are made of: its world axis a, the tool's rotation error phi (world axis x
-    angle still to turn, frames.orientation_error), the tool's frame, the joint -> tip lever r and w = goal - tip."""
+    angle still to turn, frames.orientation_error), the tool's frame, the joint -> tip lever r and w = goal - tip,
+    the joint's angle q and its limits (rad)."""
 
     a: np.ndarray
     phi: np.ndarray
     tool: tuple[float, ...]
     r: np.ndarray
     w: np.ndarray
+    q: float = 0.0
+    limits: tuple[float, float] = (-math.pi, math.pi)
 
 
 def _g_rot(g: Geo) -> float:
@@ -120,6 +128,12 @@ def _g_l2(g: Geo, weight: float) -> float:
     return (float(g.w @ m) + weight * weight * float(g.phi @ g.a)) / lever
 
 
+def _lim(g: Geo, weight: float) -> float:
+    """The room (rad) this joint has left in the direction g_perp + weight (phi . a) wants it to turn."""
+    lo, hi = g.limits
+    return hi - g.q if _g_pose(g, weight) > 0 else g.q - lo
+
+
 #: name -> (its StateVariable, how a joint computes it)
 POSE_VARS: dict[str, tuple[StateVariable, Callable[[Geo], float]]] = {
     "g_rot": (G_ROT, _g_rot),
@@ -133,6 +147,8 @@ POSE_VARS: dict[str, tuple[StateVariable, Callable[[Geo], float]]] = {
     "g_pose": (StateVariable("g_pose", 9, (-0.12, 0.12)), lambda g: _g_pose(g, W_TASK)),
     "g_l2_03": (StateVariable("g_l2", 9, (-0.12, 0.12)), lambda g: _g_l2(g, 0.3)),
     "g_pose3": (StateVariable("g_pose", 9, (-0.12, 0.12)), lambda g: _g_pose(g, 0.3)),
+    "lim3": (StateVariable("lim", 3, (0.0, 0.5)), lambda g: _lim(g, 0.3)),
+    "lim5": (StateVariable("lim", 5, (0.0, 0.5)), lambda g: _lim(g, 0.3)),
 }
 
 
@@ -148,6 +164,7 @@ class Variant:
     pose_state: tuple[str, ...] = ("g_rot",)  # POSE_VARS appended to the plane state for a pose goal
     pose_weight: float = W_TASK  # m/rad: the orientation's weight in the reward's D_goal only
     g_perp: str = ""  # a POSE_VARS name whose value replaces g_perp (state index 2), "" keeps g_perp
+    q_var: str = ""  # a POSE_VARS name whose value, sets and range replace q's (state index 0), "" keeps q
     w_is_D: bool = False  # the plane state's |w| (index 5) replaced by the reward's D_goal (the pose's distance)
     norm: str = "sum"  # D_goal = |w| + weight angle ("sum", the task's), or sqrt(|w|^2 + (weight angle)^2) ("l2")
 
@@ -218,6 +235,25 @@ VARIANTS: tuple[Variant, ...] = (
         g_perp="g_l2_03",
     ),
     Variant("l2w05", "poses, D = sqrt(|w|^2 + (0.5 angle)^2)", pose_weight=0.5, norm="l2"),
+    Variant(
+        "w03lim3",
+        "poses, 0.3 m/rad, g_rot and lim: room left toward g_perp + 0.3 phi.a (3 sets, [0, 0.5] rad)",
+        pose_state=("g_rot", "lim3"),
+        pose_weight=0.3,
+    ),
+    Variant(
+        "w03lim5",
+        "poses, 0.3 m/rad, g_rot and lim: room left toward g_perp + 0.3 phi.a (5 sets, [0, 0.5] rad)",
+        pose_state=("g_rot", "lim5"),
+        pose_weight=0.3,
+    ),
+    Variant(
+        "w03qlim",
+        "poses, 0.3 m/rad, q -> lim: room left toward g_perp + 0.3 phi.a (5 sets, [0, 0.5] rad)",
+        q_var="lim5",
+        pose_weight=0.3,
+    ),
+    Variant("w03q7", "poses, 0.3 m/rad, q in 7 sets", {"n_sets": (7, 5, 9, 5, 5, 6)}, pose_weight=0.3),
     Variant("rot", "poses, g_rot and |phi|", pose_state=("g_rot", "rot")),
     Variant("rotoff", "poses, g_rot and |phi - (phi.a) a|", pose_state=("g_rot", "rot_off")),
     Variant(
@@ -240,11 +276,15 @@ class Loop:
         self.topo, self.pose, self.geom, self.v = topo, variant.pose, Spatial(), variant
         self.vars = [POSE_VARS[n] for n in variant.pose_state] if self.pose else []
         self.replace = POSE_VARS[variant.g_perp][1] if self.pose and variant.g_perp else None
+        self.q_var = POSE_VARS[variant.q_var] if self.pose and variant.q_var else None
         self.learners: dict[str, tuple[Learner, list[str]]] = {}
         for i, a in enumerate(topo.dof_agents):
             st = LearnerSettings.for_plane(
                 topo.reach, topo.reach_below(a), topo.agents[a].limits, **dict(variant.overrides)
             )
+            if self.q_var is not None:
+                qv = self.q_var[0]
+                st = st.replace(n_sets=(qv.sets, *st.n_sets[1:]), ranges=(qv.range, *st.ranges[1:]))
             if self.pose:
                 st = st.with_task_state(tuple(var for var, _ in self.vars))
             children = list(topo.agents[a].children)
@@ -281,9 +321,13 @@ class Loop:
                         tip,
                         np.subtract(tip[:3], links[a][:3]),
                         np.subtract(goal[:3], tip[:3]),
+                        q[a],
+                        spec.limits,
                     )
                     if self.replace is not None:
                         s[2] = self.replace(g)
+                    if self.q_var is not None:
+                        s[0] = self.q_var[1](g)
                     if self.v.w_is_D:
                         s[5] = D
                     s = np.append(s, [fn(g) for _, fn in self.vars])
