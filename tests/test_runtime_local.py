@@ -193,3 +193,28 @@ def test_a_session_that_listens_later_hears_the_next_step_messages(endpoint):
             a.close()
 
     asyncio.run(body())
+
+
+@pytest.mark.timeout(60)
+@pytest.mark.parametrize("side", ["sender", "receiver"])
+def test_in_one_session_a_corrupted_message_is_refused_by_its_mac(endpoint, side):
+    """A corrupt link fault acts on bytes, so a message handed over in-process is encoded first and then garbled:
+    the receiver's MAC check refuses it, as across processes."""
+
+    async def body() -> None:
+        a = open_session(listen=[endpoint])
+        try:
+            tx, rx = Node(a, KEYS, "agent", "a2", KEY), Node(a, KEYS, "agent", "a1", KEY)
+            rx.listen(KEYS.cmd_all)
+            await tx.wait_matched([STEP], timeout=10.0)
+            faulted = tx if side == "sender" else rx
+            fields = dict.fromkeys(("seconds", "steps", "rate", "ms", "amplitude_deg"))
+            f = Fault(id="c", fault="corrupt", targets=[faulted.ident], **{**fields, "rate": 1.0})  # type: ignore[arg-type]
+            assert faulted.apply_fault(f)
+            tx.send(STEP, Cmd(epoch=0, step=5, delta=0.0))
+            assert steps(rx, await drain(rx)) == []
+            assert rx.rejected == 1 and faulted.link_counts["corrupted"] == 1
+        finally:
+            a.close()
+
+    asyncio.run(body())
