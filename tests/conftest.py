@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import asyncio
 import dataclasses
+import logging
 import os
 import socket
 from collections.abc import Sequence
@@ -12,6 +14,8 @@ from typing import Any
 import pytest
 from kinswarm.actors.config import RunConfig
 from kinswarm.actors.runfile import load_run
+from kinswarm.actors.runtime import Mailbox
+from kinswarm.protocol.keys import Keys
 
 # Runs in tests draw no motion.gif and write no recording.rrd (RunConfig.record), unless a test asks: seconds a
 # run, hundreds of runs. Subprocesses inherit it.
@@ -114,3 +118,21 @@ def sessions(endpoint: str) -> Any:
     finally:
         b.close()
         a.close()
+
+
+class RecordingNode:
+    """What SimActor needs of a Node, recording what it sends instead of putting it on the wire."""
+
+    def __init__(self, run: str = "t") -> None:
+        self.keys = Keys(run)
+        self.role, self.ident = "sim", "sim"
+        self.log = logging.getLogger("test.sim")
+        self.mailbox = Mailbox(asyncio.get_running_loop())
+        self.sent: list[tuple[str, Any]] = []
+        self.rejected = 0
+
+    def send(self, key: str, msg: Any) -> None:
+        self.sent.append((key, msg))
+
+    def of(self, kind: type) -> list[Any]:
+        return [m for _, m in self.sent if isinstance(m, kind)]

@@ -7,15 +7,14 @@ replaced one timer per step: a step still ends at its deadline, and only then.""
 from __future__ import annotations
 
 import asyncio
-import logging
 import threading
 import time
 from typing import Any
 
 import pytest
 import zenoh
-from conftest import fault_message, run_config
-from kinswarm.actors.runtime import Mailbox, Node
+from conftest import RecordingNode, fault_message, run_config
+from kinswarm.actors.runtime import Node
 from kinswarm.protocol import codec
 from kinswarm.protocol.keys import Keys
 from kinswarm.protocol.messages import Cmd, EpochStart, Stop
@@ -298,19 +297,6 @@ def test_no_inline_handler_runs_once_serving_is_off(sessions):
 
 
 # -- the simulator's deadline watchdog ---------------------------------------------------------------
-class RecordingNode:
-    """What SimActor needs of a Node, recording what it sends instead of putting it on the wire."""
-
-    def __init__(self) -> None:
-        self.keys = Keys("t")
-        self.role, self.ident = "sim", "sim"
-        self.log = logging.getLogger("test.sim")
-        self.mailbox = Mailbox(asyncio.get_running_loop())
-        self.sent: list[tuple[str, Any]] = []
-        self.rejected = 0
-
-    def send(self, key: str, msg: Any) -> None:
-        self.sent.append((key, msg))
 
 
 def test_the_watchdog_ends_a_step_at_its_deadline_and_only_then(tmp_path, chain4):

@@ -8,10 +8,11 @@ import math
 import time
 
 import pytest
+from conftest import fault_message
 from kinswarm.actors.runtime import Local, Node, open_session, tap
 from kinswarm.protocol import codec
 from kinswarm.protocol.keys import Keys
-from kinswarm.protocol.messages import Cmd, EpochStart, Fault
+from kinswarm.protocol.messages import Cmd, EpochStart
 
 KEYS = Keys("lt")
 KEY = b"k" * 32
@@ -87,11 +88,8 @@ def test_local_delivery_is_faulted(endpoint, side):
             rx.listen(KEYS.cmd_all)
             await tx.wait_matched([STEP], timeout=10.0)
             faulted = tx if side == "sender" else rx
-            fields = dict.fromkeys(("seconds", "steps", "rate", "ms", "amplitude_deg"))
-            f = Fault(id="t", fault="delay", targets=[faulted.ident], **{**fields, "ms": 200.0})  # type: ignore[arg-type]
-            assert faulted.apply_fault(f)
-            dup = Fault(id="d", fault="duplicate", targets=[faulted.ident], **{**fields, "rate": 1.0})  # type: ignore[arg-type]
-            assert faulted.apply_fault(dup)
+            assert faulted.apply_fault(fault_message("delay", faulted.ident, ms=200.0))
+            assert faulted.apply_fault(fault_message("duplicate", faulted.ident, rate=1.0))
             t0 = time.monotonic()
             tx.send(STEP, Cmd(epoch=0, step=3, delta=0.0))
             first = await rx.recv(timeout=5)
@@ -208,9 +206,7 @@ def test_in_one_session_a_corrupted_message_is_refused_by_its_mac(endpoint, side
             rx.listen(KEYS.cmd_all)
             await tx.wait_matched([STEP], timeout=10.0)
             faulted = tx if side == "sender" else rx
-            fields = dict.fromkeys(("seconds", "steps", "rate", "ms", "amplitude_deg"))
-            f = Fault(id="c", fault="corrupt", targets=[faulted.ident], **{**fields, "rate": 1.0})  # type: ignore[arg-type]
-            assert faulted.apply_fault(f)
+            assert faulted.apply_fault(fault_message("corrupt", faulted.ident, rate=1.0))
             tx.send(STEP, Cmd(epoch=0, step=5, delta=0.0))
             assert steps(rx, await drain(rx)) == []
             assert rx.rejected == 1 and faulted.link_counts["corrupted"] == 1

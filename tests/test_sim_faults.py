@@ -6,16 +6,15 @@ it in a real Zenoh session against a tiny test controller."""
 from __future__ import annotations
 
 import asyncio
-import logging
 import math
 import time
 from pathlib import Path
 from typing import Any
 
 import pytest
-from conftest import fault_message, run_config
+from conftest import RecordingNode, fault_message, run_config
 from kinswarm.actors.config import RunConfig
-from kinswarm.actors.runtime import Mailbox, Node, open_session
+from kinswarm.actors.runtime import Node, open_session
 from kinswarm.protocol.keys import Keys
 from kinswarm.protocol.messages import (
     Bye,
@@ -32,24 +31,6 @@ from kinswarm.sim.actor import SimActor
 
 DEG = math.radians(1)
 GOAL = (4.16, 6.18)
-
-
-class RecordingNode:
-    """What SimActor needs of a Node, recording what it sends instead of putting it on the wire."""
-
-    def __init__(self, run: str = "t") -> None:
-        self.keys = Keys(run)
-        self.role, self.ident = "sim", "sim"
-        self.log = logging.getLogger("test.sim")
-        self.mailbox = Mailbox(asyncio.get_running_loop())
-        self.sent: list[tuple[str, Any]] = []
-        self.rejected = 0
-
-    def send(self, key: str, msg: Any) -> None:
-        self.sent.append((key, msg))
-
-    def of(self, kind: type) -> list[Any]:
-        return [m for _, m in self.sent if isinstance(m, kind)]
 
 
 _made: list[SimActor] = []
