@@ -7,8 +7,10 @@ replaced one timer per step: a step still ends at its deadline, and only then.""
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import threading
 import time
+from collections.abc import AsyncIterator
 from typing import Any
 
 import pytest
@@ -83,6 +85,19 @@ async def wire(sessions: tuple[zenoh.Session, zenoh.Session]) -> tuple[Node, Rec
     return tx, rx
 
 
+@contextlib.asynccontextmanager
+async def served(tx: Node, rx: Receiver, hold: float = 0.0) -> AsyncIterator[asyncio.Task[None]]:
+    """The frame of the tests below: rx's loop serving (given a moment to start), then both nodes closed."""
+    serving = asyncio.create_task(rx.serve(hold))
+    try:
+        await asyncio.sleep(0.05)
+        yield serving
+    finally:
+        serving.cancel()
+        tx.close()
+        rx.node.close()
+
+
 async def until(pred: Any, timeout: float = 10.0) -> None:
     deadline = time.monotonic() + timeout
     while not pred():
@@ -93,9 +108,7 @@ async def until(pred: Any, timeout: float = 10.0) -> None:
 def test_step_messages_are_handled_on_zenohs_thread_once_each_in_order(sessions):
     async def body() -> None:
         tx, rx = await wire(sessions)
-        serving = asyncio.create_task(rx.serve())
-        try:
-            await asyncio.sleep(0.05)
+        async with served(tx, rx) as serving:
             for i in range(200):
                 tx.send(STEP, Cmd(epoch=0, step=i, delta=0.0))
                 if i % 20 == 0:
@@ -109,10 +122,6 @@ def test_step_messages_are_handled_on_zenohs_thread_once_each_in_order(sessions)
             assert len(inline) >= 190, "the step messages did not wake the loop"  # a few may race the loop's lock
             assert rx.loop_thread not in inline
             assert rx.node.inline_handled == len(inline)
-        finally:
-            serving.cancel()
-            tx.close()
-            rx.node.close()
 
     asyncio.run(body())
 
@@ -120,9 +129,7 @@ def test_step_messages_are_handled_on_zenohs_thread_once_each_in_order(sessions)
 def test_a_bad_mac_is_rejected_on_zenohs_thread(sessions):
     async def body() -> None:
         tx, rx = await wire(sessions)
-        serving = asyncio.create_task(rx.serve())
-        try:
-            await asyncio.sleep(0.05)
+        async with served(tx, rx):
             good = codec.encode(Cmd(epoch=0, step=1, delta=0.0), KEYS.run, "a2", KEY)
             forged = codec.encode(Cmd(epoch=0, step=2, delta=0.0), KEYS.run, "a2", b"an impostor's key")
             flipped = bytearray(good)
@@ -134,10 +141,6 @@ def test_a_bad_mac_is_rejected_on_zenohs_thread(sessions):
             assert [s for s, _, _ in rx.handled] == [1]
             assert rx.node.rejected == 3
             assert rx.node.inline_handled == 4  # all four were handled there, three refused
-        finally:
-            serving.cancel()
-            tx.close()
-            rx.node.close()
 
     asyncio.run(body())
 
@@ -148,9 +151,7 @@ def test_link_faults_act_on_a_node_with_inline_handlers(sessions, kind):
 
     async def body() -> None:
         tx, rx = await wire(sessions)
-        serving = asyncio.create_task(rx.serve())
-        try:
-            await asyncio.sleep(0.05)
+        async with served(tx, rx):
             assert rx.node.apply_fault(fault(kind, "a1", **params[kind]))
             t0 = time.monotonic()
             for i in range(10):
@@ -173,10 +174,6 @@ def test_link_faults_act_on_a_node_with_inline_handlers(sessions, kind):
             tx.send(STEP, Cmd(epoch=0, step=99, delta=0.0))
             await until(lambda: any(s == 99 for s, _, _ in rx.handled))
             assert rx.handled[-1][1] == "inline" and rx.node.inline_handled == 1
-        finally:
-            serving.cancel()
-            tx.close()
-            rx.node.close()
 
     asyncio.run(body())
 
@@ -184,9 +181,7 @@ def test_link_faults_act_on_a_node_with_inline_handlers(sessions, kind):
 def test_while_the_loop_holds_the_lock_step_messages_wait_and_keep_their_order(sessions):
     async def body() -> None:
         tx, rx = await wire(sessions)
-        serving = asyncio.create_task(rx.serve(hold=0.5))
-        try:
-            await asyncio.sleep(0.05)
+        async with served(tx, rx, hold=0.5) as serving:
             tx.send(STOP, Stop(reason="test"))  # the loop takes it and holds the lock for 0.5 s
             await asyncio.sleep(0.1)
             for i in range(20):
@@ -202,10 +197,6 @@ def test_while_the_loop_holds_the_lock_step_messages_wait_and_keep_their_order(s
             assert rx.overlaps == 0
             tx.send(STOP, Stop(reason="test"))
             await asyncio.wait_for(serving, 10.0)
-        finally:
-            serving.cancel()
-            tx.close()
-            rx.node.close()
 
     asyncio.run(body())
 
@@ -219,9 +210,7 @@ def test_in_one_session_a_step_message_is_handled_within_the_send_unless_it_must
         tx = Node(sessions[0], KEYS, "agent", "a2", KEY)
         rx = Receiver(sessions[0])  # the same session: local delivery
         await tx.wait_matched([STEP, STOP], timeout=10.0)
-        serving = asyncio.create_task(rx.serve(hold=0.5))
-        try:
-            await asyncio.sleep(0.05)
+        async with served(tx, rx, hold=0.5) as serving:
             for i in range(50):
                 tx.send(STEP, Cmd(epoch=0, step=i, delta=0.0))
                 assert [s for s, _, _ in rx.handled] == list(range(i + 1)), "not handled within the send"
@@ -238,10 +227,6 @@ def test_in_one_session_a_step_message_is_handled_within_the_send_unless_it_must
             assert rx.node.inline_handled == 51 and rx.overlaps == 0
             tx.send(STOP, Stop(reason="test"))
             await asyncio.wait_for(serving, 10.0)
-        finally:
-            serving.cancel()
-            tx.close()
-            rx.node.close()
 
     asyncio.run(body())
 
@@ -250,9 +235,7 @@ def test_a_failing_inline_handler_fails_the_actor_on_its_loop_and_nothing_runs_a
     async def body() -> None:
         tx, rx = await wire(sessions)
         rx.fail_at = 3
-        serving = asyncio.create_task(rx.serve())
-        try:
-            await asyncio.sleep(0.05)
+        async with served(tx, rx) as serving:
             for i in range(6):
                 tx.send(STEP, Cmd(epoch=0, step=i, delta=0.0))
             with pytest.raises(KeyError, match="step 3"):
@@ -262,9 +245,6 @@ def test_a_failing_inline_handler_fails_the_actor_on_its_loop_and_nothing_runs_a
             tx.send(STEP, Cmd(epoch=0, step=7, delta=0.0))
             await asyncio.sleep(0.3)
             assert len(rx.handled) == seen and all(s < 3 for s, _, _ in rx.handled)
-        finally:
-            tx.close()
-            rx.node.close()
 
     asyncio.run(body())
 
@@ -272,9 +252,7 @@ def test_a_failing_inline_handler_fails_the_actor_on_its_loop_and_nothing_runs_a
 def test_no_inline_handler_runs_once_serving_is_off(sessions):
     async def body() -> None:
         tx, rx = await wire(sessions)
-        serving = asyncio.create_task(rx.serve())
-        try:
-            await asyncio.sleep(0.05)
+        async with served(tx, rx) as serving:
             tx.send(STEP, Cmd(epoch=0, step=0, delta=0.0))
             await until(lambda: len(rx.handled) == 1)
             rx.node.serve_inline(False)
@@ -288,10 +266,6 @@ def test_no_inline_handler_runs_once_serving_is_off(sessions):
             tx.send(STEP, Cmd(epoch=0, step=9, delta=0.0))
             await asyncio.sleep(0.3)
             assert len(rx.handled) == 6
-        finally:
-            serving.cancel()
-            tx.close()
-            rx.node.close()
 
     asyncio.run(body())
 
