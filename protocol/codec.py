@@ -72,9 +72,16 @@ def sign(body: bytes, key: bytes) -> bytes:
 
 def encode(msg: Any, run: str, src: str, key: bytes) -> bytes:
     body = {"v": SCHEMA_VERSION, "kind": msg.KIND, "run": run, "src": src}
-    for name in _field_names(type(msg)):
-        body[name] = getattr(msg, name)
+    if type(msg) is messages.Batch:  # each item as the map of its fields, under the batch's one envelope
+        body.update(of=msg.of, robots=list(msg.robots), items=[_item(m) for m in msg.items])
+    else:
+        for name in _field_names(type(msg)):
+            body[name] = getattr(msg, name)
     return sign(msgpack.packb(body, use_bin_type=True), key)
+
+
+def _item(msg: Any) -> dict[str, Any]:
+    return {name: getattr(msg, name) for name in _field_names(type(msg))}
 
 
 Check = typing.Callable[[Any, str], Any]
@@ -234,19 +241,23 @@ def _fast_field(name: str, tp: Any, lines: list[str]) -> bool:
 
 
 @cache
-def _fast(cls: type) -> Any:
+def _fast(cls: type, envelope: bool = True) -> Any:
     """The fast path for `cls`: body -> message, or None for "ask the general path"; None if `cls` has none.
+    Without `envelope`: a Batch's item, the map of the fields alone (the batch's envelope is checked once).
 
     Generated source, e.g. for Cmd: `if len(b) != 7 or b.get("v") != 2 or ... : return None`,
     `epoch = b.get("epoch")`, `if type(epoch) is not int: return None`, ..., then the message."""
     hints = {k: v for k, v in typing.get_type_hints(cls, vars(messages)).items() if k != "KIND"}
     if hasattr(cls, "__post_init__") or getattr(cls, "__slots__", None) is not None:
         return None  # built field by field below: only for plain dataclasses
-    n = len(hints) + len(_ENVELOPE)
-    lines = [
-        f"if len(b) != {n} or b.get('v') != {SCHEMA_VERSION!r} or b.get('kind') != {cls.KIND!r}"  # type: ignore[attr-defined]
-        " or b.get('run') != run or type(b.get('src')) is not str: return None"
-    ]
+    if envelope:
+        lines = [
+            f"if len(b) != {len(hints) + len(_ENVELOPE)} or b.get('v') != {SCHEMA_VERSION!r}"
+            f" or b.get('kind') != {cls.KIND!r}"  # type: ignore[attr-defined]
+            " or b.get('run') != run or type(b.get('src')) is not str: return None"
+        ]
+    else:
+        lines = [f"if len(b) != {len(hints)}: return None"]
     for name, tp in hints.items():
         lines.append(f"{name} = b.get({name!r})")
         if not _fast_field(name, tp, lines):
@@ -262,6 +273,59 @@ def _fast(cls: type) -> Any:
 
 def decode(payload: bytes, expect: type[M], run: str, key: bytes) -> M:
     """Verify the MAC with `key`, then decode and validate one message of type `expect` for run `run`."""
+    if expect is messages.Batch:
+        return decode_batch(payload, None, run, key)  # type: ignore[return-value]
+    body = _verified(payload, key)
+    if type(body) is dict and (fast := _fast(expect)) is not None and (m := fast(body, run)) is not None:
+        return m
+    _envelope(body, expect.KIND, run)  # type: ignore[attr-defined]
+    return expect(**_checked(body, expect, ""))
+
+
+def decode_batch(payload: bytes, of: type | None, run: str, key: bytes) -> messages.Batch:
+    """Verify the MAC with `key`, then decode and validate a Batch of `of` messages (None: of any step message) for
+    run `run`: its envelope, its robots (ascending integers >= 0, one per item) and every item as a message of its
+    kind (the item's index in the reason). One bad item refuses the batch: it is one actor's one step."""
+    body = _verified(payload, key)
+    _envelope(body, messages.Batch.KIND, run)
+    allowed = frozenset(_field_names(messages.Batch)) | frozenset(_ENVELOPE)
+    if set(body) != allowed:
+        raise DecodeError(f"batch: expected the fields {sorted(allowed - set(_ENVELOPE))}")
+    kind = body["of"]
+    if of is None:
+        of = messages.BATCHED.get(kind) if type(kind) is str else None
+        if of is None:
+            raise DecodeError(f"batch of {kind!r:.40}: not a step message")
+    elif kind != of.KIND:  # type: ignore[attr-defined]
+        raise DecodeError(f"batch of {kind!r:.40}, expected {of.KIND!r}")  # type: ignore[attr-defined]
+    robots, items = body["robots"], body["items"]
+    _robots(robots, items)
+    fast = _fast(of, False)
+    out = []
+    for i, item in enumerate(items):
+        m = fast(item, run) if type(item) is dict and fast is not None else None
+        if m is None:
+            if not isinstance(item, dict):
+                raise DecodeError(f"items[{i}]: expected a map, got {type(item).__name__}")
+            m = of(**_checked(item, of, f"items[{i}]."))
+        out.append(m)
+    return messages.Batch(of=of.KIND, robots=list(robots), items=out)  # type: ignore[attr-defined]
+
+
+def _robots(robots: Any, items: Any) -> None:
+    if not isinstance(robots, list) or not isinstance(items, list):
+        raise DecodeError("batch: robots and items must be lists")
+    if not robots or len(robots) != len(items):
+        raise DecodeError(f"batch: {len(robots)} robots for {len(items)} items (one each, at least one)")
+    last = -1
+    for r in robots:
+        if type(r) is not int or r <= last:
+            raise DecodeError(f"batch: robots must be ascending integers >= 0, got {robots!r:.80}")
+        last = r
+
+
+def _verified(payload: bytes, key: bytes) -> Any:
+    """The msgpack body of `payload`, once its MAC is verified with `key`."""
     n = len(payload)
     if n > MAX_PAYLOAD:
         raise DecodeError(f"payload of {n} bytes exceeds {MAX_PAYLOAD}")
@@ -275,34 +339,42 @@ def decode(payload: bytes, expect: type[M], run: str, key: bytes) -> M:
     if not hmac.compare_digest(h.digest(), payload[-MAC_SIZE:]):
         raise DecodeError(BAD_MAC)
     try:
-        body = msgpack.unpackb(packed, raw=False, strict_map_key=True)
+        return msgpack.unpackb(packed, raw=False, strict_map_key=True)
     except Exception as e:  # msgpack raises several unrelated types for garbage
         raise DecodeError(f"not msgpack: {type(e).__name__}: {e}"[:200]) from None
-    if type(body) is dict and (fast := _fast(expect)) is not None and (m := fast(body, run)) is not None:
-        return m
+
+
+def _envelope(body: Any, kind: str, run: str) -> None:
     if not isinstance(body, dict):
         raise DecodeError(f"expected a map, got {type(body).__name__}")
     if body.get("v") != SCHEMA_VERSION:
         raise DecodeError(f"schema version {body.get('v')!r}, expected {SCHEMA_VERSION}")
-    kind = body.get("kind")
-    if kind != expect.KIND:  # type: ignore[attr-defined]
-        known = "" if isinstance(kind, str) and kind in MESSAGE_TYPES else " (unknown kind)"  # a list is unhashable
-        raise DecodeError(f"kind {kind!r}{known}, expected {expect.KIND!r}")  # type: ignore[attr-defined]
+    got = body.get("kind")
+    if got != kind:
+        known = "" if isinstance(got, str) and got in MESSAGE_TYPES else " (unknown kind)"  # a list is unhashable
+        raise DecodeError(f"kind {got!r}{known}, expected {kind!r}")
     if body.get("run") != run:
         raise DecodeError(f"run {body.get('run')!r}, expected {run!r}")
     if not isinstance(body.get("src"), str):
         raise DecodeError("src: expected a string")
-    checks, allowed = _schema(expect)
+
+
+def _checked(body: dict[str, Any], cls: type, where: str) -> dict[str, Any]:
+    """The fields of a message of type `cls` from `body` (with the envelope, or a Batch's item without), checked;
+    `where` prefixes the reason (a batch item's index)."""
+    checks, allowed = _schema(cls)
+    if where:
+        allowed = allowed - frozenset(_ENVELOPE)
     if len(body) != len(allowed) or not allowed.issuperset(body):
         extra = sorted(str(k) for k in set(body) - allowed)
         if extra:
-            raise DecodeError(f"unexpected field {extra[0]!r}")
+            raise DecodeError(f"{where}unexpected field {extra[0]!r}")
     fields = {}
     for name, check in checks:
         if name not in body:
-            raise DecodeError(f"missing field {name!r}")
-        fields[name] = check(body[name], name)
-    return expect(**fields)
+            raise DecodeError(f"{where}missing field {name!r}")
+        fields[name] = check(body[name], where + name)
+    return fields
 
 
 def local(msg: M, sent_run: str, src: str, run: str) -> M | None:
@@ -312,10 +384,30 @@ def local(msg: M, sent_run: str, src: str, run: str) -> M | None:
     leaves to the general path, e.g. a numpy float, or a message it would refuse, another run's among them): the
     caller encodes and decodes it then, for the same message or the same reason. The MAC is the caller's to match."""
     cls = type(msg)
+    if cls is messages.Batch:
+        return _local_batch(msg, sent_run, run)  # type: ignore[return-value]
     fast = _fast(cls)
     if fast is None:
         return None
     return fast({**msg.__dict__, "v": SCHEMA_VERSION, "kind": cls.KIND, "run": sent_run, "src": src}, run)  # type: ignore[attr-defined]
+
+
+def _local_batch(batch: messages.Batch, sent_run: str, run: str) -> messages.Batch | None:
+    """local() of a Batch: the envelope, the robots and every item as decode_batch checks them, into fresh ones."""
+    cls = messages.BATCHED.get(batch.of) if type(batch.of) is str else None
+    fast = _fast(cls, False) if cls is not None else None
+    if fast is None or sent_run != run or type(batch.items) not in (list, tuple):
+        return None
+    try:
+        _robots(list(batch.robots) if type(batch.robots) in (list, tuple) else batch.robots, list(batch.items))
+    except DecodeError:
+        return None
+    items = []
+    for m in batch.items:
+        if type(m) is not cls or (m := fast(m.__dict__, run)) is None:
+            return None
+        items.append(m)
+    return messages.Batch(of=batch.of, robots=list(batch.robots), items=items)
 
 
 def sender(payload: bytes) -> str:

@@ -86,6 +86,11 @@ def check_fault(f: Fault, agents: list[str] | None = None) -> str:
             return f"{f.fault}: degrees must be in ({lo}, 180], got {f.degrees}"
     if f.fault == "lag" and f.steps is not None and f.steps > MAX_LAG_STEPS:
         return f"lag: steps must be at most {MAX_LAG_STEPS}, got {f.steps}"
+    if f.robot is not None:
+        if f.fault not in JOINT_FAULTS:  # kill, freeze and message faults act on an agent: every robot's joint
+            return f"{f.fault}: acts on an agent, so on every robot of a fleet; only joint faults take a robot"
+        if f.robot < 0:
+            return f"{f.fault}: robot must be >= 0, got {f.robot}"
     return ""
 
 
@@ -99,4 +104,5 @@ def expand_targets(targets: list[str], agents: list[str]) -> list[str]:
 def describe(f: Fault) -> str:
     """One line for logs, events and the CLI: `drop a2,a3 rate=0.05 seconds=30`."""
     extras = [f"{n}={getattr(f, n):g}" for n in _OPTIONAL_FIELDS if getattr(f, n) is not None]
-    return " ".join([f.fault, ",".join(f.targets), *extras])
+    robot = [f"robot={f.robot}"] if f.robot is not None else []
+    return " ".join([f.fault, ",".join(f.targets), *extras, *robot])

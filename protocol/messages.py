@@ -11,7 +11,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import ClassVar
 
-SCHEMA_VERSION = 9  # 2: faults, events, status, bye; payloads carry a MAC (codec.py). 3: Up.action is the
+SCHEMA_VERSION = 10  # 2: faults, events, status, bye; payloads carry a MAC (codec.py). 3: Up.action is the
 # sender's action of the step before (sent before it learns), plus a closing Up after an epoch's last step.
 # 4: scenes with obstacles and the grasp scene: `sense` maps, `traces` on EpochDone. 5: several hosts (deploy
 # plans): Setup, Heartbeat. 6: Up.clearance. 7: every scene reading and task aggregate travels in the one `sense`
@@ -19,7 +19,9 @@ SCHEMA_VERSION = 9  # 2: faults, events, status, bye; payloads carry a MAC (code
 # only in `traces`, and EpochStart.path, the goal of every step when it moves. 8: faults in the robot's model
 # (reverse, scale, deadzone, offset, lag) and their sizes, Fault.factor and Fault.degrees; EpochDone.angles, the
 # robot's pose after every step; AgentTrace, what each agent saw and chose. 9: spatial robots (from URDF): goals,
-# frames and tips are `Coords`, of the robot's kind; EpochStart.start, a task's start pose.
+# frames and tips are `Coords`, of the robot's kind; EpochStart.start, a task's start pose. 10: fleets (`run.fleet`):
+# a fleet's step messages travel as a Batch, one item per robot; EpochDone.fleet, every robot's final error;
+# EpochStart.goals and .starts, each robot's; Fault.robot, a joint fault on one robot.
 
 Vec2 = tuple[float, float]
 Vec3 = tuple[float, float, float]
@@ -115,6 +117,9 @@ class EpochStart:
     goal: Coords
     path: list[Coords] = field(default_factory=list)
     start: dict[str, float] = field(default_factory=dict)
+    # a fleet whose robots train on different goals (run.fleet_goals = "spread"): robot b's goal and start pose
+    goals: list[Coords] = field(default_factory=list)
+    starts: list[dict[str, float]] = field(default_factory=list)
 
 
 @dataclass(frozen=True)
@@ -136,6 +141,8 @@ class EpochDone:
     traces: dict[str, list[float]] = field(default_factory=dict)
     # the robot's true joint angles (rad) after each step, in the topology's DOF order: the run's motion
     angles: list[list[float]] = field(default_factory=list)
+    # a fleet (run.fleet = B > 1): the final error of each of its B robots (the fields above are robot 0's)
+    fleet: list[float] = field(default_factory=list)
 
 
 @dataclass(frozen=True)
@@ -196,6 +203,7 @@ class Fault:
     amplitude_deg: float | None
     factor: float | None = None
     degrees: float | None = None
+    robot: int | None = None  # a fleet's robot a joint fault acts on (None: every robot)
 
 
 @dataclass(frozen=True)
@@ -292,6 +300,22 @@ class AgentTrace:
     beliefs: list[list[float]]
 
 
+@dataclass(frozen=True)
+class Batch:
+    """A fleet's step message (run.fleet = B > 1: B robots in lockstep through one swarm): what one actor sends on
+    one step key for several robots of the fleet, in one payload. `items[i]`, a message of kind `of` (obs, task,
+    down, up, cmd), is robot `robots[i]`'s (robots ascending, each in [0, B)). On the wire each item is the map of
+    its fields (codec.py checks each as a message of its kind); one MAC covers the batch."""
+
+    KIND: ClassVar[str] = "batch"
+    of: str
+    robots: list[int]
+    items: list[Obs | Task | Down | Up | Cmd]
+
+
+#: the kinds a Batch carries: the step messages
+BATCHED = {m.KIND: m for m in (Obs, Task, Down, Up, Cmd)}
+
 _ALL = (Obs, Task, Down, Up, Cmd, EpochStart, EpochDone, Checkpoint, Saved, Stop)
-_ALL += (Bye, Fault, FaultReply, Event, JointStatus, SwarmStatus, Setup, Heartbeat, AgentTrace)
+_ALL += (Bye, Fault, FaultReply, Event, JointStatus, SwarmStatus, Setup, Heartbeat, AgentTrace, Batch)
 MESSAGE_TYPES: dict[str, type] = {m.KIND: m for m in _ALL}

@@ -8,6 +8,7 @@ from kinswarm.protocol.messages import (
     MESSAGE_TYPES,
     SCHEMA_VERSION,
     AgentTrace,
+    Batch,
     Bye,
     Checkpoint,
     Cmd,
@@ -110,6 +111,12 @@ SAMPLES = [
         expected=[[0.0, 0.5, 1.0], [0.1, 0.2, 0.3]],
         beliefs=[[0.2, 0.3, 0.5], []],
     ),  # fmt: skip
+    Batch(of="cmd", robots=[0, 3], items=[Cmd(epoch=1, step=9, delta=-0.0174), Cmd(epoch=1, step=9, delta=0.0)]),
+    Batch(
+        of="down",
+        robots=[1],
+        items=[Down(epoch=3, step=4, base=(1.0, 2.0, 0.5), goal=(4.0, 6.0), reward=None, sense={"fine": 1.0})],
+    ),
 ]
 
 
@@ -228,7 +235,7 @@ def test_reading_names_are_checked_on_both_paths(name, monkeypatch):
     payload = codec.sign(msgpack.packb(body), KEY)
     with pytest.raises(codec.DecodeError, match="expected names"):
         codec.decode(payload, Obs, "run1", KEY)
-    monkeypatch.setattr(codec, "_fast", lambda cls: None)
+    monkeypatch.setattr(codec, "_fast", lambda cls, envelope=True: None)
     with pytest.raises(codec.DecodeError, match="expected names"):
         codec.decode(payload, Obs, "run1", KEY)
 
@@ -294,7 +301,7 @@ def test_the_fast_path_decides_exactly_as_the_general_path(monkeypatch):
     payloads = [(kind, codec.sign(msgpack.packb(body, strict_types=False), KEY)) for kind, body in _variants()]
     fast = [_outcome(p, kind) for kind, p in payloads]
     assert sum(o[0] == "ok" for o in fast) > 20 and sum(o[0] == "rejected" for o in fast) > 100
-    monkeypatch.setattr(codec, "_fast", lambda cls: None)  # the general path alone
+    monkeypatch.setattr(codec, "_fast", lambda cls, envelope=True: None)  # the general path alone
     assert [_outcome(p, kind) for kind, p in payloads] == fast
 
 
@@ -336,3 +343,61 @@ def test_in_process_a_message_of_another_run_is_not_taken():
     assert codec.local(cmd, "run2", "me", "run1") is None  # the receiver's bytes path then says why
     with pytest.raises(codec.DecodeError, match="run 'run2'"):
         codec.decode(codec.encode(cmd, "run2", "me", KEY), Cmd, "run1", KEY)
+
+
+# -- a fleet's Batch: one payload, one item per robot ------------------------------------------------------------------
+CMD = {"epoch": 1, "step": 2, "delta": 0.0}
+
+
+def _batch_body(**over):
+    body = {
+        "v": SCHEMA_VERSION,
+        "kind": "batch",
+        "run": "run1",
+        "src": "a1",
+        "of": "cmd",
+        "robots": [0, 2],
+        "items": [{"epoch": 1, "step": 2, "delta": 0.01}, {"epoch": 1, "step": 2, "delta": -0.01}],
+    }
+    body.update(over)
+    return codec.sign(msgpack.packb(body), KEY)
+
+
+def test_a_batch_decodes_into_its_robots_messages():
+    b = codec.decode_batch(_batch_body(), Cmd, "run1", KEY)
+    assert b.robots == [0, 2] and b.items == [Cmd(epoch=1, step=2, delta=0.01), Cmd(epoch=1, step=2, delta=-0.01)]
+
+
+@pytest.mark.parametrize(
+    "over, reason",
+    [
+        ({"of": "down"}, "batch of 'down', expected 'cmd'"),
+        ({"robots": [2, 0]}, "ascending"),
+        ({"robots": [0, 0]}, "ascending"),
+        ({"robots": [-1, 0]}, "ascending"),
+        ({"robots": [0]}, "1 robots for 2 items"),
+        ({"robots": [], "items": []}, "at least one"),
+        ({"items": [CMD, {"epoch": 1, "step": 2, "delta": float("nan")}]}, "items[1].delta"),
+        ({"items": [{"epoch": 1, "step": 2}, CMD]}, "items[0].missing field 'delta'"),
+        ({"items": [{**CMD, "x": 1}, CMD]}, "unexpected"),
+        ({"items": [5, CMD]}, "items[0]: expected a map"),
+        ({"run": "run2"}, "run 'run2'"),
+    ],
+)  # fmt: skip
+def test_a_bad_batch_is_refused_whole_with_the_item_named(over, reason):
+    with pytest.raises(codec.DecodeError) as e:
+        codec.decode_batch(_batch_body(**over), Cmd, "run1", KEY)
+    assert reason in str(e.value)
+
+
+def test_a_batch_handed_over_in_process_is_the_one_its_bytes_decode_to():
+    batch = next(m for m in SAMPLES if type(m) is Batch and m.of == "down")
+    got = codec.local(batch, "run1", "me", "run1")
+    assert got == codec.decode(codec.encode(batch, "run1", "me", KEY), Batch, "run1", KEY)
+    assert got.items[0].sense is not batch.items[0].sense  # the receiver's own maps
+    nan = Batch(of="cmd", robots=[0, 1], items=[Cmd(epoch=0, step=0, delta=0.0), Cmd(epoch=0, step=0, delta=math.nan)])
+    assert codec.local(nan, "run1", "me", "run1") is None  # left to the bytes' way, which says why
+    with pytest.raises(codec.DecodeError, match=r"items\[1\]\.delta"):
+        codec.decode_batch(codec.encode(nan, "run1", "me", KEY), Cmd, "run1", KEY)
+    assert codec.local(Batch(of="cmd", robots=[1, 0], items=nan.items), "run1", "me", "run1") is None
+    assert codec.local(Batch(of="obs", robots=[0, 1], items=nan.items), "run1", "me", "run1") is None
