@@ -44,12 +44,13 @@ the loop one by one and faulted there, so the RNG, counters and timers are only 
 
 from .mailbox import LocalBus, Mailbox, Tapped, tap
 from .net import HANDSHAKE_MS, LEASE_MS, NetSpec, open_session, zenoh_config
-from .node import LINK_COUNTS, LinkFault, Local, Node, setup_logging
+from .node import LINK_COUNTS, Lane, LinkFault, Local, Node, setup_logging
 
 __all__ = [
     "HANDSHAKE_MS",
     "LEASE_MS",
     "LINK_COUNTS",
+    "Lane",
     "LinkFault",
     "Local",
     "LocalBus",

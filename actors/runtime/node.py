@@ -11,7 +11,7 @@ import logging
 import random
 import threading
 import time
-from collections.abc import AsyncIterator, Callable, Iterable
+from collections.abc import AsyncIterator, Callable, Iterable, Iterator
 from dataclasses import dataclass
 from typing import Any, TypeVar
 
@@ -19,7 +19,7 @@ import zenoh
 from kinswarm.protocol import codec
 from kinswarm.protocol.faults import ALL, LINK_FAULTS, check_fault, describe
 from kinswarm.protocol.keys import Keys
-from kinswarm.protocol.messages import Fault
+from kinswarm.protocol.messages import Batch, Fault
 
 from .mailbox import Mailbox, _bus, _release
 
@@ -98,6 +98,10 @@ class Node:
         self._loop_holds = False  # the loop holds `lock` (in next()); only the loop reads or writes this
         self.inline_handled = 0  # step messages handled on a Zenoh thread (the rest went through the mailbox)
         self._failure: BaseException | None = None  # what an inline handler raised, for the loop to raise
+        # A fleet (run.fleet = B > 1): its step messages travel as Batches, robots in [0, fleet). While the actor
+        # handles one batch, what its lanes send is gathered here (key -> groups of robots and messages).
+        self.fleet = 1
+        self._gathered: dict[str, list[tuple[list[int], list[Any]]]] | None = None
 
     # -- sending ---------------------------------------------------------------------------------
     def publisher(self, key: str) -> Any:
@@ -131,6 +135,60 @@ class Node:
                     self._emit(key, p)
         else:
             self._emit(key, Local(msg, self.keys.run, self.ident, self.key))
+
+    # -- a fleet: one Batch per key, whatever its B ---------------------------------------------------------
+    @contextlib.contextmanager
+    def gathering(self) -> Iterator[None]:
+        """While inside, the step messages this actor's lanes send (`send_as`) are gathered; on leaving, each key's
+        go out as one Batch (a second when a robot sent twice on one key: a robot's k-th message is in the k-th),
+        keys in the order of their first message. Nothing is sent when the body raises: the actor is failing.
+        Within a gathering (one handler's, under the node's lock) another one adds to it: the outer one sends."""
+        if self._gathered is not None:
+            yield
+            return
+        self._gathered = {}
+        try:
+            yield
+            gathered = self._gathered
+        finally:
+            self._gathered = None
+        for key, groups in gathered.items():
+            for robots, items in groups:
+                self.send(key, Batch(of=items[0].KIND, robots=robots, items=items))
+
+    def send_as(self, robot: int, key: str, msg: Any) -> None:
+        """Robot `robot`'s message: a step message into the batch being gathered (alone in a Batch of its own outside
+        gathering()), anything else sent as it is."""
+        gathered = self._gathered
+        if not key.startswith(self._step_prefixes):
+            self.send(key, msg)
+        elif gathered is None:
+            self.send(key, Batch(of=msg.KIND, robots=[robot], items=[msg]))
+        else:
+            groups = gathered.get(key)
+            if groups is None:
+                gathered[key] = [([robot], [msg])]
+                return
+            for robots, items in groups:
+                if robots[-1] < robot:
+                    robots.append(robot)
+                    items.append(msg)
+                    return
+            groups.append(([robot], [msg]))
+
+    def decode_batch(self, key: str, payload: bytes | Local, of: type[M]) -> Batch | None:
+        """A Batch of `of` messages for robots of this fleet, or None (the reason logged, as decode() logs it)."""
+        m = self.decode(key, payload, Batch)
+        if m is None:
+            return None
+        if m.of != of.KIND:  # type: ignore[attr-defined]
+            reason = f"batch of {m.of!r}, expected {of.KIND!r}"  # type: ignore[attr-defined]
+        elif m.robots[-1] >= self.fleet:
+            reason = f"batch for robot {m.robots[-1]}: this fleet has {self.fleet}"
+        else:
+            return m
+        self._rejected(key, payload.src if type(payload) is Local else codec.sender(payload), reason)
+        return None
 
     def _emit(self, key: str, payload: bytes | Local) -> None:
         """A step message: to this session's Nodes and taps listening on `key` (the local bus), and on Zenoh to the
@@ -301,20 +359,19 @@ class Node:
         try:
             return codec.decode(payload, expect, self.keys.run, self.key)
         except codec.DecodeError as e:
-            self.rejected += 1
-            # the first rejection on each key is logged, so a flood on one key cannot hide another's; then a sample
-            first_on_key = key not in self._rejected_keys and len(self._rejected_keys) < LOGGED_KEYS
-            if first_on_key:
-                self._rejected_keys.add(key)
-            if first_on_key or self.rejected <= 20 or self.rejected % 1000 == 0:
-                self.log.warning(
-                    "rejected message on %s from %s: %s (rejected so far: %d)",
-                    key,
-                    codec.sender(payload),
-                    e,
-                    self.rejected,
-                )
+            self._rejected(key, codec.sender(payload), str(e))
             return None
+
+    def _rejected(self, key: str, sender: str, reason: str) -> None:
+        self.rejected += 1
+        # the first rejection on each key is logged, so a flood on one key cannot hide another's; then a sample
+        first_on_key = key not in self._rejected_keys and len(self._rejected_keys) < LOGGED_KEYS
+        if first_on_key:
+            self._rejected_keys.add(key)
+        if first_on_key or self.rejected <= 20 or self.rejected % 1000 == 0:
+            self.log.warning(
+                "rejected message on %s from %s: %s (rejected so far: %d)", key, sender, reason, self.rejected
+            )
 
     # -- link faults -----------------------------------------------------------------------------
     def apply_fault(self, f: Fault) -> str:
@@ -423,6 +480,34 @@ class Node:
         self._pubs.clear()
         self._subs.clear()
         self._token = None
+
+
+class Lane:
+    """One robot of a fleet as an actor's per-robot code sees its Node: the step messages it sends are robot
+    `robot`'s (Node.send_as: into the batch being gathered). Only the owning lane (robot 0's, the actor's own) speaks
+    for the actor otherwise: it subscribes, and sends what is not a step message (events, replies); the other lanes'
+    are their duplicates (every robot loses the same neighbour at the same step), not sent, and their log says only
+    errors (the owner's says the rest once)."""
+
+    __slots__ = ("node", "robot", "owner", "log")
+
+    def __init__(self, node: Node, robot: int) -> None:
+        self.node, self.robot, self.owner = node, robot, robot == 0
+        self.log = node.log
+        if not self.owner:
+            self.log = logging.getLogger(f"{node.log.name}.fleet")
+            self.log.setLevel(logging.ERROR)
+
+    def send(self, key: str, msg: Any) -> None:
+        if self.owner or key.startswith(self.node._step_prefixes):
+            self.node.send_as(self.robot, key, msg)
+
+    def listen(self, key_expr: str, inline: Callable[[str, bytes], None] | None = None) -> None:
+        if self.owner:
+            self.node.listen(key_expr, inline)
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self.node, name)
 
 
 def setup_logging(level: str = "INFO") -> None:
