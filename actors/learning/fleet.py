@@ -1,0 +1,73 @@
+"""A fleet's agent (run.fleet = B > 1): one learner learning from the B robots' transitions.
+
+The learner is one: one Q (its phi, Eq. 2), one set of fictitious-play counts (Eq. 7), one random generator, one
+epoch's schedules. What is each robot's own is the transition it is in: the rules s(t-1) fired and their weights,
+its pending joint action, its own action, and the step t of the temperature schedule (Eq. 8). A robot's lane swaps
+its own into the learner for the length of each call, so lane b's calls compute exactly what one learner's calls
+would, on the Q and counts the calls before it left; the agent makes them in a fixed order (robot 0 first), so a
+fleet's run is as deterministic as one robot's.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Collection, Sequence
+from typing import Any
+
+import numpy as np
+
+from .learner import Learner
+
+#: the Learner's attributes that are one transition's: each lane keeps its own
+EPISODE = ("_fired", "_w", "_rules_and_O", "_latest", "_pending", "_own", "t")
+
+
+class LearnerLane:
+    """Robot b's view of a fleet agent's learner: decide, observe, start_epoch and resync on its own transition;
+    anything else (settings, E, P just after its decide, checkpoints) is the learner's."""
+
+    def __init__(self, learner: Learner) -> None:
+        self.learner = learner
+        fired = np.zeros_like(learner._fired)
+        fired[:, 1] = -1  # as a new learner's: no rule of s(t-1) updated yet
+        w = np.zeros_like(learner._w)
+        self._own_state: dict[str, Any] = {
+            "_fired": fired,
+            "_w": w,
+            "_rules_and_O": [(fired[i, 0], w[i]) for i in (0, 1)],
+            "_latest": 0,
+            "_pending": None,
+            "_own": 0,
+            "t": 0,
+        }
+
+    def _call(self, method: str, *args: Any, **kwargs: Any) -> Any:
+        learner, mine = self.learner, self._own_state
+        for name in EPISODE:
+            setattr(learner, name, mine[name])
+        try:
+            return getattr(learner, method)(*args, **kwargs)
+        finally:
+            for name in EPISODE:
+                mine[name] = getattr(learner, name)
+
+    def decide(
+        self,
+        state: np.ndarray,
+        reward: float | None,
+        learn: bool = True,
+        explore: bool = True,
+        avoid: Collection[int] = (),
+    ) -> int:
+        return self._call("decide", state, reward, learn=learn, explore=explore, avoid=avoid)
+
+    def observe(self, visible_actions: Sequence[int], learn: bool = True) -> None:
+        self._call("observe", visible_actions, learn=learn)
+
+    def start_epoch(self, epoch: int, t: int = 0) -> None:
+        self._call("start_epoch", epoch, t=t)
+
+    def resync(self, t: int) -> None:
+        self._call("resync", t)
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self.learner, name)
