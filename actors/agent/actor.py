@@ -23,6 +23,7 @@ from __future__ import annotations
 import asyncio
 import zlib
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from kinswarm.actors.config import RunConfig
@@ -61,7 +62,9 @@ class _Step:
 
 
 class Agent:
-    def __init__(self, cfg: RunConfig, topo: Topology, agent_id: str, node: Node) -> None:
+    def __init__(self, cfg: RunConfig, topo: Topology, agent_id: str, node: Node, learner: Any = None) -> None:
+        """`learner`: the learner to decide with (a fleet's lane shares its agent's: actors/agent/fleet.py); by
+        default its own."""
         self.cfg, self.topo, self.node, self.id = cfg, topo, node, agent_id
         self.spec = topo.agents[agent_id]
         self.geom = geometry_of(topo)
@@ -77,7 +80,7 @@ class Agent:
         self.extra_names: tuple[str, ...] = ()  # the learner's own extra variables, after the task's
         if self.spec.has_dof:
             settings = learner_settings(task, cfg.learner, cfg.source)[agent_id]
-            self.learner = Learner(settings, len(self.visible), agent_seed(cfg.seed, agent_id))
+            self.learner = learner or Learner(settings, len(self.visible), agent_seed(cfg.seed, agent_id))
             self.extra_names = tuple(v.name for v in settings.extra_state[self.n_task_vars :])
         self.unsigned_g3 = self.learner is not None and self.learner.settings.g3 == "unsigned"
         self.trace = None  # what it saw and chose, for the recording (run.record_agents)
@@ -156,7 +159,7 @@ class Agent:
                     continue
                 kind = key[len(k.root) + 1 :]
                 if key == "__alive__":
-                    self.standin.on_token(payload.decode())
+                    self._on_token(payload.decode())
                 elif kind == "ctl/fault":
                     if (f := node.decode(key, payload, Fault)) is not None:
                         node.apply_fault(f)
@@ -170,29 +173,43 @@ class Agent:
                         return
                 # other ctl verbs are for other actors
 
+    def _on_token(self, change: str) -> None:
+        self.standin.on_token(change)
+
     def _on_step(self, key: str, payload: bytes) -> bool:
         """One step message (obs, task, down, up) handled; False if `key` is not one."""
-        node = self.node
         kind = key[self._root_len :]
-        if kind.startswith("sim/obs/"):
-            if (m := node.decode(key, payload, Obs)) is not None:
-                agent = kind[8:]  # len("sim/obs/")
-                if agent in self.q_in:
-                    self.q_in[agent][(m.epoch, m.step)] = m.q
-                    if m.sense and agent == self.id:
-                        self.sense_in[(m.epoch, m.step)] = m.sense
-                    self._try_begin((m.epoch, m.step))
-        elif kind.endswith("/down") or kind == "sim/task":
-            m2 = node.decode(key, payload, Task if self.is_root else Down)
-            if m2 is not None:
-                self.head_in[(m2.epoch, m2.step)] = m2
-                self._try_begin((m2.epoch, m2.step))
-        elif kind.endswith("/up"):
-            if (m3 := node.decode(key, payload, Up)) is not None:
-                self._on_up(m3, kind[2:-3])
-        else:
+        of = self._kind(kind)
+        if of is None:
             return False
+        if (m := self.node.decode(key, payload, of)) is not None:
+            self._take(kind, m)
         return True
+
+    def _kind(self, kind: str) -> type | None:
+        """The message a step key carries (`kind`: the key below the run's root); None for any other key."""
+        if kind.startswith("sim/obs/"):
+            return Obs
+        if kind.endswith("/down") or kind == "sim/task":
+            return Task if self.is_root else Down
+        if kind.endswith("/up"):
+            return Up
+        return None
+
+    def _take(self, kind: str, m: Any) -> None:
+        """A step message, decoded: an encoder reading, the head of the step (task or down), or a child's up."""
+        if type(m) is Obs:
+            agent = kind[8:]  # len("sim/obs/")
+            if agent in self.q_in:
+                self.q_in[agent][(m.epoch, m.step)] = m.q
+                if m.sense and agent == self.id:
+                    self.sense_in[(m.epoch, m.step)] = m.sense
+                self._try_begin((m.epoch, m.step))
+        elif type(m) is Up:
+            self._on_up(m, kind[2:-3])
+        else:
+            self.head_in[(m.epoch, m.step)] = m
+            self._try_begin((m.epoch, m.step))
 
     # -- begin: the top-down pass --------------------------------------------------------------------
     def _try_begin(self, key: Key) -> None:
