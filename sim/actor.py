@@ -56,12 +56,13 @@ class SimActor:
         self.cfg, self.topo, self.node, self.keys = cfg, topo, node, node.keys
         # Read before the world exists: a bad file fails the actor without leaking a PyBullet client.
         self.scenario = load_scenario(cfg.scenario, topo) if cfg.scenario else None
-        self.world = World(topo)
+        self.world = self._world(topo)
         try:
             self.scene = build_scene(self.world, cfg.scene_spec, cfg.action_rad)
         except BaseException:
             self.world.close()
             raise
+        self.robot = 0  # which robot of a fleet this is (sim/fleet.py): a joint fault for another is not its
         self.dof = topo.dof_agents
         self.dof_set = frozenset(self.dof)
         self._obs_first = [a for a in self.dof if a == topo.root]  # the root's reading goes out with the task
@@ -108,6 +109,9 @@ class SimActor:
                 node.log.warning(
                     "scenario %s: steps %s are beyond --steps %d, never reached", cfg.scenario, late, cfg.steps
                 )
+
+    def _world(self, topo: Topology) -> World:
+        return World(topo)
 
     def outputs(self) -> list[str]:
         out = [self.keys.task, *(self.keys.obs(a) for a in self.dof)]
@@ -331,7 +335,7 @@ class SimActor:
     def apply_fault(self, f: Fault) -> None:
         """Apply a joint fault now (it takes effect at the current step's increments); others are ignored,
         they are for the supervisor and the runtimes."""
-        if f.fault not in JOINT_FAULTS:
+        if f.fault not in JOINT_FAULTS or f.robot not in (None, self.robot):
             return
         problem = check_fault(f, list(self.topo.order))
         if problem:
@@ -411,8 +415,7 @@ class SimActor:
                 return
             self._publish_step()
             return
-        self.node.send(
-            self.keys.metrics("epoch"),
+        self._done(
             EpochDone(
                 epoch=e.epoch,
                 steps=e.steps,
@@ -428,6 +431,10 @@ class SimActor:
             ),
         )
         self.epoch = None
+
+    def _done(self, m: EpochDone) -> None:
+        """The epoch is over: its metrics to the observers (a fleet's sim sends every robot's in one)."""
+        self.node.send(self.keys.metrics("epoch"), m)
 
     def goal(self) -> tuple[float, float]:
         """The goal of the running step: it moves along the epoch's path, if it has one."""

@@ -13,12 +13,17 @@ from .base import Scene
 SPATIAL_KINDS = ("free",)  # the scenes a spatial robot (from URDF) can be in
 
 
+def scene_class(kind: str) -> type[Scene]:
+    if kind not in SCENE_KINDS:
+        raise ValueError(f"unknown scene kind {kind!r}; expected one of {', '.join(SCENE_KINDS)}")
+    return importlib.import_module(f"{__name__}.{kind}").SCENE
+
+
 def build_scene(world: World, spec: SceneSpec, action_rad: float) -> Scene:
-    if spec.kind not in SCENE_KINDS:
-        raise ValueError(f"unknown scene kind {spec.kind!r}; expected one of {', '.join(SCENE_KINDS)}")
+    cls = scene_class(spec.kind)
     if world.topo.spatial and spec.kind not in SPATIAL_KINDS:  # walls and objects lie in the plane z = 0
         raise ValueError(f"the {spec.kind} scene is planar; a robot from URDF ({world.topo.name}) runs in free space")
-    return importlib.import_module(f"{__name__}.{spec.kind}").SCENE(world, spec, action_rad)
+    return cls(world, spec, action_rad)
 
 
-__all__ = ["Scene", "build_scene"]
+__all__ = ["Scene", "build_scene", "scene_class"]

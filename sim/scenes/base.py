@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
+from typing import ClassVar
 
 from kinswarm.protocol.messages import Readings
 from kinswarm.protocol.scene import SceneSpec
@@ -26,6 +27,9 @@ Pose = tuple[float, ...]  # a tip: planar (x, y, heading), spatial a 7-float fra
 
 
 class Scene:
+    #: its robots may share one PyBullet client (a fleet: sim/fleet.py): nothing of one robot's world acts on another's
+    shares_world: ClassVar[bool] = True
+
     def __init__(self, world: World, spec: SceneSpec, action_rad: float) -> None:
         self.world, self.spec, self.action_rad = world, spec, action_rad
 

@@ -20,6 +20,8 @@ from .contact import GraspScene
 
 
 class ObjectScene(Scene):
+    shares_world = False  # the object is pushed by the simulated contacts: one per robot, in a world of its own
+
     def __init__(self, world: World, spec: SceneSpec, action_rad: float) -> None:
         super().__init__(world, spec, action_rad)
         assert spec.object is not None

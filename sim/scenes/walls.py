@@ -155,6 +155,8 @@ class Walls:
 
 
 class WallsScene(Scene):
+    shares_world = False  # its obstacles are bodies in the client: another robot's would be among them
+
     def __init__(self, world: World, spec: SceneSpec, action_rad: float) -> None:
         super().__init__(world, spec, action_rad)
         self.walls = Walls(world, spec.obstacles)
