@@ -105,6 +105,7 @@ def _control(a: argparse.Namespace) -> int:
             amplitude_deg=a.amplitude,
             factor=a.factor,
             degrees=a.degrees,
+            robot=a.robot,
         )
     cfg = run_config(a.run_id, a.run_dir)
     run_dir = a.run_dir or Path("runs") / a.run_id
@@ -249,6 +250,11 @@ def _main(argv: list[str] | None) -> int:
             f"{cfg.run_id}: {len(fe)} epochs, final error {fe[-1]:.3f} (last {len(last)}: {within} within {line:g}), "
             f"{summary['steps_per_second']:.0f} steps/s, {summary['wall_seconds']:.1f} s -> {cfg.out}"
         )
+        if (fleet := summary.get("fleet_final_error")) and fleet[-1]:
+            print(
+                f"  fleet of {cfg.fleet}: {sum(e <= line for e in fleet[-1])} robots within {line:g} at the last "
+                f"epoch, {summary['robot_steps_per_second']:.0f} robot-steps/s"
+            )
     if lost := sum(summary.get("tokens_lost", {}).values()):
         print(
             f"kinswarm: {lost} liveliness token(s) went away while training (events.jsonl): a fault, or an actor "

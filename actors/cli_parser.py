@@ -178,6 +178,7 @@ def build_parser() -> argparse.ArgumentParser:
     fault.add_argument("--amplitude", type=float, default=None, help="disturb: degrees per step (default 2)")
     fault.add_argument("--factor", type=float, default=None, help="scale: the motor moves FACTOR x the command")
     fault.add_argument("--degrees", type=float, default=None, help="deadzone: smallest move; offset: encoder error")
+    fault.add_argument("--robot", type=int, default=None, help="a fleet's joint faults: on robot N only (default: all)")
     status = sub.add_parser("status", help="show a running swarm's actors (alive, pid, restarts, faults, joints)")
     status.add_argument("run_id", metavar="RUN-ID")
     status.add_argument("--watch", action="store_true", help="refresh live until Ctrl-C")
@@ -234,7 +235,7 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
-VALUED = ("--for", "--ms", "--rate", "--steps", "--amplitude", "--factor", "--degrees")  # fault's options
+VALUED = ("--for", "--ms", "--rate", "--steps", "--amplitude", "--factor", "--degrees", "--robot")  # fault's options
 
 
 def joined(argv: list[str]) -> list[str]:

@@ -50,7 +50,11 @@ RUN_KEYS = (
     "stall_limit_s",
     "record_agents",
     "record",
+    "fleet",
+    "fleet_goals",
 )
+FLEET_GOALS = ("same", "spread")
+MAX_FLEET = 1024  # robots in a fleet: a step's Batch of them stays far below the codec's 1 MiB
 
 
 class ConfigError(ValueError):
@@ -104,6 +108,12 @@ class RunConfig:
     # at the end: motion.gif (kinswarm animate) and, with the extra kinswarm[viewer], recording.rrd (kinswarm view).
     # Its default comes from KINSWARM_RECORD when set: the test suite sets 0 (a few seconds a run, hundreds of runs)
     record: bool = field(default_factory=lambda: os.environ.get("KINSWARM_RECORD", "1") != "0")
+    # B robots in lockstep through one swarm, each agent learning from all B (actors/agent/fleet.py, sim/fleet.py);
+    # the run's metrics, recording and motion are robot 0's, EpochDone.fleet every robot's final error
+    fleet: int = 1
+    # "same": every robot the epoch's goal; "spread": robot b of epoch e the task's goal (and start) of epoch e*B + b,
+    # a goal list walked B goals an epoch (the paper's protocol is one goal an epoch: "same", or no fleet)
+    fleet_goals: str = "same"
     listen: str = DEFAULT_LISTEN  # the supervisor's endpoint
     # Several hosts (a deploy plan): the hosts whose heartbeats the sim must hear to step, within lease_ms
     hosts: list[str] = field(default_factory=list)
@@ -118,6 +128,14 @@ class RunConfig:
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or v < lo:
                 raise ConfigError(f"{name}: expected an integer >= {lo}, got {v!r}")
+        if isinstance(self.fleet, bool) or not isinstance(self.fleet, int) or not 1 <= self.fleet <= MAX_FLEET:
+            raise ConfigError(f"fleet: expected an integer in [1, {MAX_FLEET}], got {self.fleet!r}")
+        if self.fleet_goals not in FLEET_GOALS:
+            raise ConfigError(f"fleet_goals: {self.fleet_goals!r} is not one of {', '.join(FLEET_GOALS)}")
+        if self.fleet > 1 and self.controller != "agents":
+            raise ConfigError(
+                f"fleet: only the learning agents drive a fleet; controller {self.controller!r} drives one robot"
+            )
         if self.seed >= 2**63:
             raise ConfigError(f"seed: expected an integer below 2**63, got {self.seed}")
         if self.lease_ms > LEASE_RANGE_MS[1]:

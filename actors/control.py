@@ -121,6 +121,7 @@ def make_fault(
     amplitude_deg: float | None = None,
     factor: float | None = None,
     degrees: float | None = None,
+    robot: int | None = None,
 ) -> Fault:
     f = Fault(
         id=f"cli-{secrets.token_hex(4)}",
@@ -133,6 +134,7 @@ def make_fault(
         amplitude_deg=amplitude_deg,
         factor=factor,
         degrees=degrees,
+        robot=robot,
     )
     error = check_fault(f)
     if error:

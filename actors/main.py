@@ -50,8 +50,9 @@ def build_actor(role: str, ident: str, cfg: RunConfig, topo: Topology, node: Nod
     """`restore`: a restart -- resume from this run's newest good checkpoint instead of the start."""
     if role == "agent":
         from kinswarm.actors.agent import Agent
+        from kinswarm.actors.agent.fleet import FleetAgent
 
-        agent = Agent(cfg, topo, ident, node)
+        agent = FleetAgent(cfg, topo, ident, node) if cfg.fleet > 1 else Agent(cfg, topo, ident, node)
         if restore:
             agent.memory.resume(Path(cfg.out) / "agents")
         elif cfg.from_dir:
@@ -59,8 +60,9 @@ def build_actor(role: str, ident: str, cfg: RunConfig, topo: Topology, node: Nod
         return agent
     if role == "sim":  # imported lazily: agent processes never load PyBullet
         from kinswarm.sim.actor import SimActor
+        from kinswarm.sim.fleet import FleetSim
 
-        return SimActor(cfg, topo, node)
+        return FleetSim(cfg, topo, node) if cfg.fleet > 1 else SimActor(cfg, topo, node)
     if role == "controller":
         from kinswarm.sim.controller import BaselineController
 

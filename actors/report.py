@@ -371,6 +371,10 @@ def write_summary(run_dir: Path, extra: dict[str, Any]) -> dict[str, Any]:
         "steps_per_second": steps / sim_seconds if sim_seconds > 0 else 0.0,
         **extra,
     }
+    if cfg.fleet > 1:  # the rows are robot 0's; every robot's final error, and the fleet's rate
+        summary["fleet"] = cfg.fleet
+        summary["fleet_final_error"] = [r.get("fleet_final_error", []) for r in rows]
+        summary["robot_steps_per_second"] = summary["steps_per_second"] * cfg.fleet
     if scene.object is not None:  # an object to grasp: the grasp's quality per epoch
         from kinswarm.actors.grasp_report import grasp_summary
 

@@ -181,6 +181,11 @@ def resolve(
             if e.epoch is not None and e.epoch >= cfg.epochs:
                 what = f"epoch {e.epoch} is beyond the run's {cfg.epochs} epochs (run.epochs): it would never fire"
                 raise ScenarioError(cfg.scenario, f"event[{i}].epoch", what)
+            if e.fault.robot is not None and e.fault.robot >= cfg.fleet:
+                what = f"robot {e.fault.robot}: the run's fleet has {cfg.fleet} (run.fleet; robots 0..{cfg.fleet - 1})"
+                raise ScenarioError(cfg.scenario, f"event[{i}].robot", what)
+    if cfg.fleet > 1 and cfg.fleet_goals == "spread" and task.goal(0, cfg.steps)[1]:
+        raise ConfigError('fleet_goals: "spread" gives each robot a goal of its own; this task\'s goal moves (a path)')
     if cfg.from_dir is not None:  # and checkpoints that do not fit this run's learners
         check_checkpoints(Path(cfg.from_dir), task, learner, source)
     return cfg

@@ -61,7 +61,7 @@ class Scenario:
 
 _TOP_KEYS = {"name", "description", "event"}
 _FLOATS = ("seconds", "rate", "ms", "amplitude_deg", "factor", "degrees")
-_EVENT_KEYS = {"step", "epoch", "fault", "target", "steps", *_FLOATS}
+_EVENT_KEYS = {"step", "epoch", "fault", "target", "steps", "robot", *_FLOATS}
 
 
 def _int(src: str, where: str, v: Any) -> int:
@@ -96,8 +96,9 @@ def _entry(src: str, i: int, row: Any, topo: Topology) -> ScenarioEntry:
     if not isinstance(targets, list) or not targets or not all(isinstance(t, str) for t in targets):
         raise ScenarioError(src, f"{at}.target", f"expected an agent id or a list of them, got {target!r}")
     steps = _int(src, f"{at}.steps", row["steps"]) if "steps" in row else None
+    robot = _int(src, f"{at}.robot", row["robot"]) if "robot" in row else None
     floats = {n: _float(src, f"{at}.{n}", row[n]) if n in row else None for n in _FLOATS}
-    f = Fault(id=f"scenario-{i}", fault=kind, targets=targets, steps=steps, **floats)  # type: ignore[arg-type]
+    f = Fault(id=f"scenario-{i}", fault=kind, targets=targets, steps=steps, robot=robot, **floats)  # type: ignore[arg-type]
     problem = check_fault(f, list(topo.order))
     if problem:
         raise ScenarioError(src, at, problem)

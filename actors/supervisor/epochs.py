@@ -46,9 +46,14 @@ class EpochLoop:
 
     def epoch_start(self, epoch: int) -> EpochStart:
         """The epoch's start: its goal, and each step's when the task's goal moves."""
-        goal, path = self.sup.task.goal(epoch, self.sup.cfg.steps)
-        start = self.sup.task.start(epoch)
-        return EpochStart(epoch=epoch, steps=self.sup.cfg.steps, goal=goal, path=path, start=start)
+        cfg, task = self.sup.cfg, self.sup.task
+        if cfg.fleet > 1 and cfg.fleet_goals == "spread":  # robot b: the task's epoch e*B + b
+            goals = [task.goal(epoch * cfg.fleet + b, cfg.steps)[0] for b in range(cfg.fleet)]  # not moving (runfile)
+            starts = [task.start(epoch * cfg.fleet + b) for b in range(cfg.fleet)]
+            return EpochStart(epoch=epoch, steps=cfg.steps, goal=goals[0], start=starts[0], goals=goals, starts=starts)
+        goal, path = task.goal(epoch, cfg.steps)
+        start = task.start(epoch)
+        return EpochStart(epoch=epoch, steps=cfg.steps, goal=goal, path=path, start=start)
 
     async def run_epoch(self, epoch: int) -> EpochDone:
         from .core import NoMessage

@@ -43,6 +43,8 @@ class FaultRouter:
         error = check_fault(f, list(sup.topo.order))
         if not error and not sup.agents and f.fault not in JOINT_FAULTS:
             error = f"{f.fault}: this run has no agents (a baseline run); only joint faults apply"
+        if not error and f.robot is not None and f.robot >= sup.cfg.fleet:
+            error = f"{f.fault}: robot {f.robot}: this run's fleet has {sup.cfg.fleet} (robots 0..{sup.cfg.fleet - 1})"
         if not error and f.fault in PROCESS_FAULTS and f.fault not in sup.placement.supports:
             error = f"{f.fault}: needs --placement process (this run is {sup.cfg.placement})"
         if not error and f.fault in JOINT_FAULTS:

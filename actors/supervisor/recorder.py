@@ -62,6 +62,8 @@ class Recorder:
         }
         if d.traces:  # the scene's per-step series (refused moves and clearance among walls, a grasp's forces)
             row["traces"] = d.traces
+        if d.fleet:  # a fleet: the row is robot 0's; this is every robot's final error
+            row["fleet_final_error"] = d.fleet
         assert self._metrics is not None
         self._metrics.write(json.dumps(row) + "\n")
         self._metrics.flush()
