@@ -1,0 +1,190 @@
+"""Fleets (run.fleet = B): B robots in lockstep through one swarm, each agent learning from all B."""
+
+from __future__ import annotations
+
+import copy
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+from conftest import EXAMPLES, LOCKSTEP_ARGS, free_port, run_config, swarm_pids
+from kinswarm.actors.agent.actor import agent_seed
+from kinswarm.actors.cli import main as cli_main
+from kinswarm.actors.control import ControlError, make_fault
+from kinswarm.actors.learning.fleet import EPISODE, LearnerLane
+from kinswarm.actors.learning.learner import Learner
+from kinswarm.actors.runfile import learner_settings, task_of
+from kinswarm.actors.runtime import Node
+from kinswarm.protocol.messages import Batch, Cmd, Obs
+from kinswarm.sim import kinematics
+
+pytestmark = pytest.mark.timeout(180)
+CHAIN4 = EXAMPLES / "chain4.toml"
+
+
+def run(tmp_path: Path, name: str, *args: str) -> dict:
+    out = tmp_path / name
+    argv = ["run", str(CHAIN4), "--out", str(out), "--listen", f"tcp/127.0.0.1:{free_port()}", "--no-progress"]
+    assert cli_main([*argv, *LOCKSTEP_ARGS, *args]) == 0
+    return json.loads((out / "summary.json").read_text())
+
+
+def test_a_fleet_runs_the_same_in_both_placements(tmp_path):
+    common = ("--epochs", "3", "--steps", "80", "--seed", "5", "--set", "run.fleet=3")
+    a = run(tmp_path, "s", "--placement", "single", *common)
+    b = run(tmp_path, "p", "--placement", "process", *common)
+    assert a["fleet"] == 3 and len(a["fleet_final_error"]) == 3
+    assert all(len(row) == 3 for row in a["fleet_final_error"])
+    assert a["final_error"] == [row[0] for row in a["fleet_final_error"]]  # the run's rows are robot 0's
+    assert a["fleet_final_error"] == b["fleet_final_error"] and a["mean_error"] == b["mean_error"]
+    assert b["missed_cmds"] == 0
+    # the robots explore apart (one random generator, drawn in robot order): they do not move as one
+    assert len({round(e, 9) for e in a["fleet_final_error"][-1]}) > 1
+    assert swarm_pids(str(tmp_path / "p")) == []
+
+
+def test_a_fleet_of_one_is_the_swarm_of_one_robot(tmp_path):
+    """B = 1 is today's swarm on today's path (no Batch, no lane: tests/test_golden.py holds its numbers)."""
+    s = run(tmp_path, "one", "--placement", "single", "--epochs", "1", "--steps", "30")
+    assert "fleet" not in s and "fleet_final_error" not in s
+    metrics = (tmp_path / "one" / "metrics.jsonl").read_text()
+    assert "fleet_final_error" not in metrics
+
+
+def test_a_joint_fault_on_one_robot_leaves_the_others(tmp_path):
+    """Every joint of robot 1 locked from the first step: it never moves (its error stays the start's), while
+    robot 0, the same swarm, learns to reach; the events name the robot."""
+    scenario = tmp_path / "lock-robot1.toml"
+    scenario.write_text('name = "lock robot 1"\n\n[[event]]\nstep = 0\nepoch = 0\nfault = "lock"\ntarget = "all"\n'
+                        'robot = 1\n')  # fmt: skip
+    s = run(tmp_path, "r", "--placement", "single", "--epochs", "3", "--steps", "150", "--set", "run.fleet=2",
+            "--scenario", str(scenario))  # fmt: skip
+    cfg = run_config(CHAIN4)
+    topo = cfg.topo()
+    tip = kinematics.tips(topo, topo.initial_angles())[topo.end_effectors[0]]
+    goal = cfg.task["goal"]
+    start_error = math.hypot(tip[0] - goal[0], tip[1] - goal[1])
+    robot1 = [row[1] for row in s["fleet_final_error"]]
+    robot0 = [row[0] for row in s["fleet_final_error"]]
+    assert robot1 == pytest.approx([start_error] * 3, abs=1e-6)  # PyBullet's link states are single precision
+    assert min(robot0) < start_error / 2
+    events = [json.loads(line) for line in (tmp_path / "r" / "events.jsonl").read_text().splitlines()]
+    locks = [e for e in events if e.get("event") == "lock"]
+    assert {e["target"] for e in locks} == {"a1", "a2", "a3", "a4"}
+    assert all("robot=1" in e["detail"] for e in locks)
+
+
+def test_the_lanes_learn_as_one_learner():
+    """Lane b's call computes exactly what one learner computes from the Q, the counts and the random generator the
+    calls before it left, with lane b's own transition: checked call by call, robots interleaved."""
+    cfg = run_config(CHAIN4)
+    settings = learner_settings(task_of(cfg), cfg.learner, cfg.source)["a3"]
+    shared = Learner(settings, 1, agent_seed(0, "a3"))
+    lanes = [LearnerLane(shared) for _ in range(3)]
+    rng = np.random.default_rng(1)
+    for lane in lanes:
+        lane.start_epoch(0)
+    for t in range(40):
+        for lane in lanes:
+            state = rng.uniform(-1, 1, size=len(settings.n_sets))
+            reward = None if t == 0 else float(rng.normal())
+            one = copy.deepcopy(shared)  # one learner: the shared state, and this lane's transition
+            for name in EPISODE:
+                setattr(one, name, copy.deepcopy(lane._own_state[name]))
+            one._rules_and_O = [(one._fired[i, 0], one._w[i]) for i in (0, 1)]
+            sel, nv = one._selection, one.n_visible  # deepcopy detaches views: the learner's are views of one array
+            one.counts, one._P, one._E, one._z = sel[:nv], sel[nv : 2 * nv], sel[2 * nv], sel[2 * nv + 1]
+            expected = one.decide(state, reward)
+            assert lane.decide(state, reward) == expected
+            seen = [int(rng.integers(0, 3))]
+            one.observe(seen)
+            lane.observe(seen)
+            assert np.array_equal(shared.q.phi, one.q.phi) and np.array_equal(shared.counts, one.counts)
+            assert lane._own_state["_pending"] == one._pending and lane._own_state["t"] == one.t
+    assert shared.rules_used > 0
+
+
+def test_gathering_sends_one_batch_per_key_and_a_second_for_a_robot_sending_twice():
+    node = Node.__new__(Node)  # the gathering alone: no session (what send() does with a Batch is the runtime's)
+    node._gathered = None
+    node._step_prefixes = ("ks/r/sim/", "ks/r/a/")
+    sent: list[tuple[str, object]] = []
+    node.send = lambda key, msg: sent.append((key, msg))  # type: ignore[method-assign]
+    cmd = [Cmd(epoch=0, step=1, delta=float(b)) for b in range(3)]
+    with node.gathering():
+        for b in range(3):
+            node.send_as(b, "ks/r/sim/cmd/a1", cmd[b])
+            node.send_as(b, "ks/r/a/a1/up", cmd[b])
+            if b == 1:
+                node.send_as(b, "ks/r/a/a1/up", cmd[b])  # a closing `up` after the step's
+            node.send_as(b, "ks/r/metrics/event", "not a step message")
+        with node.gathering():  # within a gathering, another adds to it
+            node.send_as(2, "ks/r/sim/obs/a1", Obs(epoch=0, step=1, q=0.0))
+        assert [k for k, _ in sent] == ["ks/r/metrics/event"] * 3  # what is not a step message goes at once
+    batches = [(k, m) for k, m in sent if isinstance(m, Batch)]
+    assert [(k, m.robots) for k, m in batches] == [
+        ("ks/r/sim/cmd/a1", [0, 1, 2]),
+        ("ks/r/a/a1/up", [0, 1, 2]),
+        ("ks/r/a/a1/up", [1]),
+        ("ks/r/sim/obs/a1", [2]),
+    ]
+    assert batches[0][1].items == cmd and batches[0][1].of == "cmd"
+    with pytest.raises(RuntimeError), node.gathering():
+        node.send_as(0, "ks/r/sim/cmd/a1", cmd[0])
+        raise RuntimeError("the handler failed")
+    assert len([m for _, m in sent if isinstance(m, Batch)]) == 4  # nothing of a failed handler went out
+
+
+@pytest.mark.parametrize(
+    "sets, why",
+    [
+        (["run.fleet=0"], "fleet: expected an integer in [1, 1024], got 0"),
+        (["run.fleet=5000"], "fleet: expected an integer in [1, 1024], got 5000"),
+        (['run.fleet="many"'], "fleet"),
+        (["run.fleet=2", 'run.controller="pinv"'], "only the learning agents drive a fleet"),
+    ],
+)
+def test_a_bad_fleet_is_one_line_before_anything_starts(tmp_path, capsys, sets, why):
+    argv = ["run", str(CHAIN4), "--out", str(tmp_path / "x"), "--no-progress"]
+    for s in sets:
+        argv += ["--set", s]
+    assert cli_main(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert why in err and len(err.splitlines()) == 1
+    assert not (tmp_path / "x").exists()
+
+
+def test_a_robot_outside_the_fleet_and_a_robot_for_an_agent_fault_are_refused(tmp_path, capsys):
+    scenario = tmp_path / "s.toml"
+    scenario.write_text('name = "s"\n\n[[event]]\nstep = 0\nfault = "lock"\ntarget = "a2"\nrobot = 2\n')
+    argv = ["run", str(CHAIN4), "--out", str(tmp_path / "x"), "--no-progress", "--set", "run.fleet=2"]
+    assert cli_main([*argv, "--scenario", str(scenario)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "event[0].robot" in err and "fleet has 2" in err and len(err.splitlines()) == 1
+    with pytest.raises(ControlError, match="only joint faults take a robot"):
+        make_fault("kill", ["a2"], robot=1)
+    assert make_fault("lock", ["a2"], robot=1).robot == 1
+
+
+def test_spread_goals_give_each_robot_the_task_goal_of_its_own_epoch(tmp_path):
+    """Learning and exploring off, a robot's run depends on its goal alone: robot b of a spread fleet at epoch e ends
+    as one robot on the task's goal of epoch e*B + b does."""
+    goals = "task.goals=[[4.16, 6.18], [-5.0, 7.0], [3.0, -6.0], [8.0, 2.0]]"
+    run(tmp_path, "t", "--epochs", "4", "--steps", "200", "--placement", "single", "--set", goals)
+    frozen = ("--learn", "off", "--explore", "off", "--steps", "60", "--placement", "single", "--set", goals)
+    frozen += ("--from", str(tmp_path / "t"))  # trained: its greedy choices are not ties (an untrained Q's are all
+    # ties, broken by the random generator, which the robots share)
+    fleet = run(tmp_path, "f", "--epochs", "2", "--set", "run.fleet=2", "--set", 'run.fleet_goals="spread"', *frozen)
+    one = run(tmp_path, "o", "--epochs", "4", *frozen)
+    assert [e for row in fleet["fleet_final_error"] for e in row] == one["final_error"]
+    same = run(tmp_path, "s", "--epochs", "1", "--set", "run.fleet=3", *frozen)
+    assert same["fleet_final_error"] == [[one["final_error"][0]] * 3]
+
+
+def test_spread_goals_refuse_a_moving_goal(tmp_path, capsys):
+    argv = ["run", str(EXAMPLES / "chain4-track.toml"), "--out", str(tmp_path / "x"), "--no-progress"]
+    assert cli_main([*argv, "--set", "run.fleet=2", "--set", 'run.fleet_goals="spread"']) == 2
+    err = capsys.readouterr().err.strip()
+    assert "fleet_goals" in err and "moves" in err and len(err.splitlines()) == 1
