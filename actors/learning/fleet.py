@@ -10,7 +10,6 @@ fleet's run is as deterministic as one robot's.
 
 from __future__ import annotations
 
-from collections.abc import Collection, Sequence
 from typing import Any
 
 import numpy as np
@@ -50,24 +49,18 @@ class LearnerLane:
             for name in EPISODE:
                 mine[name] = getattr(learner, name)
 
-    def decide(
-        self,
-        state: np.ndarray,
-        reward: float | None,
-        learn: bool = True,
-        explore: bool = True,
-        avoid: Collection[int] = (),
-    ) -> int:
-        return self._call("decide", state, reward, learn=learn, explore=explore, avoid=avoid)
+    # the calls of Learner that act on a transition, on this robot's (their arguments and results are Learner's)
+    def decide(self, *args: Any, **kwargs: Any) -> int:
+        return self._call("decide", *args, **kwargs)
 
-    def observe(self, visible_actions: Sequence[int], learn: bool = True) -> None:
-        self._call("observe", visible_actions, learn=learn)
+    def observe(self, *args: Any, **kwargs: Any) -> None:
+        self._call("observe", *args, **kwargs)
 
-    def start_epoch(self, epoch: int, t: int = 0) -> None:
-        self._call("start_epoch", epoch, t=t)
+    def start_epoch(self, *args: Any, **kwargs: Any) -> None:
+        self._call("start_epoch", *args, **kwargs)
 
-    def resync(self, t: int) -> None:
-        self._call("resync", t)
+    def resync(self, *args: Any, **kwargs: Any) -> None:
+        self._call("resync", *args, **kwargs)
 
     def __getattr__(self, name: str) -> Any:
         return getattr(self.learner, name)
