@@ -26,6 +26,7 @@ class LearnerLane:
 
     def __init__(self, learner: Learner) -> None:
         self.learner = learner
+        self.settings, self.n_actions, self.n_visible = learner.settings, learner.n_actions, learner.n_visible
         fired = np.zeros_like(learner._fired)
         fired[:, 1] = -1  # as a new learner's: no rule of s(t-1) updated yet
         w = np.zeros_like(learner._w)
