@@ -15,7 +15,9 @@ other random configurations. Two disjoint test sets of 100 ("A", "B") check that
 Poses (position and the tool's orientation, success within 5 cm and 15°) run the same protocol. The locked-joint
 scenario locks the shoulder (a2) throughout; the disturbed one shakes the elbow (a4) in steps 100-199 of every trial:
 trained frozen, trained still learning, an untrained swarm learning, the rule and the pseudo-inverse, on test set A's
-goals.
+goals. The lost one takes the shoulder's agent away at the test's first step, for good: its process stopped (SIGSTOP,
+never resumed: a killed agent is always restarted, or with --max-restarts 0 the run fails), so its joint holds and
+its parent (a1) stands in for a3; `process` placement, not bit-reproducible (the stop lands where the process is).
 """
 
 from __future__ import annotations
@@ -24,11 +26,12 @@ import math
 from typing import Any
 
 import numpy as np
+from kinswarm.actors.report import read_events
 from kinswarm.protocol import frames
 from kinswarm.protocol.topology import Topology, load_robot
 
 from .common import Context, Report, mean_std, plt_module, pm, run_specs, settings
-from .swarm import ROOT, RunOutcome, Spec
+from .swarm import DEADLINE_MS, ROOT, RunOutcome, Spec
 
 ROBOT = ROOT / "examples" / "iiwa.toml"
 TOL = 0.05  # m
@@ -52,6 +55,9 @@ BLIND = {"n_sets": (5, 2, 2, 2, 2, 2), "ranges": ((-math.pi, math.pi), *((-1000.
 CONTROLLERS = {"rule": "rule", "pseudo-inverse": "pinv", "greedy per joint": "greedy"}
 LOCK = ROOT / "scenarios" / "iiwa-locked-a2.toml"
 DISTURB_DEG = 2.0  # the disturbed joint's random increment each step: ±2°, twice the agents' move
+# The agent lost for good: the shoulder, the joint the locked scenario holds, so the two differ only in the agent
+# (gone, its parent standing in, vs there and choosing moves that do nothing); the references' rows are the lock's.
+LOST = "a2"
 
 
 def _disturbed(ctx: Context, steps: int) -> str:
@@ -63,6 +69,20 @@ def _disturbed(ctx: Context, steps: int) -> str:
         'name = "r3d-disturbed-a4"\n\n[[event]]\n'
         f'step = {steps // 4}\nfault = "disturb"\ntarget = ["a4"]\n'
         f"steps = {steps // 4}\namplitude_deg = {DISTURB_DEG}\n"
+    )
+    return str(path)
+
+
+def _lost(ctx: Context) -> str:
+    """LOST's process stopped at the first step of the test (epoch 0, step 0) and never resumed (no thaw: `freeze`
+    without seconds): its token goes after the lease (~1 s), its joint holds, its parent stands in for its children
+    to the end. A scenario file under the experiment's runs, like the disturbed one."""
+    path = ctx.runs / "scenarios" / f"r3d-lost-{LOST}.toml"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(
+        f'name = "r3d-lost-{LOST}"\n'
+        f'description = "{LOST} stopped (SIGSTOP) at the first step of the test, never resumed"\n\n[[event]]\n'
+        f'epoch = 0\nstep = 0\nfault = "freeze"\ntarget = ["{LOST}"]\n'
     )
     return str(path)
 
@@ -174,12 +194,18 @@ def run(ctx: Context) -> dict[str, Any]:
             _disturbed(ctx, steps),
         ),
     )
+    f_runs_by: dict[str, list[RunOutcome]] = {}
     for key, tag, heading, scenario in faults:
         f_rows, f_results, f_runs = _faulted(ctx, topo, steps, n_test, tag, scenario)
         all_runs += f_runs
+        f_runs_by[key] = f_runs
         rep.results[key] = f_results
         rep.text(f"## {heading}, test set A")
         rep.table(["condition", f"within {TOL * 100:.0f} cm (%)", "mean error (m)", "seeds"], f_rows)
+    f_rows, f_results, f_runs = _faulted(ctx, topo, steps, n_test, "lost", _lost(ctx), lost=True)
+    all_runs += f_runs
+    rep.results[f"lost_{LOST}"] = f_results
+    _lost_section(rep, topo, f_rows, f_results, f_runs_by["locked_a2"], f_runs)
     _figure(ctx, rep)
     rep.write(
         {
@@ -264,11 +290,73 @@ def _protocol(
     return rows, results, [*trained.values(), *outs.values()]
 
 
+def _lost_section(
+    rep: Report,
+    topo: Topology,
+    rows: list[list[Any]],
+    results: dict[str, Any],
+    locked: list[RunOutcome],
+    lost: list[RunOutcome],
+) -> None:
+    parent = topo.agents[LOST].parent
+    rep.text(
+        f"## The shoulder's agent ({LOST}) lost for good at the start of the test, test set A",
+        "",
+        f"At the first step of the test (epoch 0, step 0) the process of agent {LOST} is stopped (SIGSTOP) and never "
+        "resumed: once its liveliness token lapses (the 1 s lease) the swarm runs on without it to the end, its joint "
+        f"holding (at each trial's start angle, as the locked shoulder's), its parent ({parent}) standing in for its "
+        f"children (composing their frames from {LOST}'s encoder). A kill cannot do this: a killed agent is restarted "
+        "from its checkpoint, and with `--max-restarts 0` its exit ends the run; the stopped process stays, gone for "
+        "the swarm but never exiting, so nothing restarts it. These runs use `process` placement (one OS process per "
+        "actor, as `kinswarm run --placement process`). **Not bit-reproducible**, unlike every other row: the stop "
+        "lands wherever the process is, by the clock; the step it is lost in ends at the step deadline "
+        f"({DEADLINE_MS / 1000:g} s here), {parent} holding (it waits for {LOST}'s `up`) and the joints below "
+        f"{LOST} too if its frames had not gone down yet; {parent} stands in from the next step. The learning swarms' "
+        "updates around that step vary with the timing. The rule and the pseudo-inverse have no agents to lose: "
+        f"their rows are the equivalent locked joint ({LOST} locked throughout: the same runs as above).",
+    )
+    rep.table(["condition", f"within {TOL * 100:.0f} cm (%)", "mean error (m)", "seeds"], rows)
+    swarms = {label: r for label, r in results.items() if "stood_in_from" in r}
+    stood = "; ".join(
+        f"{label}: "
+        + ", ".join(f"{e}/{st} ({m})" for (e, st), m in zip(r["stood_in_from"], r["held_cmds"], strict=True))
+        for label, r in swarms.items()
+    )
+    lapsed = [t for r in swarms.values() for t in r["tokens_lost"]]
+    frozen = {o.spec.seed: o for o in locked if o.spec.name.endswith("-frozen")}
+    same = [
+        sum(a == b for a, b in zip(o.final_errors, frozen[o.spec.seed].final_errors, strict=True))
+        for o in lost
+        if o.spec.name.endswith("-frozen")
+    ]
+    rep.text(
+        f"Where {parent} began to stand in for {LOST} (epoch/step, and in brackets the commands the first trial "
+        f"missed, each a joint holding for a step; a run per seed): {stood}. "
+        + (
+            f"No other agent's liveliness token lapsed in these runs, {LOST}'s once in each. "
+            if all(t == {LOST: 1} for t in lapsed)
+            else "Liveliness tokens lapsed, per run (a process starved past the lease, besides the stop): "
+            + "; ".join(", ".join(f"{a} {n}x" for a, n in sorted(t.items())) for t in lapsed)
+            + ". "
+        )
+        + f"Frozen, the swarm without {LOST} ends {', '.join(map(str, same))} of its {len(lost[0].rows)} trials "
+        f"(a run per seed) at exactly the error of the frozen swarm with {LOST} locked and its agent there (the "
+        "locked shoulder's table)"
+        + (
+            f": every trial but the first, where the stop landed; {parent}'s stand-in sends down the frames {LOST} "
+            "would have."
+            if all(n >= len(lost[0].rows) - 1 for n in same)
+            else "."
+        )
+    )
+
+
 def _faulted(
-    ctx: Context, topo: Topology, steps: int, n_test: int, tag: str, scenario: str
+    ctx: Context, topo: Topology, steps: int, n_test: int, tag: str, scenario: str, lost: bool = False
 ) -> tuple[list[list[Any]], dict[str, Any], list]:
     """Test set A's points with a scenario's faults in every trial: the trained swarm frozen and still learning, an
-    untrained swarm learning, the rule and the pseudo-inverse."""
+    untrained swarm learning, the rule and the pseudo-inverse. `lost`: the scenario stops LOST's process; the swarms
+    run in `process` placement (each run's stand-in checked in its events), the references with LOST locked."""
     goals, starts = sample(topo, SETS["A"], n_test, False)
     t_goals, t_starts = training_set(topo, False, *QUICK_TRAINING if ctx.quick else ())
     file = str(ROBOT)
@@ -289,7 +377,9 @@ def _faulted(
         ],
         f"{tag} train",
     )
-    common = {"epochs": n_test, "steps": steps, "file": file, "task": _task(goals, starts), "scenario": scenario}
+    common: dict[str, Any] = {"epochs": n_test, "steps": steps, "file": file, "task": _task(goals, starts)}
+    ref = {**common, "scenario": str(LOCK) if lost else scenario}  # the rule's and pseudo-inverse's
+    common.update(scenario=scenario, placement="process" if lost else "single")
     specs: dict[tuple[str, int], Spec] = {}
     for s, t in zip(ctx.seed_list, trained, strict=True):
         specs[("trained, frozen", s)] = Spec(
@@ -297,17 +387,35 @@ def _faulted(
         )
         specs[("trained, learning", s)] = Spec(f"r3d-{tag}-learning", seed=s, from_dir=str(t.out), **common)
         specs[("untrained, learning", s)] = Spec(f"r3d-{tag}-scratch", seed=s, **common)
-    specs[("pseudo-inverse", 0)] = Spec(f"r3d-{tag}-pinv", controller="pinv", **common)
-    specs[("rule", 0)] = Spec(f"r3d-{tag}-rule", controller="rule", **common)
+    ref_tag = "lock" if lost else tag  # the lock's own runs (the cache): the same specs
+    refs = {"pseudo-inverse": "pinv", "rule": "rule"}
+    for label, law in refs.items():
+        specs[(label, 0)] = Spec(f"r3d-{ref_tag}-{law}", controller=law, **ref)
     outs = dict(zip(specs, run_specs(ctx, list(specs.values()), tag), strict=True))
     rows, results = [], {}
     for label in ("trained, frozen", "trained, learning", "untrained, learning", "rule", "pseudo-inverse"):
         keys = [k for k in outs if k[0] == label]
         within = [100.0 * float(np.mean([e <= TOL for e in outs[k].final_errors])) for k in keys]
         means = [float(np.mean(outs[k].final_errors)) for k in keys]
-        results[label] = {"within_pct": within, "mean": means}
-        rows.append([label, pm(within, 1), pm(means), len(keys)])
+        name = f"{label} ({LOST} locked instead)" if lost and label in refs else label
+        results[name] = {"within_pct": within, "mean": means}
+        if lost and label not in refs:
+            results[name]["stood_in_from"] = [_stood_in(outs[k]) for k in keys]
+            results[name]["tokens_lost"] = [outs[k].summary.get("tokens_lost", {}) for k in keys]
+            results[name]["held_cmds"] = [outs[k].rows[0]["missed_cmds"] for k in keys]
+        rows.append([name, pm(within, 1), pm(means), len(keys)])
     return rows, results, list(outs.values())
+
+
+def _stood_in(out: RunOutcome) -> tuple[int, int]:
+    """(epoch, step) where LOST's parent began to stand in for it (its `adopt` event): the stop took, for good (no
+    `handback`). Else the run is not what its row says, and the report is not written."""
+    events = read_events(out.out)
+    adopt = [(e["epoch"], e["step"]) for e in events if e["event"] == "adopt" and e["target"] == LOST]
+    back = [e for e in events if e["event"] in ("handback", "restart", "thaw") and e["target"] == LOST]
+    if len(adopt) != 1 or back:
+        raise RuntimeError(f"{out.out}: {LOST} was to be lost for good: adopt at {adopt}, then {back}")
+    return adopt[0]
 
 
 def _figure(ctx: Context, rep: Report) -> None:

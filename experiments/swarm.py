@@ -1,6 +1,8 @@
 """Runs for the experiments: `kinswarm run`'s machinery (the same Supervisor, actors and wire, `single` placement),
 plus an observer of the step messages (`sim/task`, `sim/obs/*`) for the end-effector path and the joint effort
-(optimality), subscribed on the run's session before any actor exists, so nothing is missed.
+(optimality), subscribed on the run's session before any actor exists, so nothing is missed. A spec in `process`
+placement (what process faults need: an agent's process stopped or killed) runs through `kinswarm run`'s own
+launcher (launch.run_swarm), one OS process per actor.
 
 Each run is a `Spec`: a run file and overrides of its fields, resolved by the one loader (actors/runfile.py). It
 lives in its own directory with `spec.json`, and is reused when that directory already holds a finished run of the
@@ -18,13 +20,14 @@ import json
 import math
 import os
 import shutil
+import socket
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-from kinswarm.actors.config import RunConfig
+from kinswarm.actors.config import ConfigError, RunConfig
 from kinswarm.actors.learning.settings import LearnerSettings
 from kinswarm.actors.report import read_metrics, write_summary
 from kinswarm.actors.runfile import read_run_file, resolve, write_resolved
@@ -39,7 +42,8 @@ ROOT = Path(__file__).resolve().parent.parent
 CHAIN4 = ROOT / "examples" / "chain4.toml"
 LISTEN = "tcp/127.0.0.1:0"  # single placement: nobody connects, so any free port (no races between workers)
 # No fault here is a missing actor, so a missed step deadline could only come from a loaded machine; it would
-# make a joint hold and the run depend on the load. A long deadline keeps every run a function of its seed.
+# make a joint hold and the run depend on the load. A long deadline keeps every run a function of its seed. (An
+# agent stopped on purpose, `process` placement, costs the one step it is lost in, ended at this deadline.)
 DEADLINE_MS = 10_000
 
 Goal = tuple[float, float]
@@ -71,6 +75,9 @@ class Spec:
     # Another run starts from this one's checkpoints (`--from`): only a run of exactly these epochs will do.
     # Not part of the identity: it changes nothing in the run.
     checkpoint: bool = False
+    # "process": one OS process per actor (`kinswarm run --placement process`), for process faults (freeze, kill);
+    # no `observe`. A run without them gives the same errors in either placement (tests/test_swarm.py).
+    placement: str = "single"
 
     def overrides(self) -> list[tuple[tuple[str, ...], Any]]:
         """The fields this spec sets over its run file."""
@@ -78,7 +85,7 @@ class Spec:
             (("run", "seed"), self.seed),
             (("run", "epochs"), self.epochs),
             (("run", "steps"), self.steps),
-            (("run", "placement"), "single"),
+            (("run", "placement"), self.placement),
             (("run", "learn"), self.learn),
             (("run", "explore"), self.explore),
             (("run", "successive"), self.successive),
@@ -99,9 +106,9 @@ class Spec:
             out += [((section, k), _listed(v)) for k, v in pairs]
         return out
 
-    def config(self, out: Path, run_id: str | None = None) -> RunConfig:
+    def config(self, out: Path, run_id: str | None = None, listen: str = LISTEN) -> RunConfig:
         return resolve(
-            read_run_file(self.file), self.file, self.overrides(), run_id=run_id or "x", out=out, listen=LISTEN
+            read_run_file(self.file), self.file, self.overrides(), run_id=run_id or "x", out=out, listen=listen
         )
 
     def identity(self, with_epochs: bool = True) -> str:
@@ -114,6 +121,8 @@ class Spec:
             d["from_dir"] = Path(self.from_dir).name  # itself "<name>-<identity>": portable
         if self.scenario is not None:
             d["scenario"] = _content(self.scenario)
+        if self.placement != "single":  # a process fault applies only there (single: refused, the run goes on)
+            d["placement"] = self.placement
         if not with_epochs:
             d.pop("epochs")
         return hashlib.sha256(json.dumps(d, sort_keys=True, default=json_default).encode()).hexdigest()[:16]
@@ -301,6 +310,8 @@ def run_spec(spec: Spec, runs: Path) -> RunOutcome:
         out = (runs / f"{spec.name}-{spec.identity()[:8]}").resolve()
         if out.exists():  # an unfinished earlier attempt
             shutil.rmtree(out)
+        if spec.placement != "single":
+            return _run_in_processes(spec, out)
         out.mkdir(parents=True)
         cfg = spec.config(out, run_id=f"x{spec.identity()}")
         topo = cfg.topo()
@@ -322,6 +333,32 @@ def run_spec(spec: Spec, runs: Path) -> RunOutcome:
     summary = json.loads((cached / "summary.json").read_text())
     rows = read_metrics(cached)[: spec.epochs]
     return RunOutcome(spec, cached, summary, rows)
+
+
+def _run_in_processes(spec: Spec, out: Path) -> RunOutcome:
+    """Run `spec` as `kinswarm run --placement process` does (launch.run_swarm: its records, summary and plots), on
+    a free loopback port (the actors connect to it; another run may take the port first: then another)."""
+    from kinswarm.actors.launch import run_swarm
+
+    if spec.observe:
+        raise ValueError(f"run {spec.name}: `observe` needs the single placement")
+    for attempt in range(3):
+        with socket.socket() as s:
+            s.bind(("127.0.0.1", 0))
+            port = s.getsockname()[1]
+        cfg = spec.config(out, run_id=f"x{spec.identity()}", listen=f"tcp/127.0.0.1:{port}")
+        try:
+            summary = run_swarm(cfg, cfg.topo())
+            break
+        except ConfigError as e:
+            if "cannot open the supervisor's session" not in str(e) or attempt == 2:
+                raise
+            shutil.rmtree(out, ignore_errors=True)
+    if summary.get("error") or summary.get("interrupted"):
+        raise RuntimeError(f"run {spec.name} (seed {spec.seed}) failed: {summary.get('error') or 'interrupted'}")
+    record = {**dataclasses.asdict(spec), "identity_wo_epochs": spec.identity(with_epochs=False)}
+    (out / "spec.json").write_text(json.dumps(record, indent=1, default=json_default) + "\n")  # last: marks it done
+    return RunOutcome(spec, out, summary, read_metrics(out)[: spec.epochs])
 
 
 def chain_topology(n: int, path: Path, link: float | None = None) -> Path:
