@@ -317,6 +317,27 @@ def test_research_runs(tmp_path, name):
     assert (tmp_path / name / "results.json").is_file()
 
 
+@pytest.mark.research
+@pytest.mark.timeout(600)
+def test_fleet_generalise_quick(tmp_path):
+    """A fleet on the generalisation protocol, smoke size: every condition trains (a fleet of 4 with every robot's
+    final error per epoch) and is tested frozen as one robot from its checkpoints."""
+    from kinswarm.experiments.research.__main__ import main as research
+
+    assert research(["fleet_generalise", "--quick", "--jobs", "1", "--out", str(tmp_path)]) == 0
+    res = json.loads((tmp_path / "fleet_generalise" / "results.json").read_text())
+    assert res["problems"] == []
+    conds = res["conditions"]
+    assert [c["fleet"] for c in conds.values()] == [1, 4, 4, 4]
+    # the same goal-episodes (8) for the paper protocol and the spread fleet, 4x them for the last
+    assert [c["goal_episodes"] for c in conds.values()] == [8, 8, 8, 32]
+    for c in conds.values():
+        (p,) = c["per_seed"]
+        assert len(p["errors"]) == 8 and all(e >= 0.0 for e in p["errors"])
+        assert p["train_robot_steps"] == c["goal_episodes"] * 100 and p["train_wall_seconds"] > 0.0
+    assert (tmp_path / "fleet_generalise" / "report.md").is_file()
+
+
 @pytest.mark.slow
 @pytest.mark.timeout(4 * 3600)
 def test_all_experiments_full(tmp_path):
