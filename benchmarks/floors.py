@@ -1,6 +1,7 @@
 """The 4-joint chain's step rate next to its floors, all measured in one sitting, as one table.
 
-    python benchmarks/floors.py [--repeats 3] [--epochs 3] [--steps 500] [--passes 2000] [--json out.json]
+    python benchmarks/floors.py [--repeats 3] [--epochs 3] [--steps 500] [--passes 2000] [--fleets 1,8,64]
+                                [--fleet-steps 100] [--json out.json]
 
 Rows (medians over the repeats, each repeat runs every row once, interleaved, so drift on a shared machine
 hits every row alike):
@@ -13,6 +14,8 @@ hits every row alike):
   in-process     the same four learners (Learner.decide/observe, the run's settings and seeds) and the planar
                  kinematics (sim/kinematics.py) in a plain loop: no messages, no processes, no PyBullet —
                  what the step costs in computation alone
+  fleets         the same run with `run.fleet = B` (B robots through one swarm, sim/fleet.py), both placements,
+                 --fleet-steps steps an epoch: robot-steps/s, and each over B = 1's in the same placement
 Ratios are each rate over a floor's median. Steps/s of a swarm come from the simulator's per-epoch timing with
 the first epoch dropped (warm-up); the in-process loop is timed the same way.
 """
@@ -90,13 +93,20 @@ def main() -> None:
     ap.add_argument("--epochs", type=int, default=3)
     ap.add_argument("--steps", type=int, default=500)
     ap.add_argument("--passes", type=int, default=2000, help="round trips per wire floor measurement")
+    ap.add_argument("--fleets", default="1,8,64", help="fleet sizes B to time in both placements ('' : none)")
+    ap.add_argument("--fleet-steps", type=int, default=100, help="steps an epoch of the fleet runs")
     ap.add_argument("--json", type=Path, default=None)
     a = ap.parse_args()
-    names = ("process", "single", "wire (async)", "wire (block)", "in-process")
+    fleets = [int(b) for b in a.fleets.split(",") if b.strip()]
+    names = ["process", "single", "wire (async)", "wire (block)", "in-process"]
+    names += [f"{p} B={b}" for b in fleets for p in ("process", "single")]
     rows: dict[str, list[float]] = {name: [] for name in names}
     for r in range(a.repeats):
         for name in rows:
-            if name in ("process", "single"):
+            if " B=" in name:
+                placement, b = name.split(" B=")
+                v = swarm_rate(placement, a.epochs, a.fleet_steps, seed=r, fleet=int(b))
+            elif name in ("process", "single"):
                 v = swarm_rate(name, a.epochs, a.steps, seed=r)
             elif name.startswith("wire"):
                 v = wire_floor(name[6:-1], a.passes)
@@ -112,9 +122,21 @@ def main() -> None:
     head = f"{'':14}{'median':>9}{'min':>9}{'max':>9}" + "".join(f"{'/ ' + f:>16}" for f in floors)
     print(head)
     for name, v in rows.items():
+        if " B=" in name:
+            continue
         ratios = "".join(f"{med[name] / med[f]:16.2f}" for f in floors)
         print(f"{name:14}{med[name]:9.0f}{min(v):9.0f}{max(v):9.0f}{ratios}")
     print("steps/s; ratios of medians. Target: process >= 0.8 x wire (block).")
+    if fleets:
+        print(f"\nfleets: {a.epochs} epochs x {a.fleet_steps} steps, robot-steps/s (median), / the placement's B=1")
+        print(f"{'B':>6}" + "".join(f"{p:>12}{'/ B=1':>8}" for p in ("process", "single")))
+        for b in fleets:
+            cells = []
+            for p in ("process", "single"):
+                one = med.get(f"{p} B=1")
+                cells.append(f"{med[f'{p} B={b}']:12.0f}" + (f"{med[f'{p} B={b}'] / one:8.2f}" if one else f"{'':8}"))
+            print(f"{b:6}" + "".join(cells))
+        print("Target: B=64 >= 20 x B=1 in both placements.")
     if a.json:
         a.json.write_text(json.dumps({"rows": rows, "median": med, "args": vars(a) | {"json": str(a.json)}}, indent=2))
 

@@ -34,7 +34,8 @@ def free_port() -> int:
         return s.getsockname()[1]
 
 
-def swarm_rate(placement: str, epochs: int, steps: int, seed: int) -> float:
+def swarm_rate(placement: str, epochs: int, steps: int, seed: int, fleet: int = 1) -> float:
+    """Steps/s of the chain (robot-steps/s: times `fleet`, the robots each step moves)."""
     with tempfile.TemporaryDirectory() as d:
         a = build_parser().parse_args(
             [
@@ -52,13 +53,15 @@ def swarm_rate(placement: str, epochs: int, steps: int, seed: int) -> float:
                 d,
                 "--listen",
                 f"tcp/127.0.0.1:{free_port()}",
+                "--set",
+                f"run.fleet={fleet}",
             ]
         )
         cfg, topo = _resolve(a, "agents")
         run_swarm(cfg, topo)
         rows = [json.loads(line) for line in (Path(d) / "metrics.jsonl").read_text().splitlines()]
     rows = rows[1:] or rows  # the first epoch warms caches and JIT-free code paths
-    return sum(r["steps"] for r in rows) / sum(r["seconds"] for r in rows)
+    return fleet * sum(r["steps"] for r in rows) / sum(r["seconds"] for r in rows)
 
 
 def wire_floor(mode: str, passes: int = 2000, attempts: int = 3) -> float | None:
