@@ -188,3 +188,17 @@ def test_spread_goals_refuse_a_moving_goal(tmp_path, capsys):
     assert cli_main([*argv, "--set", "run.fleet=2", "--set", 'run.fleet_goals="spread"']) == 2
     err = capsys.readouterr().err.strip()
     assert "fleet_goals" in err and "moves" in err and len(err.splitlines()) == 1
+
+
+def test_an_agent_killed_in_a_fleet_is_restarted_for_every_robot(tmp_path):
+    """kill acts on the agent, so on that joint of every robot: it is back from its checkpoint (its parent standing in
+    meanwhile, when the restart takes longer than a step: timing), and the fleet's run goes on to its end."""
+    scenario = tmp_path / "kill.toml"
+    scenario.write_text('name = "kill a3"\n\n[[event]]\nstep = 60\nepoch = 1\nfault = "kill"\ntarget = "a3"\n')
+    s = run(tmp_path, "k", "--placement", "process", "--epochs", "3", "--steps", "150", "--set", "run.fleet=3",
+            "--scenario", str(scenario))  # fmt: skip
+    assert len(s["fleet_final_error"]) == 3 and all(len(row) == 3 for row in s["fleet_final_error"])
+    events = [json.loads(line) for line in (tmp_path / "k" / "events.jsonl").read_text().splitlines()]
+    kinds = {(e.get("event"), e.get("target")) for e in events}
+    assert {("exited", "a3"), ("restart", "a3"), ("restored", "a3")} <= kinds, kinds
+    assert swarm_pids(str(tmp_path / "k")) == []
