@@ -94,6 +94,7 @@ def test_the_lanes_learn_as_one_learner():
             for name in EPISODE:
                 setattr(one, name, copy.deepcopy(lane._own_state[name]))
             one._rules_and_O = [(one._fired[i, 0], one._w[i]) for i in (0, 1)]
+            one._fired[one._latest, 1] = one.q.lookup(one._fired[one._latest, 0])  # one learner's rows are current
             sel, nv = one._selection, one.n_visible  # deepcopy detaches views: the learner's are views of one array
             one.counts, one._P, one._E, one._z = sel[:nv], sel[nv : 2 * nv], sel[2 * nv], sel[2 * nv + 1]
             expected = one.decide(state, reward)
@@ -202,3 +203,24 @@ def test_an_agent_killed_in_a_fleet_is_restarted_for_every_robot(tmp_path):
     kinds = {(e.get("event"), e.get("target")) for e in events}
     assert {("exited", "a3"), ("restart", "a3"), ("restored", "a3")} <= kinds, kinds
     assert swarm_pids(str(tmp_path / "k")) == []
+
+
+def test_a_rule_has_one_row_of_phi_however_the_robots_interleave():
+    """A rule s(t-1) fired that no update had touched when robot b decided may have been given its phi row by another
+    robot's update since: robot b's update must find that row, not give the rule a second one (which would orphan
+    what the first learned)."""
+    cfg = run_config(CHAIN4)
+    settings = learner_settings(task_of(cfg), cfg.learner, cfg.source)["a4"]
+    shared = Learner(settings, 0, agent_seed(0, "a4"))
+    lanes = [LearnerLane(shared) for _ in range(4)]
+    for lane in lanes:
+        lane.start_epoch(0)
+    state = np.zeros(len(settings.n_sets))
+    for t in range(30):
+        for b, lane in enumerate(lanes):  # the robots in nearby states: the rules they fire overlap
+            lane.decide(state + 0.01 * b + 0.002 * t, None if t == 0 else 1.0)
+            lane.observe([])
+    index, n = shared.q.index, int(shared.q.index.size[0])
+    rules, rows = index.entries[0, :n].tolist(), index.entries[1, :n].tolist()
+    assert n > 0 and len(set(rules)) == n
+    assert sorted(rows) == list(range(n))  # rows 0..n-1, each one rule's: none orphaned, none shared

@@ -4,8 +4,9 @@ The learner is one: one Q (its phi, Eq. 2), one set of fictitious-play counts (E
 epoch's schedules. What is each robot's own is the transition it is in: the rules s(t-1) fired and their weights,
 its pending joint action, its own action, and the step t of the temperature schedule (Eq. 8). A robot's lane swaps
 its own into the learner for the length of each call, so lane b's calls compute exactly what one learner's calls
-would, on the Q and counts the calls before it left; the agent makes them in a fixed order (robot 0 first), so a
-fleet's run is as deterministic as one robot's.
+would, on the Q and counts the calls before it left (one thing is refreshed: a rule of s(t-1) that had no row of
+phi when lane b decided may have been given one by another robot's update since); the agent makes them in a fixed
+order (robot 0 first), so a fleet's run is as deterministic as one robot's.
 """
 
 from __future__ import annotations
@@ -42,6 +43,10 @@ class LearnerLane:
 
     def _call(self, method: str, *args: Any, **kwargs: Any) -> Any:
         learner, mine = self.learner, self._own_state
+        if method == "decide":  # s(t-1)'s rules that had no phi row when this robot decided may have one now
+            rules, rows = mine["_fired"][mine["_latest"]]
+            if (rows < 0).any():  # another robot's update made it: the TD update (Eq. 6) must find that row
+                rows[:] = learner.q.lookup(rules)  # rows never move: only the -1 entries change
         for name in EPISODE:
             setattr(learner, name, mine[name])
         try:
