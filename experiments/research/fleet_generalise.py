@@ -12,11 +12,11 @@ The learner's schedules run per epoch (epsilon = 0.97^epoch, lr = 0.5 (1 - 1/105
 goals in 8 epochs ends still exploring (epsilon 0.81 in its last epoch, the one robot's 0.02); one row rescales both
 to the goal-episode (epsilon_decay 1 - 0.97^16: fleet epoch e has the one robot's schedule of epoch 16 e).
 
-Measured (3 seeds, test set 0, 1429 s; docs/results/research/fleet-generalise/): the paper protocol 98 % within 0.5,
-mean 0.168; fleet 4 81 %, 1.313; fleet 16 62 %, 2.365; with the schedules per goal-episode 69 %, 2.618; fleet 16 with
-16x the episodes 68 %, 2.525. The fleets reach their training goals as often (94-98 % of the last pass, learning on)
-but their frozen swarms generalise worse, more experience not helping; a fleet of 16 trains the same robot-steps in
-~0.67x the wall time on a quiet machine. Not kept.
+Measured (3 seeds, test set 0, 640 s; docs/results/research/fleet-generalise/): the paper protocol 98 % within 0.5,
+mean 0.168; fleet 4 97 %, 0.192; fleet 16 97 %, 0.155; with the schedules per goal-episode 95 %, 0.164; fleet 16 with
+16x the episodes 99 %, 0.120. A fleet of 16 learns what one robot learns from the same robot-steps, in ~0.67x the
+wall time (quiet machine, back to back). (A first measurement, 62-81 %, ran a fleet learner that gave a rule a second
+row of phi: fixed in actors/learning/fleet.py, redone.)
 """
 
 from __future__ import annotations
