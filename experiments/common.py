@@ -49,7 +49,14 @@ class Context:
         return list(range(self.seeds))
 
     def command(self) -> str:
-        return "kinswarm " + " ".join(self.argv) if self.argv else f"kinswarm experiment {self.name}"
+        if not self.argv:
+            return f"kinswarm experiment {self.name}"
+        research = self.argv[0].startswith("python ")  # research/__main__.py names its own program first
+        return " ".join(self.argv) if research else "kinswarm " + " ".join(self.argv)
+
+    def program(self) -> str:
+        """What runs one report of this kind: `kinswarm experiment`, or the research modules' runner."""
+        return self.argv[0] if self.argv and self.argv[0].startswith("python ") else "kinswarm experiment"
 
 
 def settings(**kw: Any) -> tuple[tuple[str, Any], ...]:
@@ -213,9 +220,9 @@ class Report:
             f"- wall time of this command: {wall:.0f} s ({ctx.jobs} worker process(es)); the {len(runs)} swarm "
             f"runs it used took {run_wall:.0f} s of run time (runs reused from a shared cache count too)",
             f"- machine: {os.cpu_count()} cores, Python {platform.python_version()}, {platform.machine()}",
-            f"- placement: {PLACEMENT_NOTE}",
+            f"- placement: {PLACEMENT_NOTE}{_in_processes(runs)}",
             f"- runs: `{_rel(ctx.runs)}/` (each with config.json, metrics.jsonl, summary.json, spec.json); "
-            f"`kinswarm experiment {ctx.name} --seeds {ctx.seeds}{' --quick' if ctx.quick else ''} --out "
+            f"`{ctx.program()} {ctx.name} --seeds {ctx.seeds}{' --quick' if ctx.quick else ''} --out "
             f"{_rel(ctx.out.parent)}` redoes only this experiment, reusing every finished run there",
         ]
         body = "\n\n".join(["\n".join(head), *self.parts])
@@ -228,12 +235,28 @@ class Report:
             "seeds": ctx.seed_list,
             "wall_seconds": round(wall, 1),
             "run_seconds": round(run_wall, 1),
-            "placement": "single",
+            "placement": _placements(runs),
             "settings": settings_used,
             **self.results,
         }
         (ctx.out / "results.json").write_text(json.dumps(_clean(res), indent=1, default=json_default) + "\n")
         return ctx.out / "report.md"
+
+
+def _placements(runs: Sequence[RunOutcome]) -> str | dict[str, int]:
+    """ "single", or how many runs went in each placement when some needed one process per actor."""
+    counts: dict[str, int] = {}
+    for r in runs:
+        counts[r.spec.placement] = counts.get(r.spec.placement, 0) + 1
+    return "single" if set(counts) <= {"single"} else counts
+
+
+def _in_processes(runs: Sequence[RunOutcome]) -> str:
+    names = sorted({r.spec.name for r in runs if r.spec.placement != "single"})
+    if not names:
+        return ""
+    where = "in `process` placement (one OS process per actor, for process faults)"
+    return f" Except {len(names)} kind(s) of run {where}: {', '.join(names)}."
 
 
 def _rel(p: Path) -> str:
