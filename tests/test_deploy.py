@@ -17,6 +17,7 @@ import subprocess
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 import pytest
 from kinswarm.actors.config import RunConfig
@@ -158,7 +159,9 @@ def _net_plan(
     client: bool = False,
     deadline_ms: int = RunConfig.deadline_ms,
     lease_ms: int | None = None,
+    sets: tuple[str, ...] = (),
 ) -> Path:
+    deadline = f"run.deadline_ms={deadline_ms}"
     lines = ['mode = "client"', f'routers = ["tcp/{h.address("hub")}:7447"]'] if client else []
     lines += [f"lease_ms = {lease_ms}"] if lease_ms is not None else []
     zenoh = "[zenoh]\n" + "".join(f"{line}\n" for line in lines) if lines else ""
@@ -169,7 +172,7 @@ leader = "brain"
 {zenoh}{extra}
 [run]
 file = "{CHAIN4}"
-set = ["run.epochs={epochs}", "run.steps={steps}", "run.seed=3", "run.deadline_ms={deadline_ms}"]
+set = {json.dumps([f"run.epochs={epochs}", f"run.steps={steps}", "run.seed=3", deadline, *sets])}
 [[host]]
 name = "brain"
 address = "{h.address("brain")}"
@@ -197,8 +200,8 @@ def _wait(p: subprocess.Popen, timeout: float, log: Path) -> int:
         pytest.fail(f"no end within {timeout:.0f} s; its log ends:\n{log.read_text()[-3000:]}")
 
 
-def _final_errors(run_dir: Path) -> list[float]:
-    return [json.loads(line)["final_error"] for line in (run_dir / "metrics.jsonl").read_text().splitlines()]
+def _final_errors(run_dir: Path, field: str = "final_error") -> list[Any]:
+    return [json.loads(line)[field] for line in (run_dir / "metrics.jsonl").read_text().splitlines()]
 
 
 def _missed(run_dir: Path) -> int:
@@ -209,13 +212,13 @@ def _events(run_dir: Path) -> list[dict]:
     return [json.loads(line) for line in (run_dir / "events.jsonl").read_text().splitlines()]
 
 
-def _single(tmp_path: Path, epochs: int, steps: int) -> list[float]:
+def _single(tmp_path: Path, epochs: int, steps: int, **fields: Any) -> list[float]:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
     cfg = run_config(
         CHAIN4, run_id="ref", out=str(tmp_path / "single"), epochs=epochs, steps=steps, seed=3,
-        placement="single", listen=f"tcp/127.0.0.1:{port}",
+        placement="single", listen=f"tcp/127.0.0.1:{port}", **fields,
     )  # fmt: skip
     run_swarm(cfg, cfg.topo())
     return _final_errors(tmp_path / "single")
@@ -230,6 +233,17 @@ def test_split_over_two_hosts_learns_what_single_learns(hosts: Hosts, tmp_path: 
     assert _final_errors(tmp_path / "brain") == _single(tmp_path, 3, 120)
     # the agents on `limbs` checkpointed into limbs' own run directory
     assert sorted(p.name for p in (tmp_path / "limbs" / "agents").glob("a?.npz")) == ["a2.npz", "a3.npz", "a4.npz"]
+
+
+@pytest.mark.timeout(240)
+def test_a_fleet_split_over_two_hosts_learns_what_single_learns(hosts: Hosts, tmp_path: Path) -> None:
+    plan = _net_plan(tmp_path, hosts, epochs=2, steps=100, sets=("run.fleet=3",), **LOCKSTEP)
+    leader = _up(hosts, plan, tmp_path)
+    assert _wait(leader, 180, tmp_path / "brain.log") == 0, (tmp_path / "brain.log").read_text()[-3000:]
+    assert _missed(tmp_path / "brain") == 0
+    assert _final_errors(tmp_path / "brain") == _single(tmp_path, 2, 100, fleet=3)
+    fleet = _final_errors(tmp_path / "brain", "fleet_final_error")
+    assert fleet == _final_errors(tmp_path / "single", "fleet_final_error") and all(len(row) == 3 for row in fleet)
 
 
 @pytest.mark.timeout(240)
