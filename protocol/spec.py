@@ -37,5 +37,6 @@ def table(src: str, where: str, v: Any, known: set[str] | frozenset[str]) -> dic
         raise SpecError(src, where, f"must be a table, got {v!r:.60}")
     bad = sorted(set(v) - set(known))
     if bad:
-        raise SpecError(src, f"{where}.{bad[0]}", f"unknown field (expected {', '.join(sorted(known))})")
+        name = bad[0] if str(bad[0]).isprintable() else repr(bad[0])  # a key like "\n" is named on the one line
+        raise SpecError(src, f"{where}.{name}", f"unknown field (expected {', '.join(sorted(known))})")
     return v

@@ -81,6 +81,17 @@ def test_every_field_is_checked_and_named(sets, where, what):
     assert where in text and what in text and "\n" not in text
 
 
+def test_an_unknown_field_with_a_line_break_in_its_name_is_named_on_one_line():
+    """Found by tests/test_fuzz.py: a table key "\n" (TOML allows it quoted) was printed as it is."""
+    from kinswarm.actors.runfile import resolve
+
+    data = read_run_file(CHAIN4)
+    data["run"] = {"\n": False}
+    with pytest.raises(SpecError) as e:
+        resolve(data, "fuzz.toml")
+    assert "run.'\\n'" in str(e.value) and "\n" not in str(e.value)
+
+
 def test_old_topology_files_get_a_hint(tmp_path):
     p = tmp_path / "old.toml"
     p.write_text('[robot]\nname = "x"\n[[agent]]\nid = "a"\nlink_length = 1.0\n[task]\ngoal = [1, 1]\n')
