@@ -9,6 +9,7 @@ import contextlib
 import logging
 import os
 import signal
+import statistics
 import sys
 from collections.abc import Iterator
 from pathlib import Path
@@ -107,9 +108,9 @@ async def _supervise(
             row = {"epoch": d.epoch, "final_error": d.final_error, "mean_error": d.mean_error, "errors": d.errors}
             live.epoch(row, d.angles)
         if bar is not None:
-            bar.set_postfix(
-                final=f"{d.final_error:.3f}", mean=f"{d.mean_error:.3f}", steps_s=f"{d.steps / d.seconds:.0f}"
-            )
+            fleet = {"median": f"{statistics.median(d.fleet):.3f}"} if d.fleet else {}  # a fleet: every robot's
+            rate = d.steps * max(len(d.fleet), 1) / d.seconds  # robot-steps/s
+            bar.set_postfix(final=f"{d.final_error:.3f}", mean=f"{d.mean_error:.3f}", **fleet, steps_s=f"{rate:.0f}")
             bar.update(1)
 
     placement: ProcessPlacement | SinglePlacement
