@@ -42,9 +42,11 @@ attribute check more than without the feature; with some active, received step m
 the loop one by one and faulted there, so the RNG, counters and timers are only ever touched on the loop.
 """
 
+from .fleet import Lane
+from .links import LINK_COUNTS, LinkFault
 from .mailbox import LocalBus, Mailbox, Tapped, tap
 from .net import HANDSHAKE_MS, LEASE_MS, NetSpec, open_session, zenoh_config
-from .node import LINK_COUNTS, Lane, LinkFault, Local, Node, setup_logging
+from .node import Local, Node, setup_logging
 
 __all__ = [
     "HANDSHAKE_MS",

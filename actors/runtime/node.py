@@ -1,26 +1,26 @@
 """A Node: one actor's presence on the wire. Publishers with BLOCK congestion control, subscriptions into its
 mailbox, readiness (every publisher matched before the liveliness token goes up), decoding with the reasons logged,
-link faults, and clean shutdown. The package's doc (__init__.py) says how messages reach the loop."""
+and clean shutdown; its link faults are in links.py, a fleet's batches in fleet.py. The package's doc (__init__.py)
+says how messages reach the loop."""
 
 from __future__ import annotations
 
 import asyncio
 import contextlib
-import dataclasses
 import logging
 import random
 import threading
 import time
-from collections.abc import AsyncIterator, Callable, Iterable, Iterator
+from collections.abc import AsyncIterator, Callable, Iterable
 from dataclasses import dataclass
 from typing import Any, TypeVar
 
 import zenoh
 from kinswarm.protocol import codec
-from kinswarm.protocol.faults import ALL, LINK_FAULTS, check_fault, describe
 from kinswarm.protocol.keys import Keys
-from kinswarm.protocol.messages import Batch, Fault
 
+from .fleet import Gathering
+from .links import LINK_COUNTS, LinkFault, LinkFaults
 from .mailbox import Mailbox, _bus, _release
 
 #: a node logs the first rejected message on each of up to this many keys, then every 1000th: a flood on one key
@@ -29,7 +29,6 @@ LOGGED_KEYS = 100
 M = TypeVar("M")
 
 
-LINK_COUNTS = ("dropped", "delayed", "duplicated", "corrupted")
 FAILED = "__failed__"  # the mailbox item that wakes the loop when an inline step handler raised (no Zenoh key)
 
 
@@ -50,18 +49,7 @@ class Local:
         return self.payload
 
 
-@dataclass
-class LinkFault:
-    """One active link fault of a node: at most one per kind; a new one of the same kind replaces it."""
-
-    kind: str  # drop, delay, duplicate or corrupt
-    rate: float  # probability per message (1.0 for delay)
-    ms: float  # delay only
-    description: str
-    expiry: asyncio.TimerHandle | None = None
-
-
-class Node:
+class Node(LinkFaults, Gathering):
     """One actor's handle on the wire: mailbox, publishers, subscriptions, liveliness token, link faults.
 
     Several nodes may share one session (the `single` placement); each owns its declarations and
@@ -135,60 +123,6 @@ class Node:
                     self._emit(key, p)
         else:
             self._emit(key, Local(msg, self.keys.run, self.ident, self.key))
-
-    # -- a fleet: one Batch per key, whatever its B ---------------------------------------------------------
-    @contextlib.contextmanager
-    def gathering(self) -> Iterator[None]:
-        """While inside, the step messages this actor's lanes send (`send_as`) are gathered; on leaving, each key's
-        go out as one Batch (a second when a robot sent twice on one key: a robot's k-th message is in the k-th),
-        keys in the order of their first message. Nothing is sent when the body raises: the actor is failing.
-        Within a gathering (one handler's, under the node's lock) another one adds to it: the outer one sends."""
-        if self._gathered is not None:
-            yield
-            return
-        self._gathered = {}
-        try:
-            yield
-            gathered = self._gathered
-        finally:
-            self._gathered = None
-        for key, groups in gathered.items():
-            for robots, items in groups:
-                self.send(key, Batch(of=items[0].KIND, robots=robots, items=items))
-
-    def send_as(self, robot: int, key: str, msg: Any) -> None:
-        """Robot `robot`'s message: a step message into the batch being gathered (alone in a Batch of its own outside
-        gathering()), anything else sent as it is."""
-        gathered = self._gathered
-        if not key.startswith(self._step_prefixes):
-            self.send(key, msg)
-        elif gathered is None:
-            self.send(key, Batch(of=msg.KIND, robots=[robot], items=[msg]))
-        else:
-            groups = gathered.get(key)
-            if groups is None:
-                gathered[key] = [([robot], [msg])]
-                return
-            for robots, items in groups:
-                if robots[-1] < robot:
-                    robots.append(robot)
-                    items.append(msg)
-                    return
-            groups.append(([robot], [msg]))
-
-    def decode_batch(self, key: str, payload: bytes | Local, of: type[M]) -> Batch | None:
-        """A Batch of `of` messages for robots of this fleet, or None (the reason logged, as decode() logs it)."""
-        m = self.decode(key, payload, Batch)
-        if m is None:
-            return None
-        if m.of != of.KIND:  # type: ignore[attr-defined]
-            reason = f"batch of {m.of!r}, expected {of.KIND!r}"  # type: ignore[attr-defined]
-        elif m.robots[-1] >= self.fleet:
-            reason = f"batch for robot {m.robots[-1]}: this fleet has {self.fleet}"
-        else:
-            return m
-        self._rejected(key, payload.src if type(payload) is Local else codec.sender(payload), reason)
-        return None
 
     def _emit(self, key: str, payload: bytes | Local) -> None:
         """A step message: to this session's Nodes and taps listening on `key` (the local bus), and on Zenoh to the
@@ -373,77 +307,6 @@ class Node:
                 "rejected message on %s from %s: %s (rejected so far: %d)", key, sender, reason, self.rejected
             )
 
-    # -- link faults -----------------------------------------------------------------------------
-    def apply_fault(self, f: Fault) -> str:
-        """Apply a link fault to this node; return what was done in one line, or "" when `f` is not a
-        link fault for this node (`all` targets every agent-role node). Call it on the loop."""
-        if f.fault not in LINK_FAULTS:
-            return ""
-        if self.ident not in f.targets and not (ALL in f.targets and self.role == "agent"):
-            return ""
-        error = check_fault(f)
-        if error:  # the supervisor checks before forwarding: this is a bug or a hand-made message
-            self.log.warning("ignored link fault %s: %s", f.id, error)
-            return ""
-        if f.fault == "clear":
-            was = sorted(self._link_faults)
-            self._clear_link_faults()
-            desc = f"clear {self.ident} ({', '.join(was) or 'no link fault'} active)"
-        else:
-            rate = 1.0 if f.rate is None else f.rate  # duplicate and corrupt default to every message
-            shown = dataclasses.replace(f, targets=[self.ident], rate=None if f.fault == "delay" else rate)
-            lf = LinkFault(kind=f.fault, rate=rate, ms=f.ms or 0.0, description=describe(shown))
-            old = self._link_faults.get(lf.kind)
-            if old is not None and old.expiry is not None:
-                old.expiry.cancel()
-            if f.seconds is not None:
-                lf.expiry = self._loop.call_later(f.seconds, self._expire, lf)
-            self._link_faults[lf.kind] = lf
-            desc = lf.description
-        self.log.warning("link fault: %s", desc)
-        return desc
-
-    @property
-    def link_faults(self) -> list[str]:
-        """The active link faults, one description each (for status reports)."""
-        return [lf.description for lf in self._link_faults.values()]
-
-    def _expire(self, lf: LinkFault) -> None:
-        if self._link_faults.get(lf.kind) is lf:
-            del self._link_faults[lf.kind]
-            self.log.warning("link fault expired: %s", lf.description)
-            if self.on_fault_expired is not None:
-                self.on_fault_expired(lf.description)
-
-    def _clear_link_faults(self) -> None:
-        for lf in self._link_faults.values():
-            if lf.expiry is not None:
-                lf.expiry.cancel()
-        self._link_faults.clear()
-
-    def _fault(self, payload: bytes) -> list[tuple[float, bytes]]:
-        """What the active faults make of one step message: (delay in s, payload) per copy; [] if dropped."""
-        faults, rng, counts = self._link_faults, self.fault_rng, self.link_counts
-        f = faults.get("drop")
-        if f is not None and rng.random() < f.rate:
-            counts["dropped"] += 1
-            return []
-        f = faults.get("corrupt")
-        if f is not None and rng.random() < f.rate:
-            payload = rng.randbytes(len(payload))  # garbage of the same length: the receiver's MAC check fails
-            counts["corrupted"] += 1
-        copies = [payload]
-        f = faults.get("duplicate")
-        if f is not None and rng.random() < f.rate:
-            copies.append(payload)
-            counts["duplicated"] += 1
-        f = faults.get("delay")
-        delay = 0.0
-        if f is not None and f.ms > 0:
-            delay = f.ms / 1000
-            counts["delayed"] += len(copies)
-        return [(delay, p) for p in copies]
-
     # -- readiness -------------------------------------------------------------------------------
     async def wait_matched(self, keys: Iterable[str], timeout: float) -> None:
         """Wait until every given publisher has a matching subscriber: a put before that is lost."""
@@ -480,34 +343,6 @@ class Node:
         self._pubs.clear()
         self._subs.clear()
         self._token = None
-
-
-class Lane:
-    """One robot of a fleet as an actor's per-robot code sees its Node: the step messages it sends are robot
-    `robot`'s (Node.send_as: into the batch being gathered). Only the owning lane (robot 0's, the actor's own) speaks
-    for the actor otherwise: it subscribes, and sends what is not a step message (events, replies); the other lanes'
-    are their duplicates (every robot loses the same neighbour at the same step), not sent, and their log says only
-    errors (the owner's says the rest once)."""
-
-    __slots__ = ("node", "robot", "owner", "log")
-
-    def __init__(self, node: Node, robot: int) -> None:
-        self.node, self.robot, self.owner = node, robot, robot == 0
-        self.log = node.log
-        if not self.owner:
-            self.log = logging.getLogger(f"{node.log.name}.fleet")
-            self.log.setLevel(logging.ERROR)
-
-    def send(self, key: str, msg: Any) -> None:
-        if self.owner or key.startswith(self.node._step_prefixes):
-            self.node.send_as(self.robot, key, msg)
-
-    def listen(self, key_expr: str, inline: Callable[[str, bytes], None] | None = None) -> None:
-        if self.owner:
-            self.node.listen(key_expr, inline)
-
-    def __getattr__(self, name: str) -> Any:
-        return getattr(self.node, name)
 
 
 def setup_logging(level: str = "INFO") -> None:
