@@ -84,8 +84,6 @@ class Agent:
             self.extra_names = tuple(v.name for v in settings.extra_state[self.n_task_vars :])
         self.unsigned_g3 = self.learner is not None and self.learner.settings.g3 == "unsigned"
         self.trace = None  # what it saw and chose, for the recording (run.record_agents)
-        # a fleet's lane while its agent handles a batch: where finishing leaves its second part (_decide) for later
-        self.deferred: list[tuple[Agent, _Step, StepView, dict[str, tuple[float, ...]]]] | None = None
         if cfg.record_agents and self.learner is not None:
             self.trace = StepTrace(agent_id, self.learner.settings.state_names)
         self.task = task.agent(agent_id, self.learner.settings if self.learner else None)
@@ -317,15 +315,6 @@ class Agent:
         if not self.is_root:  # first: the parent's state needs only the tips (and the task's aggregate)
             up = Up(epoch=epoch, step=step, tips=tips, action=-1 if last is None else last, sense=self.task.up(view))
             self.node.send(self.keys.up(self.spec.parent), up)  # type: ignore[arg-type]
-        if self.deferred is not None:  # a fleet's lane: every robot's `up` leaves before any robot learns (fleet.py)
-            self.deferred.append((self, cur, view, tips))
-        else:
-            self._decide(cur, view, tips)
-
-    def _decide(self, cur: _Step, view: StepView, tips: dict[str, tuple[float, ...]]) -> None:
-        """Finishing's second part, off the pass's path: learn from the step before, choose a(t), send `cmd`."""
-        epoch, step = cur.key
-        tip = view.tip
         if self.learner is not None:
             self._observe(cur)
             s = self.geom.state(self.spec, cur.frame, cur.q, tip, cur.goal, self.unsigned_g3)

@@ -6,9 +6,7 @@ memory) whose node is a `Lane` of this agent's one Node, and whose learner is a 
 learner (actors/learning/fleet.py): the joint learns from every robot's transitions. Lane 0 is this actor itself (it
 subscribes, checkpoints, says goodbye). A step message arrives as one Batch (protocol/messages.py) with an item per
 robot; the lanes take their items in robot order, and what they send in handling it leaves as one Batch per key
-(Node.gathering). Finishing a step is split as for one robot, `up` first: every robot's `up` leaves in one batch
-before any robot learns, so the parent's pass goes on while this agent learns. The agent code is the one robot's:
-nothing here knows a task.
+(Node.gathering). The agent code is the one robot's: nothing here knows a task.
 """
 
 from __future__ import annotations
@@ -48,20 +46,9 @@ class FleetAgent(Agent):
         if of is None:
             return False
         node = self.fleet_node
-        if (batch := node.decode_batch(key, payload, of)) is None:
-            return True
-        lanes, deferred = self.lanes, []
-        for lane in lanes:
-            lane.deferred = deferred
-        try:
-            with node.gathering():  # every robot's `up` (and `down`) leaves as one batch a key ...
+        if (batch := node.decode_batch(key, payload, of)) is not None:
+            lanes = self.lanes
+            with node.gathering():
                 for robot, m in zip(batch.robots, batch.items, strict=True):
                     lanes[robot]._take(kind, m)
-        finally:
-            for lane in lanes:
-                lane.deferred = None
-        if deferred:  # ... before any robot learns: the parent goes on up while this agent learns, as with one robot
-            with node.gathering():
-                for lane, cur, view, tips in deferred:  # in robot order: the learner's calls as without deferring
-                    lane._decide(cur, view, tips)
         return True
