@@ -134,11 +134,12 @@ def build_parser() -> argparse.ArgumentParser:
     _add_common(base)
     base.add_argument(
         "--law",
-        choices=("pinv", "greedy", "rule"),
+        choices=("pinv", "greedy", "rule", "turn"),
         default="pinv",
         help="pinv: the Jacobian pseudo-inverse (default); greedy: each joint alone takes the 1-step move that "
         "brings the tip nearest (a reference for what per-joint greedy control can do); rule: each joint one step "
-        "along sign(g_perp) (no learning, no model: the control every learning result needs)",
+        "along sign(g_perp) (no learning, no model: the control every learning result needs); turn: each joint one "
+        "step toward its own best angle, sign(g_q) (a robot from URDF: the rule on the turn state)",
     )
     rep = sub.add_parser("report", help="rebuild a run's summary plots")
     rep.add_argument("run_dir", type=Path)

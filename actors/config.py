@@ -26,7 +26,8 @@ from kinswarm.protocol.topology import Topology, parse_robot
 
 PLACEMENTS = ("process", "single")
 LEASE_RANGE_MS = (100, 60_000)  # the Zenoh leases accepted: [run] lease_ms and a plan's [zenoh] lease_ms
-CONTROLLERS = ("agents", "pinv", "greedy", "rule")  # the learning agents, or a model-based law (sim/controller.py)
+#: the learning agents, or a model-based law (sim/controller.py)
+CONTROLLERS = ("agents", "pinv", "greedy", "rule", "turn")
 DEFAULT_LISTEN = "tcp/127.0.0.1:7447"
 #: The run file's [run] keys: every field of RunConfig a user sets in a file (`from` is the field from_dir).
 RUN_KEYS = (

@@ -402,6 +402,7 @@ LAW_NAMES = {
     "pinv": "pseudo-inverse (model-based)",
     "greedy": "greedy per joint (model-based)",
     "rule": "rule on g_perp (no learning)",
+    "turn": "rule on g_q (no learning)",
 }
 
 

@@ -47,7 +47,7 @@ from typing import Any
 import msgspec
 import tomli_w
 from kinswarm.actors.config import RUN_KEYS, ConfigError, RunConfig, check_endpoint
-from kinswarm.actors.learning.settings import LearnerSettings
+from kinswarm.actors.learning.settings import SPATIAL_STATES, LearnerSettings
 from kinswarm.actors.tasks import kinds, task_class
 from kinswarm.actors.tasks.base import TaskDef
 from kinswarm.protocol.keys import check_id
@@ -184,6 +184,8 @@ def resolve(
             if e.fault.robot is not None and e.fault.robot >= cfg.fleet:
                 what = f"robot {e.fault.robot}: the run's fleet has {cfg.fleet} (run.fleet; robots 0..{cfg.fleet - 1})"
                 raise ScenarioError(cfg.scenario, f"event[{i}].robot", what)
+    if cfg.controller == "turn" and not (task.topo.spatial and len(task.topo.end_effectors) == 1):
+        raise ConfigError("controller: the turn rule moves the one end effector of a robot from URDF")
     if cfg.fleet > 1 and cfg.fleet_goals == "spread" and task.goal(0, cfg.steps)[1]:
         raise ConfigError('fleet_goals: "spread" gives each robot a goal of its own; this task\'s goal moves (a path)')
     if cfg.from_dir is not None:  # and checkpoints that do not fit this run's learners
@@ -239,6 +241,12 @@ def learner_settings(task: TaskDef, learner: Mapping[str, Any], source: str = "<
     except msgspec.ValidationError as e:
         raise _spec_error(e, source, "learner") from None
     given = {k: getattr(typed, k) for k in learner}
+    fits = SPATIAL_STATES if task.topo.spatial else ("planar",)
+    if "state" in given and given["state"] not in fits:
+        what = "a robot from URDF" if task.topo.spatial else "a planar robot"
+        raise SpecError(
+            source, "learner.state", f"{given['state']!r} is not a state of {what}; it takes: {', '.join(fits)}"
+        )
     out = {}
     for agent in task.topo.dof_agents:
         try:

@@ -6,7 +6,8 @@ comparable.
 
 A planar robot's goal is a point (x, y). A spatial robot's (from URDF) is a point (x, y, z), or a pose (x, y, z, qx,
 qy, qz, qw): the tool's position and orientation, the orientation's error (rad) weighed as frames.POSE_WEIGHT metres
-per radian wherever it meets the position's.
+per radian wherever it meets the position's. Near a pose goal every law moves as finely as the agents do
+(move_size).
 """
 
 from __future__ import annotations
@@ -197,23 +198,57 @@ def _spatial_rule(
     }
 
 
+def turn_increments(
+    topo: Topology,
+    angles: Mapping[str, float],
+    goal: Goal,
+    *,
+    max_step: float = math.radians(1),
+) -> dict[str, float]:
+    """The rule on the turn state, no learning: each joint one step toward its own best value within its limits
+    (sign(g_q), frames.best_turn: the others held, where D_goal is least), when that lies more than a step away,
+    else keeps. What a joint of a swarm with state "turn" knows; a spatial robot with one end effector."""
+    if max_step <= 0:
+        raise ValueError(f"max_step must be > 0, got {max_step}")
+    if not topo.spatial or len(topo.end_effectors) != 1:
+        raise ValueError("the turn rule moves the one end effector of a robot from URDF")
+    links = frames.link_frames(topo, angles)
+    (tip,) = frames.tips(topo, angles).values()
+    out = {}
+    for a in topo.dof_agents:
+        spec = topo.agents[a]
+        lo, hi = spec.limits
+        axis = frames.joint_axis(spec, links[a])
+        t = frames.best_turn(axis, links[a], tip, goal, (lo - angles[a], hi - angles[a]), spec.prismatic)
+        out[a] = math.copysign(max_step, t) if abs(t) > max_step else 0.0
+    return out
+
+
+def move_size(topo: Topology, angles: Mapping[str, float], goal: Goal, max_step: float) -> float:
+    """The agents' move here: max_step, or its fine share near a pose goal (frames.move_share), so that a law is
+    compared with the agents at the same move sizes."""
+    if not topo.spatial or len(goal) != 7:
+        return max_step
+    return max_step * min(frames.move_share(tip, goal) for tip in frames.tips(topo, angles).values())
+
+
 def _pose_distance2(tip: Sequence[float], goal: Goal) -> float:
-    """A spatial tip's squared distance to a goal: 3D, plus (POSE_WEIGHT x angle)² for a pose."""
-    d2 = (goal[0] - tip[0]) ** 2 + (goal[1] - tip[1]) ** 2 + (goal[2] - tip[2]) ** 2
+    """A spatial tip's squared distance to a goal: 3D; a pose's D_goal² (frames.pose_distance)."""
+    d = math.dist(tip[:3], goal[:3])
     if len(goal) == 7:
-        d2 += (frames.POSE_WEIGHT * frames.angle_between(tip[3:7], goal[3:7])) ** 2
-    return d2
+        d = frames.pose_distance(d, frames.angle_between(tip[3:7], goal[3:7]))
+    return d * d
 
 
 def reached(topo: Topology, angles: Mapping[str, float], goal: Goal, tol: float) -> bool:
-    """Every tip within `tol` of the goal: planar, in the plane; spatial, in 3D, and for a pose goal its distance
-    plus POSE_WEIGHT x the angle to the goal's orientation (the reach3d task's D_goal)."""
+    """Every tip within `tol` of the goal: planar, in the plane; spatial, in 3D, and for a pose goal its D_goal
+    (frames.pose_distance, the reach3d task's)."""
     if not topo.spatial:
         return all(math.hypot(goal[0] - x, goal[1] - y) <= tol for x, y, _ in kinematics.tips(topo, angles).values())
     for tip in frames.tips(topo, angles).values():
         d = math.dist(tip[:3], goal[:3])
         if len(goal) == 7:
-            d += frames.POSE_WEIGHT * frames.angle_between(tip[3:7], goal[3:7])
+            d = frames.pose_distance(d, frames.angle_between(tip[3:7], goal[3:7]))
         if d > tol:
             return False
     return True
@@ -236,9 +271,10 @@ def run_baseline(
     Returns (steps taken, or None if not reached within max_steps; final angles).
     """
     step_of = {
-        "pinv": lambda q: pinv_increments(topo, q, goal_xy, max_step=max_step, gain=gain),
-        "greedy": lambda q: greedy_increments(topo, q, goal_xy, max_step=max_step),
-        "rule": lambda q: rule_increments(topo, q, goal_xy, max_step=max_step),
+        "pinv": lambda q: pinv_increments(topo, q, goal_xy, max_step=move_size(topo, q, goal_xy, max_step), gain=gain),
+        "greedy": lambda q: greedy_increments(topo, q, goal_xy, max_step=move_size(topo, q, goal_xy, max_step)),
+        "rule": lambda q: rule_increments(topo, q, goal_xy, max_step=move_size(topo, q, goal_xy, max_step)),
+        "turn": lambda q: turn_increments(topo, q, goal_xy, max_step=move_size(topo, q, goal_xy, max_step)),
     }[law]
     q = dict(topo.initial_angles() if angles is None else angles)
     for step in range(max_steps + 1):

@@ -1,9 +1,10 @@
 """The model-based baselines as an actor: one takes the place of the agents on the same wire — reads the
 same encoder readings and task observation, and sends one `cmd` per joint — so learned and
 model-based runs go through the same simulator, deadlines and metrics. Its control law is the run's
-`controller`: "pinv" (the pseudo-inverse), "greedy" (each joint alone, greedy in the distance) or "rule" (each joint
-along sign(g_perp), the hand-written control on the agents' own state). The goal is the task's as it travels: a
-planar robot's point, a spatial robot's point or pose (sim/baseline.py)."""
+`controller`: "pinv" (the pseudo-inverse), "greedy" (each joint alone, greedy in the distance), "rule" (each joint
+along sign(g_perp), the hand-written control on the agents' own state) or "turn" (each joint toward its own best
+angle, sign(g_q): the rule on the turn state). The goal is the task's as it travels: a planar robot's point, a spatial
+robot's point or pose (sim/baseline.py); every law moves as the agents do (baseline.move_size)."""
 
 from __future__ import annotations
 
@@ -11,9 +12,9 @@ from kinswarm.actors.config import RunConfig
 from kinswarm.actors.runtime import Node
 from kinswarm.protocol.messages import Cmd, Obs, Stop, Task
 from kinswarm.protocol.topology import Topology
-from kinswarm.sim.baseline import greedy_increments, pinv_increments, rule_increments
+from kinswarm.sim.baseline import greedy_increments, move_size, pinv_increments, rule_increments, turn_increments
 
-LAWS = {"pinv": pinv_increments, "greedy": greedy_increments, "rule": rule_increments}
+LAWS = {"pinv": pinv_increments, "greedy": greedy_increments, "rule": rule_increments, "turn": turn_increments}
 
 
 class BaselineController:
@@ -55,6 +56,6 @@ class BaselineController:
             return
         self.q = {s: v for s, v in self.q.items() if s > step}
         self.task = {s: v for s, v in self.task.items() if s > step}
-        dq = self.law(self.topo, q, task.goal, max_step=self.cfg.action_rad)
+        dq = self.law(self.topo, q, task.goal, max_step=move_size(self.topo, q, task.goal, self.cfg.action_rad))
         for a in self.dof:
             self.node.send(self.keys.cmd(a), Cmd(epoch=step[0], step=step[1], delta=dq[a]))

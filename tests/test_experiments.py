@@ -351,7 +351,7 @@ def test_all_experiments_full(tmp_path):
 
 @pytest.mark.timeout(600)
 def test_quick_reach3d_experiment(tmp_path):
-    """The 3D report's smoke version: points and poses, every control on both test sets, and the locked shoulder."""
+    """The 3D report's smoke version: points, every control on both test sets, the locked and disturbed joints."""
     from kinswarm.experiments import run_experiment
 
     res = run_experiment("reach3d", seeds=1, quick=True, out=tmp_path, jobs=2)["reach3d"]
@@ -360,12 +360,35 @@ def test_quick_reach3d_experiment(tmp_path):
         assert (out / f).is_file(), f
     controls = ["trained, frozen", "untrained, frozen", "blind (q only), frozen", "rule", "pseudo-inverse",
                 "greedy per joint"]  # fmt: skip
-    for kind, sets in (("points", ("A", "B")), ("poses", ("A",))):
-        assert set(res[kind]) == {f"{c} | {s}" for c in controls for s in sets}
-        for row in res[kind].values():
-            assert all(0.0 <= w <= 100.0 for w in row["within_pct"]) and all(m >= 0.0 for m in row["mean"])
+    assert set(res["points"]) == {f"{c} | {s}" for c in controls for s in ("A", "B")}
+    for row in res["points"].values():
+        assert all(0.0 <= w <= 100.0 for w in row["within_pct"]) and all(m >= 0.0 for m in row["mean"])
     for fault in ("locked_a2", "disturbed_a4"):
         assert set(res[fault]) == {"trained, frozen", "trained, learning", "untrained, learning", "rule",
                                    "pseudo-inverse"}  # fmt: skip
     text = (out / "report.md").read_text()
     assert "## Points: frozen on 5 unseen goals" in text and "quick" in text
+
+
+@pytest.mark.timeout(300)
+def test_quick_pose3d_experiment(tmp_path):
+    """The pose report's smoke version: the turn-state swarm and every control, both test sets; the swarm's runs are
+    of the turn state and the blind one's of the plane state."""
+    from kinswarm.experiments import run_experiment
+
+    res = run_experiment("pose3d", seeds=1, quick=True, out=tmp_path, jobs=2)["pose3d"]
+    out = tmp_path / "pose3d"
+    for f in ("report.md", "results.json", "within.png"):
+        assert (out / f).is_file(), f
+    controls = ["trained, frozen", "untrained, frozen", "blind (q only), frozen", "rule on g_perp", "rule on g_q",
+                "pseudo-inverse", "greedy per joint"]  # fmt: skip
+    assert set(res["poses"]) == {f"{c} | {s}" for c in controls for s in ("A", "B")}
+    for row in res["poses"].values():
+        assert all(0.0 <= w <= 100.0 for w in row["within_pct"]) and all(m >= 0.0 for m in row["mean"])
+    states = {}
+    for config in (tmp_path / "runs").glob("*/config.json"):
+        cfg = json.loads(config.read_text())
+        if cfg["controller"] == "agents":
+            states[cfg["run_id"]] = cfg["learner"].get("state", "turn")
+    assert states and set(states.values()) == {"turn", "plane"}
+    assert "## Poses: frozen on 5 unseen goals" in (out / "report.md").read_text()

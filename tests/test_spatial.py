@@ -149,7 +149,7 @@ def test_g_perp_says_which_way_the_joint_brings_the_tip_closer():
         links = frames.link_frames(topo, q)
         (tip,) = frames.tips(topo, q).values()
         for a in topo.dof_agents:
-            g_perp = geom.state(topo.agents[a], links[a], q[a], tip, goal, False)[2]
+            g_perp = geom.state(topo.agents[a], links[a], q[a], tip, goal, False, "plane")[2]
             (moved,) = frames.tips(topo, {**q, a: q[a] + 1e-5}).values()
             closer = math.dist(moved[:3], goal) < math.dist(tip[:3], goal)
             if abs(g_perp) > 1e-6:
@@ -182,9 +182,11 @@ def test_spatial_coordinates_on_the_wire():
         codec.decode(codec.encode(bad, "r", "x", KEY), Down, "r", KEY)
 
 
-def _run_file(tmp_path, robot_toml: str, task_toml: str):
+def _run_file(tmp_path, robot_toml: str, task_toml: str, learner_toml: str = ""):
     f = tmp_path / "run.toml"
-    f.write_text(f"[robot]\n{robot_toml}\n[task]\n{task_toml}\n")
+    f.write_text(
+        f"[robot]\n{robot_toml}\n[task]\n{task_toml}\n" + (f"[learner]\n{learner_toml}\n" * bool(learner_toml))
+    )
     return f
 
 
@@ -220,11 +222,76 @@ def test_what_a_3d_run_file_gets_wrong_is_one_line(tmp_path, robot_toml, task_to
 
 
 def test_a_pose_goal_gives_every_joint_its_turn(tmp_path):
-    """reach3d with a pose: goals travel as 7 floats; every agent sees g_rot, the turn still to make about its axis."""
+    """reach3d with a pose: goals travel as 7 floats; every agent's state is its turn (g_q), unless the run says
+    "plane"; a state of the other geometry is refused in one line."""
     cfg = load_run(_run_file(tmp_path, IIWA_TOML, 'kind = "reach3d"\ngoal = [0.4, 0.2, 0.5, 180, 0, 90]'))
     task = task_of(cfg)
     goal, path = task.goal(0, 10)
     assert len(goal) == 7 and path == []
     assert frames.angle_between(goal[3:], frames.rpy_quat(math.pi, 0.0, math.pi / 2)) < 1e-12
-    settings = task.learner("a7", {})
-    assert settings.state == "plane" and settings.state_names[-1] == "g_rot"
+    assert task.learner("a7", {}).state_names == ("g_q",)
+    assert task.learner("a7", {"state": "plane"}).state_names == ("q", "d", "g_perp", "g_axial", "g_radial", "w")
+    points = task_of(load_run(_run_file(tmp_path, IIWA_TOML, 'kind = "reach3d"\ngoal = [0.4, 0.2, 0.5]')))
+    assert points.learner("a7", {}).state == "plane"
+    with pytest.raises(SpecError) as e:
+        load_run(_run_file(tmp_path, IIWA_TOML, 'kind = "reach3d"\ngoal = [0.4, 0.2, 0.5]', 'state = "planar"'))
+    assert e.value.where == "learner.state" and "it takes: plane, turn" in e.value.what
+
+
+def _pose_D(topo, q, goal) -> float:
+    (tip,) = frames.tips(topo, q).values()
+    if len(goal) == 3:
+        return math.dist(tip[:3], goal)
+    return frames.pose_distance(math.dist(tip[:3], goal[:3]), frames.angle_between(tip[3:7], goal[3:7]))
+
+
+def test_g_q_is_where_the_joint_alone_brings_d_goal_lowest_within_its_limits():
+    """best_turn against a brute-force sweep of the model, joint by joint, on random poses and points: the D_goal it
+    reaches is the sweep's best (to a degree's sampling)."""
+    topo = robot(IIWA)
+    rng = np.random.default_rng(3)
+    lims = np.array([topo.agents[a].limits for a in topo.dof_agents])
+    for trial in range(6):
+        q = dict(zip(topo.dof_agents, rng.uniform(lims[:, 0], lims[:, 1]), strict=True))
+        (g,) = frames.tips(topo, dict(zip(topo.dof_agents, rng.uniform(lims[:, 0], lims[:, 1]), strict=True))).values()
+        goal = g if trial % 2 else g[:3]
+        links = frames.link_frames(topo, q)
+        (tip,) = frames.tips(topo, q).values()
+        for a in topo.dof_agents:
+            spec = topo.agents[a]
+            lo, hi = spec.limits
+            t = frames.best_turn(frames.joint_axis(spec, links[a]), links[a], tip, goal, (lo - q[a], hi - q[a]))
+            assert lo - 1e-9 <= q[a] + t <= hi + 1e-9
+            sweep = min(_pose_D(topo, {**q, a: v}, goal) for v in np.linspace(lo, hi, 2000))
+            assert _pose_D(topo, {**q, a: q[a] + t}, goal) <= sweep + 2e-3
+
+
+def test_g_q_sees_the_long_way_round_when_the_short_one_is_barred():
+    """a1's goal lies just past its limit: g_perp says turn up, g_q says turn down the long way (the only way)."""
+    topo = robot(IIWA)
+    lo, hi = topo.agents["a1"].limits
+    q = dict.fromkeys(topo.dof_agents, 0.0) | {"a2": 0.6, "a1": hi - 0.05}
+    (goal,) = frames.tips(topo, {**q, "a1": hi - 0.05 + 0.4 - 2 * math.pi}).values()  # = hi + 0.35, mod 2 pi
+    links = frames.link_frames(topo, q)
+    (tip,) = frames.tips(topo, q).values()
+    axis = frames.joint_axis(topo.agents["a1"], links["a1"])
+    state = plane_state(q["a1"], links["a1"][:3], axis, tip[:3], goal[:3])
+    t = frames.best_turn(axis, links["a1"], tip, goal, (lo - q["a1"], hi - q["a1"]))
+    assert state[2] > 0 and t < -math.pi  # the goal is just up, out of reach; more than half a turn down
+
+
+def test_a_prismatic_joints_turn_is_its_shift():
+    t = frames.best_turn((0.0, 0.0, 1.0), (0, 0, 0, 0, 0, 0, 1), (0, 0, 0.1), (0.2, 0.0, 0.13), (-0.05, 0.05), True)
+    assert t == pytest.approx(0.03, abs=1e-3)
+    assert frames.best_turn((0.0, 0.0, 1.0), (0, 0, 0, 0, 0, 0, 1), (0, 0, 0.1), (0, 0, 0.3), (-0.05, 0.05), True) == (
+        pytest.approx(0.05)
+    )
+
+
+def test_moves_are_fine_near_a_pose_goal_only():
+    goal = (0.5, 0.0, 0.5, 0.0, 0.0, 0.0, 1.0)
+    assert frames.move_share((0.5, 0.0, 0.45, 0.0, 0.0, 0.0, 1.0), goal) == frames.FINE_SHARE
+    assert frames.move_share((0.5, 0.0, 0.3, 0.0, 0.0, 0.0, 1.0), goal) == 1.0
+    turned = (0.5, 0.0, 0.5, *frames.axis_angle((1.0, 0.0, 0.0), 0.5))  # on the point, 29° off: D = 0.125
+    assert frames.move_share(turned, goal) == 1.0
+    assert frames.move_share((0.5, 0.0, 0.45), goal[:3]) == 1.0  # a point goal: whole moves

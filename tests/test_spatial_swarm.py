@@ -1,5 +1,5 @@
-"""Robots from URDF as a real swarm: the iiwa, the Panda and the xArm6 example files train in both placements with the
-same results for the same seed, and faults (lock, kill, freeze) reach an iiwa's agents live."""
+"""Robots from URDF as a real swarm: the iiwa (to a point and to a pose), the Panda and the xArm6 example files train in
+both placements with the same results for the same seed, and faults (lock, kill, freeze) reach an iiwa's agents live."""
 
 from __future__ import annotations
 
@@ -21,7 +21,7 @@ def _run(file: Path, placement: str, out: Path) -> dict:
     return json.loads((out / "summary.json").read_text())
 
 
-@pytest.mark.parametrize("name", ["iiwa", "panda", "xarm6"])
+@pytest.mark.parametrize("name", ["iiwa", "iiwa-pose", "panda", "xarm6"])
 def test_a_urdf_arm_trains_alike_in_both_placements(tmp_path, name):
     single = _run(EXAMPLES / f"{name}.toml", "single", tmp_path / "single")
     process = _run(EXAMPLES / f"{name}.toml", "process", tmp_path / "process")

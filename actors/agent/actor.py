@@ -83,6 +83,7 @@ class Agent:
             self.learner = learner or Learner(settings, len(self.visible), agent_seed(cfg.seed, agent_id))
             self.extra_names = tuple(v.name for v in settings.extra_state[self.n_task_vars :])
         self.unsigned_g3 = self.learner is not None and self.learner.settings.g3 == "unsigned"
+        self.state_kind = "" if self.learner is None else self.learner.settings.state
         self.trace = None  # what it saw and chose, for the recording (run.record_agents)
         if cfg.record_agents and self.learner is not None:
             self.trace = StepTrace(agent_id, self.learner.settings.state_names)
@@ -311,13 +312,13 @@ class Agent:
         last = d[1] if d is not None and d[0] == (epoch, step - 1) else None
         tip = self.geom.centroid([tips[leaf] for leaf in self.leaves if leaf in tips])
         ups = {c: cur.ups[c] for c in cur.waiting}
-        view = StepView(epoch, step, cur.frame, cur.end, tip, cur.goal, cur.sense, ups, last)
+        view = StepView(epoch, step, cur.frame, cur.end, tip, cur.goal, cur.sense, ups, last, cur.q)
         if not self.is_root:  # first: the parent's state needs only the tips (and the task's aggregate)
             up = Up(epoch=epoch, step=step, tips=tips, action=-1 if last is None else last, sense=self.task.up(view))
             self.node.send(self.keys.up(self.spec.parent), up)  # type: ignore[arg-type]
         if self.learner is not None:
             self._observe(cur)
-            s = self.geom.state(self.spec, cur.frame, cur.q, tip, cur.goal, self.unsigned_g3)
+            s = self.geom.state(self.spec, cur.frame, cur.q, tip, cur.goal, self.unsigned_g3, self.state_kind)
             values = self.task.state(view)
             if self.extra_names:  # the learner's own extra variables: from my geometry, else from my readings
                 local = {**cur.sense, **self.geom.extras(self.extra_names, cur.frame, tip, cur.goal)}

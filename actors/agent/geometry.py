@@ -2,7 +2,8 @@
 parent sends, its children's base, a leaf's tip, and its state S_i. The agent never asks which kind it has.
 
 Planar (the paper's, actors/learning/state.py): frames (x, y, heading), S_i = <q, theta, d, g1, g2, g3>.
-Spatial (a robot from URDF, protocol/frames.py): 7-float frames, S_i the joint's rotation plane (state.plane_state).
+Spatial (a robot from URDF, protocol/frames.py): 7-float frames, S_i the joint's rotation plane (state.plane_state) or
+its turn (frames.best_turn), as its learner's state kind says.
 """
 
 from __future__ import annotations
@@ -34,7 +35,7 @@ class Planar:
         return centroid(tips)
 
     def state(
-        self, spec: AgentSpec, frame: Coords, q: float, tip: Coords, goal: Coords, unsigned_g3: bool
+        self, spec: AgentSpec, frame: Coords, q: float, tip: Coords, goal: Coords, unsigned_g3: bool, kind: str
     ) -> np.ndarray:
         return state.agent_state(frame, q, tip, goal, unsigned_g3)
 
@@ -64,9 +65,12 @@ class Spatial:
         return tuple(sum(t[i] for t in tips) / n for i in range(3))
 
     def state(
-        self, spec: AgentSpec, frame: Coords, q: float, tip: Coords, goal: Coords, unsigned_g3: bool
+        self, spec: AgentSpec, frame: Coords, q: float, tip: Coords, goal: Coords, unsigned_g3: bool, kind: str
     ) -> np.ndarray:
         axis = frames.joint_axis(spec, frame)
+        if kind == "turn":
+            lo, hi = spec.limits
+            return np.array([frames.best_turn(axis, frame, tip, goal, (lo - q, hi - q), spec.prismatic)])
         return state.plane_state(q, frame[:3], axis, tip[:3], goal[:3], spec.prismatic)
 
     def extras(self, names: Sequence[str], frame: Coords, tip: Coords, goal: Coords) -> dict[str, float]:

@@ -56,6 +56,7 @@ class StepView:
     sense: Readings  # its own Obs.sense over the context from above (Down.sense)
     ups: Mapping[str, Up]  # its live children's `up` of this step
     last_action: int | None  # its own action at the step before, if it took one
+    q: float = 0.0  # its own joint value (rad; m for a prismatic joint)
 
 
 class AgentTask:

@@ -42,6 +42,11 @@ Poses, 2026-11-24 (96 x 4, 400 steps; within 5 cm and 15° [within 5 cm] mean cm
   7 %; a joint-limit barrier added does not help (77 %, 69 %). The trained swarm's failures (l2w03, seed 0): 25 of 36
   end with a joint at its limit, 35 of 36 have stopped moving, 2 of 36 were ever within the tolerance: local minima,
   as the greedy's and the pseudo-inverse's (58 % at 400 steps, 65 % at 3000; 41 of its 42 failures at a limit).
+- the turn, g_q (frames.best_turn: the move to the joint's own best angle within its limits, the others held), D =
+  sqrt(|w|^2 + (0.25 angle)^2), sets A / B (test sets A and B, seed 0 unless said): with the plane state, g_rot and
+  g_q 5 sets +-45 deg (gq5) 55 / 54 %; g_q, no g_rot (gq5only) 55 / 55 %; g_q 9 sets alone, the plane state
+  uninformative (gq9solo) 76 / 65 %; but |w| (gq9w) 19 / 19 %; gq9solo with quarter moves under D 0.1 m (gq9f) 85 /
+  82 %; and g_q over +-15 deg (gq9_15f) 93 / 90 %, seed 1 82 / 86 %, seed 2 87 / 89 %: kept as the turn state.
 """
 
 from __future__ import annotations
@@ -58,7 +63,7 @@ from kinswarm.actors.agent.geometry import Spatial
 from kinswarm.actors.learning.learner import Learner
 from kinswarm.actors.learning.settings import LearnerSettings, StateVariable
 from kinswarm.actors.tasks.reach import reach_reward
-from kinswarm.actors.tasks.reach3d import G_ROT, wire_goal
+from kinswarm.actors.tasks.reach3d import wire_goal
 from kinswarm.experiments import reach3d as r3
 from kinswarm.experiments.common import Context
 from kinswarm.protocol import frames
@@ -66,12 +71,16 @@ from kinswarm.protocol.topology import Topology, load_robot
 
 SEEDS = 1
 INC = math.radians(1)
+FINE = 0.25  # a fine move's share of INC (Variant.fine)
 # Research-only selections (the research runner has no flags for them): REACH3D_LOOP_ONLY=key,key (variants),
 # REACH3D_LOOP_SEEDS=0,1 (seeds, instead of --seeds), REACH3D_LOOP_SETS=A (test sets).
 ENV_ONLY, ENV_SEEDS, ENV_SETS = "REACH3D_LOOP_ONLY", "REACH3D_LOOP_SEEDS", "REACH3D_LOOP_SETS"
 #: m/rad: the orientation's weight in D_goal these variants were measured against (frames.POSE_WEIGHT until
 #: 2026-11-24); fixed here so that a variant keeps its meaning when the task's weight changes
 W_TASK = 0.1
+#: g_rot: how far (rad) the tool must still turn about this joint's own axis, over ±45° (5 sets): the pose variable of
+#: the plane state until the turn state replaced it
+G_ROT = StateVariable("g_rot", 5, (-math.pi / 4, math.pi / 4))
 #: what runs without REACH3D_LOOP_ONLY (REACH3D_LOOP_ONLY=all: every variant)
 DEFAULT = ("pt300", "pt400", "pt400g11", "pose", "w03")
 
@@ -89,6 +98,7 @@ class Geo:
     w: np.ndarray
     q: float = 0.0
     limits: tuple[float, float] = (-math.pi, math.pi)
+    goal: tuple[float, ...] = ()
 
 
 def _g_rot(g: Geo) -> float:
@@ -134,6 +144,13 @@ def _lim(g: Geo, weight: float) -> float:
     return hi - g.q if _g_pose(g, weight) > 0 else g.q - lo
 
 
+def _g_q(g: Geo) -> float:
+    """The task's g_q (frames.best_turn): the move to this joint's own best angle within its limits."""
+    lo, hi = g.limits
+    joint = np.asarray(g.tool[:3]) - g.r
+    return frames.best_turn(g.a, joint, g.tool, g.goal, (lo - g.q, hi - g.q))
+
+
 #: name -> (its StateVariable, how a joint computes it)
 POSE_VARS: dict[str, tuple[StateVariable, Callable[[Geo], float]]] = {
     "g_rot": (G_ROT, _g_rot),
@@ -149,6 +166,9 @@ POSE_VARS: dict[str, tuple[StateVariable, Callable[[Geo], float]]] = {
     "g_pose3": (StateVariable("g_pose", 9, (-0.12, 0.12)), lambda g: _g_pose(g, 0.3)),
     "lim3": (StateVariable("lim", 3, (0.0, 0.5)), lambda g: _lim(g, 0.3)),
     "lim5": (StateVariable("lim", 5, (0.0, 0.5)), lambda g: _lim(g, 0.3)),
+    "g_q5": (StateVariable("g_q", 5, (-math.pi / 4, math.pi / 4)), _g_q),
+    "g_q9": (StateVariable("g_q", 9, (-math.pi / 4, math.pi / 4)), _g_q),
+    "g_q9_15": (StateVariable("g_q", 9, (-math.pi / 12, math.pi / 12)), _g_q),
 }
 
 
@@ -166,6 +186,7 @@ class Variant:
     g_perp: str = ""  # a POSE_VARS name whose value replaces g_perp (state index 2), "" keeps g_perp
     q_var: str = ""  # a POSE_VARS name whose value, sets and range replace q's (state index 0), "" keeps q
     w_is_D: bool = False  # the plane state's |w| (index 5) replaced by the reward's D_goal (the pose's distance)
+    fine: float = 0.0  # m: a move is FINE of its size while D_goal is under this (0: never)
     norm: str = "sum"  # D_goal = |w| + weight angle ("sum", the task's), or sqrt(|w|^2 + (weight angle)^2) ("l2")
 
 
@@ -254,6 +275,54 @@ VARIANTS: tuple[Variant, ...] = (
         pose_weight=0.3,
     ),
     Variant("w03q7", "poses, 0.3 m/rad, q in 7 sets", {"n_sets": (7, 5, 9, 5, 5, 6)}, pose_weight=0.3),
+    Variant(
+        "gq5",
+        "poses, D l2 0.25, g_rot and g_q (5 sets, +-45 deg)",
+        pose_state=("g_rot", "g_q5"),
+        pose_weight=0.25,
+        norm="l2",
+    ),
+    Variant(
+        "gq5only",
+        "poses, D l2 0.25, g_q (5 sets, +-45 deg), no g_rot",
+        pose_state=("g_q5",),
+        pose_weight=0.25,
+        norm="l2",
+    ),
+    Variant(
+        "gq9solo",
+        "poses, D l2 0.25, the plane state blind (2 sets over +-1000), g_q 9 sets +-45 deg",
+        {"n_sets": (2,) * 6, "ranges": ((-1000.0, 1000.0),) * 6},
+        pose_state=("g_q9",),
+        pose_weight=0.25,
+        norm="l2",
+    ),
+    Variant(
+        "gq9w",
+        "poses, D l2 0.25, the plane state blind but |w|, g_q 9 sets +-45 deg",
+        {"n_sets": (2, 2, 2, 2, 2, 6), "ranges": (*((-1000.0, 1000.0),) * 5, (0.0, 0.5))},
+        pose_state=("g_q9",),
+        pose_weight=0.25,
+        norm="l2",
+    ),
+    Variant(
+        "gq9f",
+        "gq9solo, quarter moves under D 0.1 m",
+        {"n_sets": (2,) * 6, "ranges": ((-1000.0, 1000.0),) * 6},
+        pose_state=("g_q9",),
+        pose_weight=0.25,
+        norm="l2",
+        fine=0.1,
+    ),
+    Variant(
+        "gq9_15f",
+        "gq9f, g_q 9 sets over +-15 deg",
+        {"n_sets": (2,) * 6, "ranges": ((-1000.0, 1000.0),) * 6},
+        pose_state=("g_q9_15",),
+        pose_weight=0.25,
+        norm="l2",
+        fine=0.1,
+    ),
     Variant("rot", "poses, g_rot and |phi|", pose_state=("g_rot", "rot")),
     Variant("rotoff", "poses, g_rot and |phi - (phi.a) a|", pose_state=("g_rot", "rot_off")),
     Variant(
@@ -313,7 +382,7 @@ class Loop:
             acts = {}
             for a, (learner, _) in self.learners.items():
                 spec = topo.agents[a]
-                s = self.geom.state(spec, links[a], q[a], tip, goal, False)
+                s = self.geom.state(spec, links[a], q[a], tip, goal, False, "plane")
                 if phi is not None:
                     g = Geo(
                         np.array(frames.joint_axis(spec, links[a])),
@@ -323,6 +392,7 @@ class Loop:
                         np.subtract(goal[:3], tip[:3]),
                         q[a],
                         spec.limits,
+                        goal,
                     )
                     if self.replace is not None:
                         s[2] = self.replace(g)
@@ -334,9 +404,10 @@ class Loop:
                 acts[a] = learner.decide(s, r, learn=learn, explore=learn)
             for learner, children in self.learners.values():
                 learner.observe([acts[c] for c in children], learn=learn)
+            inc = INC * (FINE if D < self.v.fine else 1.0)
             for a, act in acts.items():
                 lo, hi = topo.agents[a].limits
-                q[a] = min(max(q[a] + (act - 1) * INC, lo), hi)
+                q[a] = min(max(q[a] + (act - 1) * inc, lo), hi)
         (tip,) = frames.tips(topo, q).values()
         angle = math.degrees(frames.angle_between(tip[3:7], goal[3:7])) if self.pose else 0.0
         return math.dist(tip[:3], goal[:3]), angle
