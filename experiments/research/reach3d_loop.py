@@ -46,7 +46,11 @@ Poses, 2026-11-24 (96 x 4, 400 steps; within 5 cm and 15° [within 5 cm] mean cm
   sqrt(|w|^2 + (0.25 angle)^2), sets A / B (test sets A and B, seed 0 unless said): with the plane state, g_rot and
   g_q 5 sets +-45 deg (gq5) 55 / 54 %; g_q, no g_rot (gq5only) 55 / 55 %; g_q 9 sets alone, the plane state
   uninformative (gq9solo) 76 / 65 %; but |w| (gq9w) 19 / 19 %; gq9solo with quarter moves under D 0.1 m (gq9f) 85 /
-  82 %; and g_q over +-15 deg (gq9_15f) 93 / 90 %, seed 1 82 / 86 %, seed 2 87 / 89 %: kept as the turn state.
+  82 %; and g_q over +-15 deg (gq9_15f) 93 / 90 %, seed 1 82 / 86 %, seed 2 87 / 89 %.
+- the turn state itself (LearnerSettings.for_turn: g_q alone, 9 rules, no uninformative variables): at lr 0.5 (turn)
+  36 / 32 %. gq9_15f's 6 uninformative variables fire 64 rules per set of g_q, each at 1/64 of its weight, which
+  divides the learning rate by 64: turn_lr (0.5 / 64) 88 / 90 %; lr 0.05 35 / 27 %; 0.002 91 / 83 %. Kept: the turn
+  state at lr 0.5 / 64.
 """
 
 from __future__ import annotations
@@ -187,6 +191,7 @@ class Variant:
     q_var: str = ""  # a POSE_VARS name whose value, sets and range replace q's (state index 0), "" keeps q
     w_is_D: bool = False  # the plane state's |w| (index 5) replaced by the reward's D_goal (the pose's distance)
     fine: float = 0.0  # m: a move is FINE of its size while D_goal is under this (0: never)
+    turn: bool = False  # the learner's state kind "turn" (LearnerSettings.for_turn: g_q alone), not the plane's
     norm: str = "sum"  # D_goal = |w| + weight angle ("sum", the task's), or sqrt(|w|^2 + (weight angle)^2) ("l2")
 
 
@@ -323,6 +328,35 @@ VARIANTS: tuple[Variant, ...] = (
         norm="l2",
         fine=0.1,
     ),
+    Variant(
+        "turn",
+        "the turn state (g_q alone, 9 sets +-15 deg), quarter moves, lr 0.5",
+        {"lr": 0.5},
+        turn=True,
+        pose_weight=0.25,
+        norm="l2",
+        fine=0.1,
+    ),
+    Variant(
+        "turn_lr",
+        "turn, lr 0.5 / 64 (gq9_15f's 64 uninformative rules per g_q set)",
+        {"lr": 0.5 / 64},
+        turn=True,
+        pose_weight=0.25,
+        norm="l2",
+        fine=0.1,
+    ),
+    Variant("turn_lr05", "turn, lr 0.05", {"lr": 0.05}, turn=True, pose_weight=0.25, norm="l2", fine=0.1),
+    Variant(
+        "turn5",
+        "turn, g_q 9 sets over +-5 deg",
+        {"ranges": ((-math.pi / 36, math.pi / 36),)},
+        turn=True,
+        pose_weight=0.25,
+        norm="l2",
+        fine=0.1,
+    ),
+    Variant("turn_lr002", "turn, lr 0.002", {"lr": 0.002}, turn=True, pose_weight=0.25, norm="l2", fine=0.1),
     Variant("rot", "poses, g_rot and |phi|", pose_state=("g_rot", "rot")),
     Variant("rotoff", "poses, g_rot and |phi - (phi.a) a|", pose_state=("g_rot", "rot_off")),
     Variant(
@@ -348,6 +382,11 @@ class Loop:
         self.q_var = POSE_VARS[variant.q_var] if self.pose and variant.q_var else None
         self.learners: dict[str, tuple[Learner, list[str]]] = {}
         for i, a in enumerate(topo.dof_agents):
+            if variant.turn:
+                children = list(topo.agents[a].children)
+                st_turn = LearnerSettings.for_turn(**dict(variant.overrides))
+                self.learners[a] = (Learner(st_turn, len(children), [seed, i]), children)
+                continue
             st = LearnerSettings.for_plane(
                 topo.reach, topo.reach_below(a), topo.agents[a].limits, **dict(variant.overrides)
             )
@@ -382,8 +421,8 @@ class Loop:
             acts = {}
             for a, (learner, _) in self.learners.items():
                 spec = topo.agents[a]
-                s = self.geom.state(spec, links[a], q[a], tip, goal, False, "plane")
-                if phi is not None:
+                s = self.geom.state(spec, links[a], q[a], tip, goal, False, "turn" if self.v.turn else "plane")
+                if phi is not None and not self.v.turn:
                     g = Geo(
                         np.array(frames.joint_axis(spec, links[a])),
                         phi,
