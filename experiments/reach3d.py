@@ -7,6 +7,7 @@ beside its controls on the same goals and starts:
   blind, frozen       trained alike, but its state sees only q (every other variable 2 sets over ±1000: no
                       information); what the rotation-plane state itself buys
   rule                each joint one step along sign(g_perp) (`kinswarm baseline --law rule`): no learning, no model
+  rule on g_q         each joint one step toward its own best angle within its limits (`--law turn`)
   pseudo-inverse      resolved-rate control on the model (`--law pinv`); greedy per joint (`--law greedy`)
 
 Goals are the tool points of random joint configurations (uniform within 90 % of every joint's range, so far
@@ -53,7 +54,7 @@ MARGIN = 0.9  # goals and starts within this share of every joint's range, about
 MIN_Z = 0.05  # m above the base's plane
 # q over (-pi, pi) for every joint (the learner's overrides are the same for all agents), the rest uninformative
 BLIND = {"n_sets": (5, 2, 2, 2, 2, 2), "ranges": ((-math.pi, math.pi), *((-1000.0, 1000.0),) * 5)}
-CONTROLLERS = {"rule": "rule", "pseudo-inverse": "pinv", "greedy per joint": "greedy"}
+CONTROLLERS = {"rule": "rule", "rule on g_q": "turn", "pseudo-inverse": "pinv", "greedy per joint": "greedy"}
 LOCK = ROOT / "scenarios" / "iiwa-locked-a2.toml"
 DISTURB_DEG = 2.0  # the disturbed joint's random increment each step: ±2°, twice the agents' move
 # The agent lost for good: the shoulder, the joint the locked scenario holds, so the two differ only in the agent
@@ -167,6 +168,8 @@ def run(ctx: Context) -> dict[str, Any]:
         "- **blind (q only), frozen**: trained alike, but every state variable but q has 2 sets over ±1000 (no "
         "information): what the rotation-plane state buys;",
         "- **rule**: each joint one step along sign(g_perp) (`kinswarm baseline --law rule`): no learning, no model;",
+        "- **rule on g_q**: each joint one step toward its own best angle within its limits (`--law turn`: the turn "
+        "state's rule, which the pose experiment's swarm learns on);",
         "- **pseudo-inverse** (`--law pinv`) and **greedy per joint** (`--law greedy`): they know the model.",
         "",
         f"Goals are the tool points of random joint configurations (uniform within {MARGIN:.0%} of every joint's range "

@@ -358,8 +358,8 @@ def test_quick_reach3d_experiment(tmp_path):
     out = tmp_path / "reach3d"
     for f in ("report.md", "results.json", "within.png"):
         assert (out / f).is_file(), f
-    controls = ["trained, frozen", "untrained, frozen", "blind (q only), frozen", "rule", "pseudo-inverse",
-                "greedy per joint"]  # fmt: skip
+    controls = ["trained, frozen", "untrained, frozen", "blind (q only), frozen", "rule", "rule on g_q",
+                "pseudo-inverse", "greedy per joint"]  # fmt: skip
     assert set(res["points"]) == {f"{c} | {s}" for c in controls for s in ("A", "B")}
     for row in res["points"].values():
         assert all(0.0 <= w <= 100.0 for w in row["within_pct"]) and all(m >= 0.0 for m in row["mean"])
