@@ -48,10 +48,11 @@ import msgspec
 import tomli_w
 from kinswarm.actors.config import RUN_KEYS, ConfigError, RunConfig, check_endpoint
 from kinswarm.actors.learning.settings import SPATIAL_STATES, LearnerSettings
+from kinswarm.actors.learning.state import OWN_EXTRAS
 from kinswarm.actors.tasks import kinds, task_class
 from kinswarm.actors.tasks.base import TaskDef
 from kinswarm.protocol.keys import check_id
-from kinswarm.protocol.scene import SceneSpec, parse_scene
+from kinswarm.protocol.scene import SceneSpec, agent_readings, parse_scene
 from kinswarm.protocol.spec import SpecError, table
 from kinswarm.protocol.topology import ROBOT_KEYS, Topology, parse_robot
 from kinswarm.protocol.urdf_robot import URDF_KEYS
@@ -253,7 +254,19 @@ def learner_settings(task: TaskDef, learner: Mapping[str, Any], source: str = "<
             out[agent] = task.learner(agent, given)
         except ValueError as e:
             raise SpecError(source, "learner", str(e)) from None
+        _check_extras(task, agent, out[agent], source)
     return out
+
+
+def _check_extras(task: TaskDef, agent: str, settings: LearnerSettings, source: str) -> None:
+    """The learner's own extra variables (after the task's) are each one the agent can read: from its own geometry
+    or a reading its scene sends it. An unknown name would otherwise be a variable stuck at 0."""
+    own = () if task.topo.spatial else OWN_EXTRAS
+    readable = (*own, *agent_readings(task.scene, task.topo, agent))
+    for v in settings.extra_state[len(task.state_variables(agent)) :]:
+        if v.name not in readable:
+            takes = ", ".join(readable) if readable else "none (its geometry and its scene give no extra variables)"
+            raise SpecError(source, "learner.extra_state", f"{agent} cannot read {v.name!r}; here it takes: {takes}")
 
 
 def task_table(task: TaskDef) -> dict[str, Any]:

@@ -77,6 +77,18 @@ class SceneSpec:
     object: ObjectSpec | None = None  # object
 
 
+def agent_readings(spec: SceneSpec, topo: Topology, agent: str) -> tuple[str, ...]:
+    """The readings (messages.Readings) the scene sends agent `agent` with its encoder every step: what a learner's
+    extra state variable may name besides its own geometry's. Each scene's `agent_sense` (sim/scenes/) sends these
+    and no others (tests/test_runfile.py holds them to it)."""
+    if spec.kind == "walls":
+        clearance = ("clearance",) if topo.agents[agent].link_length > 0 else ()
+        return ("collided", *clearance, *(("shield-", "shield+") if spec.shield > 0.0 else ()))
+    if spec.kind == "object" and agent in topo.end_effectors:
+        return ("contact", "fn", "ft", "margin")
+    return ()
+
+
 def parse_scene(data: Any, topo: Topology, source: str = "<memory>", where: str = "scene") -> SceneSpec:
     """Validate a `[scene]` table (absent or empty: free space) against the robot it surrounds."""
     data = {} if data is None else data

@@ -63,6 +63,11 @@ def test_bad_set_is_one_line(text, why):
         (["learner.act_from=1"], "learner.act_from", "unknown field"),  # a probe measured and not kept
         (["learner.tabu_memory=0.1"], "learner.tabu_memory", "unknown field"),
         (["learner.clearance_state=true"], "learner.clearance_state", "unknown field"),  # the corridor task's now
+        (  # a variable no agent computes: it would be stuck at 0
+            ['learner.extra_state=[{name="g_dist", sets=5, range=[0, 1]}]'],
+            "learner.extra_state",
+            "a1 cannot read 'g_dist'; here it takes: g_perp",
+        ),
         (["task.kind=walk"], "task.kind", "expected one of"),
         (["task.goal=[1]"], "task.goal", "expected array of length 2"),
         (["task.colour=1"], "task.colour", "unknown field"),
@@ -172,3 +177,30 @@ def test_bad_inputs_reach_the_user_as_one_line(tmp_path, capsys):
         err = capsys.readouterr().err.strip()
         assert err.startswith("kinswarm: error: ") and "\n" not in err and "Traceback" not in err, err
         assert not out.exists()
+
+
+@pytest.mark.parametrize(("file", "sets"), [("corridor7.toml", ["scene.shield=0.02"]), ("grasp3.toml", [])])
+def test_a_scene_sends_each_agent_the_readings_it_declares(file, sets):
+    """What the loader lets a learner read (protocol/scene.agent_readings) is what the sim's scene sends."""
+    from kinswarm.protocol.scene import agent_readings
+    from kinswarm.sim.scenes import build_scene
+    from kinswarm.sim.world import World
+
+    cfg = run_config(EXAMPLES / file, sets)
+    topo, spec = cfg.topo(), cfg.scene_spec
+    with World(topo) as world:
+        scene = build_scene(world, spec, 0.01)
+        scene.reset()
+        scene.move(dict.fromkeys(topo.dof_agents, 0.01))
+        for agent in topo.dof_agents:
+            assert set(scene.agent_sense(agent)) == set(agent_readings(spec, topo, agent)), agent
+        assert any(agent_readings(spec, topo, a) for a in topo.dof_agents)
+
+
+def test_the_learner_may_read_its_scene(tmp_path):
+    """A reading the scene sends is a variable the loader accepts (the shield's, on a walls scene)."""
+    sets = ["scene.shield=0.02", 'learner.extra_state=[{name="shield+", sets=2, range=[0, 1]}]']
+    cfg = run_config(EXAMPLES / "corridor7.toml", sets)
+    assert cfg.learner["extra_state"][0]["name"] == "shield+"
+    with pytest.raises(SpecError, match="cannot read 'shield\\+'; here it takes: g_perp, collided, clearance$"):
+        run_config(EXAMPLES / "corridor7.toml", sets[1:])

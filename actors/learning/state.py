@@ -64,6 +64,10 @@ def goal_along_motion(frame: Sequence[float], tip: Sequence[float], goal: Sequen
     return ((goal[0] - tip[0]) * -ry + (goal[1] - tip[1]) * rx) / r
 
 
+#: the extra state variables a planar agent computes from its own geometry (own_extras)
+OWN_EXTRAS = ("g_perp",)
+
+
 def own_extras(
     names: Sequence[str], frame: Sequence[float], tip: Sequence[float], goal: Sequence[float]
 ) -> dict[str, float]:
