@@ -60,8 +60,10 @@ class Context:
 
 
 def settings(**kw: Any) -> tuple[tuple[str, Any], ...]:
-    """LearnerSettings overrides, leaving out values equal to the defaults (so equal runs share a cache key)."""
-    return learner_overrides(**{k: v for k, v in kw.items() if getattr(DEFAULTS, k) != v})
+    """LearnerSettings overrides, as given: a value equal to the dataclass's default is kept, since a task or state
+    kind may build its learner on another (the turn state's lr). Equal runs share a cache entry however they are
+    spelled (Spec.identity hashes the learners as built)."""
+    return learner_overrides(**kw)
 
 
 def _progress(total: int, desc: str) -> Any:

@@ -28,9 +28,8 @@ from typing import Any
 
 import numpy as np
 from kinswarm.actors.config import ConfigError, RunConfig
-from kinswarm.actors.learning.settings import LearnerSettings
 from kinswarm.actors.report import read_metrics, write_summary
-from kinswarm.actors.runfile import read_run_file, resolve, write_resolved
+from kinswarm.actors.runfile import learner_settings, read_run_file, resolve, task_of, write_resolved
 from kinswarm.actors.runtime import open_session, tap
 from kinswarm.actors.supervisor import RunResult, SinglePlacement, Supervisor
 from kinswarm.protocol import codec
@@ -112,11 +111,14 @@ class Spec:
         )
 
     def identity(self, with_epochs: bool = True) -> str:
-        """The run's hash: of what it runs (the resolved robot, scene, task, learner and run fields, `from_dir` by its
-        run's directory name), not of where or how it is spelled, so a cache serves any checkout and any --out."""
+        """The run's hash: of what it runs (the resolved robot, scene, task, every agent's learner and run fields,
+        `from_dir` by its run's directory name), not of where or how it is spelled, so a cache serves any checkout
+        and any --out."""
         cfg = self.config(Path("."))
         d = {f: getattr(cfg, f) for f in ("robot", "scene", "task", "learner", *_RUN_FIELDS)}
-        d["learner"] = _normalised(cfg.learner)
+        # every agent's learner as the run builds it: the overrides on the task's and the state kind's defaults, so a
+        # changed default (a kind's lr, a task's scale) is another run, not a cached one
+        d["learner"] = {a: dataclasses.asdict(s) for a, s in learner_settings(task_of(cfg), cfg.learner).items()}
         if self.from_dir is not None:
             d["from_dir"] = Path(self.from_dir).name  # itself "<name>-<identity>": portable
         if self.scenario is not None:
@@ -149,12 +151,6 @@ def _listed(v: Any) -> Any:
     return v
 
 
-def _normalised(learner: dict[str, Any]) -> dict[str, Any]:
-    """Learner overrides without those equal to the default, so equal runs share a cache entry."""
-    defaults = LearnerSettings()
-    return {k: v for k, v in learner.items() if k == "ranges" or _listed(getattr(defaults, k)) != v}
-
-
 def resolved(file: str | Path) -> RunConfig:
     """A run file as the loader resolves it, for its robot, scene and task (nothing runs: a run it continues need
     not exist yet)."""
@@ -163,8 +159,6 @@ def resolved(file: str | Path) -> RunConfig:
 
 def robot_and_goal(file: str | Path) -> tuple[Topology, Goal]:
     """A run file's robot and its task's goal (of the first epoch)."""
-    from kinswarm.actors.runfile import task_of
-
     cfg = resolved(file)
     return cfg.topo(), task_of(cfg).goal(0, cfg.steps)[0]
 
