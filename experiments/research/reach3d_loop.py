@@ -50,7 +50,8 @@ Poses, 2026-11-24 (96 x 4, 400 steps; within 5 cm and 15° [within 5 cm] mean cm
 - the turn state itself (LearnerSettings.for_turn: g_q alone, 9 rules, no uninformative variables): at lr 0.5 (turn)
   36 / 32 %. gq9_15f's 6 uninformative variables fire 64 rules per set of g_q, each at 1/64 of its weight, which
   divides the learning rate by 64: turn_lr (0.5 / 64) 88 / 90 %; lr 0.05 35 / 27 %; 0.002 91 / 83 %. Kept: the turn
-  state at lr 0.5 / 64.
+  state at lr 0.5 / 64. Seeds 0-2, A / B: 96 x 4 (turn_lr) 85.0 / 82.3 %; 96 x 8 (turn_p8) 85.7 / 82.0 %; 192 x 4
+  (turn_g192) 82.7 / 73.7 %: more experience does not help; the protocol stays 96 x 4.
 """
 
 from __future__ import annotations
@@ -357,6 +358,28 @@ VARIANTS: tuple[Variant, ...] = (
         fine=0.1,
     ),
     Variant("turn_lr002", "turn, lr 0.002", {"lr": 0.002}, turn=True, pose_weight=0.25, norm="l2", fine=0.1),
+    Variant(
+        "turn_p8",
+        "turn (lr 0.5 / 64), 96 x 8",
+        {"lr": 0.5 / 64},
+        96,
+        8,
+        turn=True,
+        pose_weight=0.25,
+        norm="l2",
+        fine=0.1,
+    ),
+    Variant(
+        "turn_g192",
+        "turn (lr 0.5 / 64), 192 x 4",
+        {"lr": 0.5 / 64},
+        192,
+        4,
+        turn=True,
+        pose_weight=0.25,
+        norm="l2",
+        fine=0.1,
+    ),
     Variant("rot", "poses, g_rot and |phi|", pose_state=("g_rot", "rot")),
     Variant("rotoff", "poses, g_rot and |phi - (phi.a) a|", pose_state=("g_rot", "rot_off")),
     Variant(
