@@ -237,17 +237,16 @@ def task_of(cfg: RunConfig) -> TaskDef:
 
 def learner_settings(task: TaskDef, learner: Mapping[str, Any], source: str = "<memory>") -> dict[str, LearnerSettings]:
     """Every DOF agent's learner settings: the [learner] overrides on the task's scale and state variables."""
+    fits = SPATIAL_STATES if task.topo.spatial else ("planar",)
+    state = learner.get("state")
+    if isinstance(state, str) and state not in fits:  # before the settings' own checks, which assume a kind's sets
+        what = "a robot from URDF" if task.topo.spatial else "a planar robot"
+        raise SpecError(source, "learner.state", f"{state!r} is not a state of {what}; it takes: {', '.join(fits)}")
     try:
         typed = msgspec.convert(dict(learner), LearnerSettings)
     except msgspec.ValidationError as e:
         raise _spec_error(e, source, "learner") from None
     given = {k: getattr(typed, k) for k in learner}
-    fits = SPATIAL_STATES if task.topo.spatial else ("planar",)
-    if "state" in given and given["state"] not in fits:
-        what = "a robot from URDF" if task.topo.spatial else "a planar robot"
-        raise SpecError(
-            source, "learner.state", f"{given['state']!r} is not a state of {what}; it takes: {', '.join(fits)}"
-        )
     out = {}
     for agent in task.topo.dof_agents:
         try:

@@ -63,6 +63,7 @@ def test_bad_set_is_one_line(text, why):
         (["learner.act_from=1"], "learner.act_from", "unknown field"),  # a probe measured and not kept
         (["learner.tabu_memory=0.1"], "learner.tabu_memory", "unknown field"),
         (["learner.clearance_state=true"], "learner.clearance_state", "unknown field"),  # the corridor task's now
+        (['learner.state="turn"'], "learner.state", "'turn' is not a state of a planar robot; it takes: planar"),
         (  # a variable no agent computes: it would be stuck at 0
             ['learner.extra_state=[{name="g_dist", sets=5, range=[0, 1]}]'],
             "learner.extra_state",
