@@ -196,6 +196,12 @@ class Variant:
     norm: str = "sum"  # D_goal = |w| + weight angle ("sum", the task's), or sqrt(|w|^2 + (weight angle)^2) ("l2")
 
 
+def _turn(key: str, label: str, overrides: dict[str, Any], goals: int = 96, passes: int = 4) -> Variant:
+    """A variant of the turn state as the task has it: D_goal = sqrt(|w|^2 + (0.25 angle)^2), quarter moves under
+    0.1 m."""
+    return Variant(key, label, overrides, goals, passes, turn=True, pose_weight=0.25, norm="l2", fine=0.1)
+
+
 VARIANTS: tuple[Variant, ...] = (
     Variant("pt300", "points, 96 x 4, 300 steps", steps=300, pose=False),
     Variant("pt400", "points, 96 x 4, 400 steps", pose=False),
@@ -329,57 +335,13 @@ VARIANTS: tuple[Variant, ...] = (
         norm="l2",
         fine=0.1,
     ),
-    Variant(
-        "turn",
-        "the turn state (g_q alone, 9 sets +-15 deg), quarter moves, lr 0.5",
-        {"lr": 0.5},
-        turn=True,
-        pose_weight=0.25,
-        norm="l2",
-        fine=0.1,
-    ),
-    Variant(
-        "turn_lr",
-        "turn, lr 0.5 / 64 (gq9_15f's 64 uninformative rules per g_q set)",
-        {"lr": 0.5 / 64},
-        turn=True,
-        pose_weight=0.25,
-        norm="l2",
-        fine=0.1,
-    ),
-    Variant("turn_lr05", "turn, lr 0.05", {"lr": 0.05}, turn=True, pose_weight=0.25, norm="l2", fine=0.1),
-    Variant(
-        "turn5",
-        "turn, g_q 9 sets over +-5 deg",
-        {"ranges": ((-math.pi / 36, math.pi / 36),)},
-        turn=True,
-        pose_weight=0.25,
-        norm="l2",
-        fine=0.1,
-    ),
-    Variant("turn_lr002", "turn, lr 0.002", {"lr": 0.002}, turn=True, pose_weight=0.25, norm="l2", fine=0.1),
-    Variant(
-        "turn_p8",
-        "turn (lr 0.5 / 64), 96 x 8",
-        {"lr": 0.5 / 64},
-        96,
-        8,
-        turn=True,
-        pose_weight=0.25,
-        norm="l2",
-        fine=0.1,
-    ),
-    Variant(
-        "turn_g192",
-        "turn (lr 0.5 / 64), 192 x 4",
-        {"lr": 0.5 / 64},
-        192,
-        4,
-        turn=True,
-        pose_weight=0.25,
-        norm="l2",
-        fine=0.1,
-    ),
+    _turn("turn", "the turn state (g_q alone, 9 sets +-15 deg), quarter moves, lr 0.5", {"lr": 0.5}),
+    _turn("turn_lr", "turn, lr 0.5 / 64 (gq9_15f's 64 uninformative rules per g_q set)", {"lr": 0.5 / 64}),
+    _turn("turn_lr05", "turn, lr 0.05", {"lr": 0.05}),
+    _turn("turn5", "turn, g_q 9 sets over +-5 deg", {"ranges": ((-math.pi / 36, math.pi / 36),)}),
+    _turn("turn_lr002", "turn, lr 0.002", {"lr": 0.002}),
+    _turn("turn_p8", "turn (lr 0.5 / 64), 96 x 8", {"lr": 0.5 / 64}, passes=8),
+    _turn("turn_g192", "turn (lr 0.5 / 64), 192 x 4", {"lr": 0.5 / 64}, goals=192),
     Variant("rot", "poses, g_rot and |phi|", pose_state=("g_rot", "rot")),
     Variant("rotoff", "poses, g_rot and |phi - (phi.a) a|", pose_state=("g_rot", "rot_off")),
     Variant(
