@@ -109,7 +109,7 @@ def test_the_lanes_learn_as_one_learner():
 
 def test_gathering_sends_one_batch_per_key_and_a_second_for_a_robot_sending_twice():
     node = Node.__new__(Node)  # the gathering alone: no session (what send() does with a Batch is the runtime's)
-    node._gathered = None
+    node._gathered, node._later = None, []
     node._step_prefixes = ("ks/r/sim/", "ks/r/a/")
     sent: list[tuple[str, object]] = []
     node.send = lambda key, msg: sent.append((key, msg))  # type: ignore[method-assign]
@@ -136,6 +136,31 @@ def test_gathering_sends_one_batch_per_key_and_a_second_for_a_robot_sending_twic
         node.send_as(0, "ks/r/sim/cmd/a1", cmd[0])
         raise RuntimeError("the handler failed")
     assert len([m for _, m in sent if isinstance(m, Batch)]) == 4  # nothing of a failed handler went out
+
+
+def test_what_a_lane_leaves_for_later_runs_once_the_gathered_batches_have_left():
+    """An agent's `up` leaves before any robot learns (Node.after_sending): a fleet's learning stays off the step's
+    critical path, as one robot's is; the later work runs in the order the lanes left it, and what it sends is
+    gathered again."""
+    node = Node.__new__(Node)
+    node._gathered, node._later = None, []
+    node._step_prefixes = ("ks/r/a/", "ks/r/sim/")
+    sent: list[tuple[str, object]] = []
+    node.send = lambda key, msg: sent.append((key, msg))  # type: ignore[method-assign]
+    ran: list[tuple[int, int]] = []
+
+    def learn(b: int) -> None:
+        ran.append((b, len(sent)))  # how much had left when robot b learned
+        node.send_as(b, "ks/r/sim/cmd/a2", Cmd(epoch=0, step=0, delta=0.0))
+
+    node.after_sending(lambda: ran.append((-1, len(sent))))  # outside a gathering: at once
+    with node.gathering():
+        for b in range(3):
+            node.send_as(b, "ks/r/a/a1/up", Cmd(epoch=0, step=0, delta=0.0))
+            node.after_sending(lambda b=b: learn(b))
+        assert ran == [(-1, 0)] and sent == []
+    assert ran == [(-1, 0), (0, 1), (1, 1), (2, 1)]  # every robot's up had left, as one batch, before any learned
+    assert [(k, m.robots) for k, m in sent] == [("ks/r/a/a1/up", [0, 1, 2]), ("ks/r/sim/cmd/a2", [0, 1, 2])]
 
 
 @pytest.mark.parametrize(

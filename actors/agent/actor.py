@@ -316,41 +316,52 @@ class Agent:
         if not self.is_root:  # first: the parent's state needs only the tips (and the task's aggregate)
             up = Up(epoch=epoch, step=step, tips=tips, action=-1 if last is None else last, sense=self.task.up(view))
             self.node.send(self.keys.up(self.spec.parent), up)  # type: ignore[arg-type]
-        if self.learner is not None:
-            self._observe(cur)
-            s = self.geom.state(self.spec, cur.frame, cur.q, tip, cur.goal, self.unsigned_g3, self.state_kind)
-            values = self.task.state(view)
-            if self.extra_names:  # the learner's own extra variables: from my geometry, else from my readings
-                local = {**cur.sense, **self.geom.extras(self.extra_names, cur.frame, tip, cur.goal)}
-                values += [local.get(n, 0.0) for n in self.extra_names]
-            if values:
-                s = np.concatenate([s, values])
-            reward = self.task.reward(view, cur.reward)
-            avoid = self.task.avoid(view)
-            action = self.learner.decide(s, reward, learn=self.cfg.learn, explore=self.cfg.explore, avoid=avoid)
-            self.decided = (cur.key, action)
-            if self.trace is not None:
-                self.trace.add(epoch, step, s, action, self.learner.E, self.learner.P)
-                if step == self.cfg.steps - 1:
-                    self.node.send(self.keys.metrics("agent"), self.trace.take())
-            if self.visible:
-                # a lost child's joint holds: to this agent's fictitious play it chose "keep"
-                self.observing = (cur.key, frozenset(c for c in self.visible if c not in cur.ups))
-                if step == self.cfg.steps - 1:
-                    self.closing = {k: v for k, v in self.closing.items() if k >= cur.key}
-                    self._try_close()
-            else:
-                self.learner.observe([], learn=self.cfg.learn)
-            if step == self.cfg.steps - 1 and not self.is_root:  # the closing `up`, before the epoch can end
-                self.node.send(
-                    self.keys.up(self.spec.parent),  # type: ignore[arg-type]
-                    Up(epoch=epoch, step=self.cfg.steps, tips=tips, action=action),
-                )
-            delta = (action - 1) * self.cfg.action_rad  # actions 0, 1, 2: decrease, keep, increase
-            scale = self.task.scale(view)
-            if scale != 1.0:
-                delta *= scale
-            self.node.send(self.keys.cmd(self.id), Cmd(epoch=epoch, step=step, delta=delta))
+        if self.learner is None:
+            self._finished(cur)
+        else:  # a fleet's robots' ups leave first, all of them (Node.after_sending): then each robot learns
+            self.node.after_sending(lambda: self._learn(cur, view, tips))
+
+    def _learn(self, cur: _Step, view: StepView, tips: dict[str, tuple[float, ...]]) -> None:
+        """The rest of the step once `up` has left: the state S_i, the TD update, a(t), and `cmd`."""
+        assert self.learner is not None
+        epoch, step, tip = view.epoch, view.step, view.tip
+        self._observe(cur)
+        s = self.geom.state(self.spec, cur.frame, cur.q, tip, cur.goal, self.unsigned_g3, self.state_kind)
+        values = self.task.state(view)
+        if self.extra_names:  # the learner's own extra variables: from my geometry, else from my readings
+            local = {**cur.sense, **self.geom.extras(self.extra_names, cur.frame, tip, cur.goal)}
+            values += [local.get(n, 0.0) for n in self.extra_names]
+        if values:
+            s = np.concatenate([s, values])
+        reward = self.task.reward(view, cur.reward)
+        avoid = self.task.avoid(view)
+        action = self.learner.decide(s, reward, learn=self.cfg.learn, explore=self.cfg.explore, avoid=avoid)
+        self.decided = (cur.key, action)
+        if self.trace is not None:
+            self.trace.add(epoch, step, s, action, self.learner.E, self.learner.P)
+            if step == self.cfg.steps - 1:
+                self.node.send(self.keys.metrics("agent"), self.trace.take())
+        if self.visible:
+            # a lost child's joint holds: to this agent's fictitious play it chose "keep"
+            self.observing = (cur.key, frozenset(c for c in self.visible if c not in cur.ups))
+            if step == self.cfg.steps - 1:
+                self.closing = {k: v for k, v in self.closing.items() if k >= cur.key}
+                self._try_close()
+        else:
+            self.learner.observe([], learn=self.cfg.learn)
+        if step == self.cfg.steps - 1 and not self.is_root:  # the closing `up`, before the epoch can end
+            self.node.send(
+                self.keys.up(self.spec.parent),  # type: ignore[arg-type]
+                Up(epoch=epoch, step=self.cfg.steps, tips=tips, action=action),
+            )
+        delta = (action - 1) * self.cfg.action_rad  # actions 0, 1, 2: decrease, keep, increase
+        scale = self.task.scale(view)
+        if scale != 1.0:
+            delta *= scale
+        self.node.send(self.keys.cmd(self.id), Cmd(epoch=epoch, step=step, delta=delta))
+        self._finished(cur)
+
+    def _finished(self, cur: _Step) -> None:
         self.last_finished = cur.key
         self.steps_done += 1
 

@@ -23,6 +23,7 @@ class Gathering:
 
     fleet: int
     _gathered: dict[str, list[tuple[list[int], list[Any]]]] | None
+    _later: list[Callable[[], None]]
     _step_prefixes: tuple[str, ...]
 
     if TYPE_CHECKING:  # Node's
@@ -35,20 +36,35 @@ class Gathering:
     def gathering(self) -> Iterator[None]:
         """While inside, the step messages this actor's lanes send (`send_as`) are gathered; on leaving, each key's
         go out as one Batch (a second when a robot sent twice on one key: a robot's k-th message is in the k-th),
-        keys in the order of their first message. Nothing is sent when the body raises: the actor is failing.
-        Within a gathering (one handler's, under the node's lock) another one adds to it: the outer one sends."""
+        keys in the order of their first message, and then what the lanes left for later (`after_sending`) runs, in
+        the order they left it, gathered again. Nothing is sent when the body raises: the actor is failing. Within a
+        gathering (one handler's, under the node's lock) another one adds to it: the outer one sends."""
         if self._gathered is not None:
             yield
             return
-        self._gathered = {}
+        self._gathered, self._later = {}, []
         try:
             yield
-            gathered = self._gathered
+            gathered, later = self._gathered, self._later
         finally:
-            self._gathered = None
+            self._gathered, self._later = None, []
         for key, groups in gathered.items():
             for robots, items in groups:
                 self.send(key, Batch(of=items[0].KIND, robots=robots, items=items))
+        if later:
+            with self.gathering():
+                for fn in later:
+                    fn()
+
+    def after_sending(self, fn: Callable[[], None]) -> None:
+        """Run `fn` once what the lanes have sent so far has left (now, outside gathering()): an agent's `up` leaves
+        before any robot's learner runs, as one robot's does (actors/agent/actor.py), so a fleet's learning is off
+        the step's critical path too. Lanes leave theirs in robot order and they run in it: a fleet's learner sees
+        its calls in the order it would have without this."""
+        if self._gathered is None:
+            fn()
+        else:
+            self._later.append(fn)
 
     def send_as(self, robot: int, key: str, msg: Any) -> None:
         """Robot `robot`'s message: a step message into the batch being gathered (alone in a Batch of its own outside

@@ -90,6 +90,7 @@ class Node(LinkFaults, Gathering):
         # handles one batch, what its lanes send is gathered here (key -> groups of robots and messages).
         self.fleet = 1
         self._gathered: dict[str, list[tuple[list[int], list[Any]]]] | None = None
+        self._later: list[Callable[[], None]] = []  # what the lanes run once the gathered batches have left
 
     # -- sending ---------------------------------------------------------------------------------
     def publisher(self, key: str) -> Any:
