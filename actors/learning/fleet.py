@@ -19,6 +19,8 @@ from .learner import Learner
 
 #: the Learner's attributes that are one transition's: each lane keeps its own
 EPISODE = ("_fired", "_w", "_rules_and_O", "_latest", "_pending", "_own", "t")
+#: of those, the ones a call rebinds (the arrays it fills in place: they are the lane's own already)
+REBOUND = ("_latest", "_pending", "_own", "t")
 
 
 class LearnerLane:
@@ -47,13 +49,13 @@ class LearnerLane:
             rules, rows = mine["_fired"][mine["_latest"]]
             if (rows < 0).any():  # another robot's update made it: the TD update (Eq. 6) must find that row
                 rows[:] = learner.q.lookup(rules)  # rows never move: only the -1 entries change
-        for name in EPISODE:
-            setattr(learner, name, mine[name])
+        state = learner.__dict__
+        state.update(mine)  # one call, not a setattr per name: a fleet makes this swap B times per call of a step
         try:
             return getattr(learner, method)(*args, **kwargs)
         finally:
-            for name in EPISODE:
-                mine[name] = getattr(learner, name)
+            for name in REBOUND:
+                mine[name] = state[name]
 
     # the calls of Learner that act on a transition, on this robot's (their arguments and results are Learner's)
     def decide(self, *args: Any, **kwargs: Any) -> int:
