@@ -36,7 +36,7 @@ from kinswarm.protocol.topology import Topology
 
 from .geometry import geometry_of
 from .memory import Memory
-from .standin import StandIn
+from .standin import StandIn, WakeGuard
 from .trace import StepTrace
 
 Key = tuple[int, int]  # (epoch, step)
@@ -90,6 +90,7 @@ class Agent:
         self.task = task.agent(agent_id, self.learner.settings if self.learner else None)
         self.memory = Memory(self)
         self.standin = StandIn(self)
+        self.waking = WakeGuard(node, cfg.lease_ms / 1000)
         self.epoch = -1
         self.last_begun: Key = (-1, -1)
         self.last_finished: Key = (-1, -1)
@@ -144,7 +145,11 @@ class Agent:
             node.declare_alive()
             if self.memory.restored is not None:
                 node.send(k.metrics("event"), self.memory.restored)
-            await self._loop()
+            ticker = asyncio.create_task(self.waking.watch())  # run()'s own, gone with it (not a TaskGroup: the
+            try:  # loop's errors reach the placement as they are, not wrapped in a group)
+                await self._loop()
+            finally:
+                ticker.cancel()
         finally:
             if watch is not None:
                 watch.undeclare()
@@ -160,7 +165,8 @@ class Agent:
                     continue
                 kind = key[len(k.root) + 1 :]
                 if key == "__alive__":
-                    self._on_token(payload.decode())
+                    if (change := self.waking.token(payload.decode())) is not None:
+                        self._on_token(change)
                 elif kind == "ctl/fault":
                     if (f := node.decode(key, payload, Fault)) is not None:
                         node.apply_fault(f)
