@@ -150,6 +150,7 @@ class Agent:
                 await self._loop()
             finally:
                 ticker.cancel()
+                await asyncio.wait([ticker])  # gone before run() returns (wait, not await: our own cancel still raises)
         finally:
             if watch is not None:
                 watch.undeclare()
