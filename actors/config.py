@@ -20,11 +20,15 @@ from functools import cached_property
 from pathlib import Path
 from typing import Any
 
+from kinswarm.protocol.faults import PROCESS_FAULTS
 from kinswarm.protocol.keys import check_id
 from kinswarm.protocol.scene import SceneSpec, parse_scene
 from kinswarm.protocol.topology import Topology, parse_robot
 
 PLACEMENTS = ("process", "single")
+#: The process faults each placement can apply (actors/supervisor/placements.py's `supports`): a task in one process
+#: can be cancelled and started again, but not stopped and continued as a process is by SIGSTOP and SIGCONT.
+PLACEMENT_FAULTS: dict[str, tuple[str, ...]] = {"process": PROCESS_FAULTS, "single": ("kill", "restart")}
 LEASE_RANGE_MS = (100, 60_000)  # the Zenoh leases accepted: [run] lease_ms and a plan's [zenoh] lease_ms
 #: the learning agents, or a model-based law (sim/controller.py)
 CONTROLLERS = ("agents", "pinv", "greedy", "rule", "turn")
@@ -60,6 +64,15 @@ MAX_FLEET = 1024  # robots in a fleet: a step's Batch of them stays far below th
 
 class ConfigError(ValueError):
     pass
+
+
+def placement_problem(fault: str, placement: str) -> str:
+    """What stops `placement` from applying `fault` ("" when nothing does): checked when a scenario is resolved and
+    again when a fault is requested live."""
+    if fault not in PROCESS_FAULTS or fault in PLACEMENT_FAULTS.get(placement, ()):
+        return ""
+    able = " or ".join(p for p, faults in PLACEMENT_FAULTS.items() if fault in faults)
+    return f"{fault}: needs --placement {able} (this run's placement is {placement})"
 
 
 #: a Zenoh endpoint as the runs use them: protocol/host:port (an IPv6 host in brackets), e.g. tcp/127.0.0.1:7447

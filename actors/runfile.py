@@ -46,7 +46,7 @@ from typing import Any
 
 import msgspec
 import tomli_w
-from kinswarm.actors.config import RUN_KEYS, ConfigError, RunConfig, check_endpoint
+from kinswarm.actors.config import RUN_KEYS, ConfigError, RunConfig, check_endpoint, placement_problem
 from kinswarm.actors.learning.settings import SPATIAL_STATES, LearnerSettings
 from kinswarm.actors.learning.state import OWN_EXTRAS
 from kinswarm.actors.tasks import kinds, task_class
@@ -185,6 +185,11 @@ def resolve(
             if e.fault.robot is not None and e.fault.robot >= cfg.fleet:
                 what = f"robot {e.fault.robot}: the run's fleet has {cfg.fleet} (run.fleet; robots 0..{cfg.fleet - 1})"
                 raise ScenarioError(cfg.scenario, f"event[{i}].robot", what)
+            if cfg.controller != "agents" and not e.is_joint:  # the supervisor would refuse it at its step
+                what = f"{e.fault.fault}: a baseline run ({cfg.controller}) has no agents; only joint faults apply"
+                raise ScenarioError(cfg.scenario, f"event[{i}].fault", what)
+            if problem := placement_problem(e.fault.fault, cfg.placement):
+                raise ScenarioError(cfg.scenario, f"event[{i}].fault", problem)
     if cfg.controller == "turn" and not (task.topo.spatial and len(task.topo.end_effectors) == 1):
         raise ConfigError("controller: the turn rule moves the one end effector of a robot from URDF")
     if cfg.fleet > 1 and cfg.fleet_goals == "spread" and task.goal(0, cfg.steps)[1]:

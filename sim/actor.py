@@ -338,13 +338,15 @@ class SimActor:
         if f.fault not in JOINT_FAULTS or f.robot not in (None, self.robot):
             return
         problem = check_fault(f, list(self.topo.order))
-        if problem:
+        if problem:  # the supervisor checks live faults first: this is a scenario's, or a message not its
             self.node.log.warning("ignored fault %s: %s", f.id, problem)
+            self._event("refused", ",".join(f.targets) or "-", f"{describe(f)}: {problem}")
             return
         detail = describe(f)
         for a in expand_targets(f.targets, list(self.dof)):
             if a not in self.dof_set:
                 self.node.log.warning("ignored fault %s on %s: a compound agent has no joint", f.id, a)
+                self._event("refused", a, f"{detail}: {a} has no joint (a compound agent)")
                 continue
             self.faults.apply(f, a)
             self._event(f.fault, a, detail)

@@ -11,6 +11,7 @@ import signal
 import time
 from typing import TYPE_CHECKING
 
+from kinswarm.actors.config import placement_problem
 from kinswarm.protocol.faults import (
     ALL,
     JOINT_FAULTS,
@@ -46,7 +47,7 @@ class FaultRouter:
         if not error and f.robot is not None and f.robot >= sup.cfg.fleet:
             error = f"{f.fault}: robot {f.robot}: this run's fleet has {sup.cfg.fleet} (robots 0..{sup.cfg.fleet - 1})"
         if not error and f.fault in PROCESS_FAULTS and f.fault not in sup.placement.supports:
-            error = f"{f.fault}: needs --placement process (this run is {sup.cfg.placement})"
+            error = placement_problem(f.fault, sup.cfg.placement) or f"{f.fault}: not in this run's placement"
         if not error and f.fault in JOINT_FAULTS:
             compound = [t for t in f.targets if t != ALL and not sup.topo.agents[t].has_dof]
             if compound:
@@ -58,8 +59,9 @@ class FaultRouter:
                 detail = self.apply(f, expand_targets(f.targets, pool))
             except ValueError as e:
                 error = str(e)
-        if error:
+        if error:  # on the run's record too: a refused fault is something that did not happen, and why
             log.warning("fault refused: %s", error)
+            sup.event("refused", ",".join(f.targets) or "-", f"{describe(f)}: {error}")
         else:
             sup.event("fault", ",".join(f.targets), describe(f) + (f" ({detail})" if detail else ""))
         try:
