@@ -53,7 +53,7 @@ from kinswarm.actors.tasks import kinds, task_class
 from kinswarm.actors.tasks.base import TaskDef
 from kinswarm.protocol.keys import check_id
 from kinswarm.protocol.scene import SceneSpec, agent_readings, parse_scene
-from kinswarm.protocol.spec import SpecError, table
+from kinswarm.protocol.spec import SpecError, shown, table
 from kinswarm.protocol.topology import ROBOT_KEYS, Topology, parse_robot
 from kinswarm.protocol.urdf_robot import URDF_KEYS
 
@@ -68,12 +68,18 @@ _OLD_LAYOUT = {
 }
 
 
+_MISSING = {
+    "robot": 'missing: give a [robot] table or robot = "a robot file"',
+    "task": f"missing: give a [task] table with kind = one of {', '.join(kinds())}",
+}
+
+
 def read_toml(path: str | Path) -> dict[str, Any]:
     p = Path(path)
     try:
         text = p.read_text()
-    except OSError as e:
-        raise SpecError(str(p), "file", f"cannot read: {e.strerror or e}") from None
+    except (OSError, ValueError) as e:  # ValueError: a NUL in the name
+        raise SpecError(str(p), "file", f"cannot read: {getattr(e, 'strerror', None) or e}") from None
     try:
         return tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:
@@ -141,6 +147,9 @@ def resolve(
     for keys, value in overrides:  # given on the command line: paths are the working directory's
         _put(data, keys, _absolute(value, Path.cwd()) if keys[0] == "run" and keys[-1] in _PATH_KEYS else value)
 
+    for name in ("robot", "task"):  # the tables a run cannot go without, before what is wrong inside one of them
+        if name not in data:
+            raise SpecError(source, name, _MISSING[name])
     robot, topo = _robot(data.get("robot"), source)
     scene = parse_scene(data.get("scene"), topo, source)
     task = _task(data.get("task"), topo, scene, source)
@@ -207,7 +216,7 @@ def check_checkpoints(run_dir: Path, task: TaskDef, learner: Mapping[str, Any], 
 
     topo = task.topo
     if not run_dir.is_dir():
-        raise CheckpointError(f"run.from {run_dir}: no such run directory")
+        raise CheckpointError(f"run.from {shown(str(run_dir))}: no such run directory")
     try:  # the run's own record says at once what it was a run of
         from kinswarm.actors.config import load_run_config
 
@@ -297,9 +306,13 @@ def write_resolved(cfg: RunConfig, path: Path) -> Path:
 # -- the parts ----------------------------------------------------------------------------------------------------
 def _robot(data: Any, source: str) -> tuple[dict[str, Any], Topology]:
     if data is None:
-        raise SpecError(source, "robot", 'missing: give a [robot] table or robot = "a robot file"')
+        raise SpecError(source, "robot", _MISSING["robot"])
     if isinstance(data, str):  # a robot file (absolute by now): its [robot] table
         file = Path(data)
+        if not data.strip() or not file.is_file():
+            what = "no such file" if data.strip() and not file.exists() else "not a file"
+            expected = 'expected a [robot] table or robot = "a robot file"'
+            raise SpecError(source, "robot", f"{expected}, got {data!r} ({what})")
         doc = read_toml(file)
         if "robot" not in doc or not isinstance(doc["robot"], dict):
             raise SpecError(str(file), "robot", "a robot file needs a [robot] table")
@@ -312,7 +325,7 @@ def _robot(data: Any, source: str) -> tuple[dict[str, Any], Topology]:
 
 def _task(data: Any, topo: Topology, scene: SceneSpec, source: str) -> TaskDef:
     if data is None:
-        raise SpecError(source, "task", f"missing: give a [task] table with kind = one of {', '.join(kinds())}")
+        raise SpecError(source, "task", _MISSING["task"])
     if not isinstance(data, dict):
         raise SpecError(source, "task", f"must be a table, got {data!r:.60}")
     kind = data.get("kind")
@@ -378,7 +391,8 @@ def _merge(under: dict[str, Any], over: Mapping[str, Any]) -> dict[str, Any]:
 
 
 def _absolute(value: Any, base: Path) -> Any:
-    return str((base / value).resolve()) if isinstance(value, str) and value else value
+    """A path as written, made absolute; a NUL left as it is, for the check of the field to name (no path has one)."""
+    return str((base / value).resolve()) if isinstance(value, str) and value and "\0" not in value else value
 
 
 def _put(data: dict[str, Any], keys: tuple[str, ...], value: Any) -> None:

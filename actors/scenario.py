@@ -28,6 +28,7 @@ from typing import Any
 
 from kinswarm.protocol.faults import ALL, JOINT_FAULTS, check_fault
 from kinswarm.protocol.messages import Fault
+from kinswarm.protocol.spec import one_line, shown
 from kinswarm.protocol.topology import Topology
 
 
@@ -35,7 +36,7 @@ class ScenarioError(ValueError):
     """A scenario file that does not fit the format; the message names the file, the entry/field and the fault."""
 
     def __init__(self, source: str, where: str, what: str) -> None:
-        super().__init__(f"{source}: {where}: {what}")
+        super().__init__(f"{shown(source)}: {shown(where)}: {one_line(what)}")
         self.source, self.where, self.what = source, where, what
 
     def __reduce__(self) -> tuple[Any, ...]:  # raised in an experiment's worker process, it must come back whole
@@ -134,8 +135,8 @@ def load_scenario(path: str | Path, topo: Topology) -> Scenario:
     path = Path(path)
     try:
         text = path.read_text()
-    except OSError as e:
-        raise ScenarioError(str(path), "file", f"cannot read: {e.strerror}") from None
+    except (OSError, ValueError) as e:  # ValueError: a NUL in the name
+        raise ScenarioError(str(path), "file", f"cannot read: {getattr(e, 'strerror', None) or e}") from None
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:

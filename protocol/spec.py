@@ -12,11 +12,22 @@ class SpecError(ValueError):
     `<file>: <field>: <what is wrong>`."""
 
     def __init__(self, source: str, where: str, what: str) -> None:
-        super().__init__(f"{source}: {where}: {what}")
+        super().__init__(f"{shown(source)}: {shown(where)}: {one_line(what)}")
         self.source, self.where, self.what = source, where, what
 
     def __reduce__(self) -> tuple:  # pickled with its three parts: a worker process's error reaches its parent whole
         return (type(self), (self.source, self.where, self.what))
+
+
+def one_line(text: str) -> str:
+    """`text` with what would break its line (a line break, a tab, any character not printable) written as Python
+    writes it in a string: the message stays one line, and says exactly what the value held."""
+    return text if text.isprintable() else "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)
+
+
+def shown(name: str) -> str:
+    """A file or field name as it is, or quoted (repr) when it holds what cannot be shown on the line."""
+    return name if name.isprintable() else repr(name)
 
 
 def number(src: str, where: str, v: Any) -> float:

@@ -194,7 +194,10 @@ def parse_robot(robot: Any, source: str = "<memory>", where: str = "robot") -> T
             raise SpecError(src, f"{at}.compound", f"expected true or false, got {compound!r}")
         if compound and not children[aid]:
             raise SpecError(src, f"{at}.compound", "a compound agent must have children")
-        length = number(src, f"{at}.link_length", r.get("link_length", 0.0 if compound else None))
+        if "link_length" not in r and not compound:  # said as the user would fix it, not as the None it reads
+            what = f"missing: {aid}'s link needs a length, here or in [{where}.defaults]"
+            raise SpecError(src, f"{at}.link_length", what)
+        length = number(src, f"{at}.link_length", r.get("link_length", 0.0))
         if length < 0 or (not compound and length == 0):
             raise SpecError(src, f"{at}.link_length", f"must be > 0 for a joint agent, got {length}")
         lo, hi = vector(src, f"{at}.limits_deg", r.get("limits_deg", [-180.0, 180.0]), 2)

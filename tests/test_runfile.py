@@ -13,6 +13,7 @@ from kinswarm.actors.checkpoint import CheckpointError
 from kinswarm.actors.cli import main as cli_main
 from kinswarm.actors.config import ConfigError
 from kinswarm.actors.runfile import load_run, parse_set, read_run_file, task_of
+from kinswarm.actors.tasks import kinds
 from kinswarm.protocol.spec import SpecError
 
 CHAIN4 = EXAMPLES / "chain4.toml"
@@ -205,3 +206,56 @@ def test_the_learner_may_read_its_scene(tmp_path):
     assert cfg.learner["extra_state"][0]["name"] == "shield+"
     with pytest.raises(SpecError, match="cannot read 'shield\\+'; here it takes: g_perp, collided, clearance$"):
         run_config(EXAMPLES / "corridor7.toml", sets[1:])
+
+
+@pytest.mark.parametrize(
+    ("robot", "shown"),
+    [
+        ("\\n", "/\\n' (no such file)"),  # TOML's escape: the string holds a line break
+        ("", "got '' (not a file)"),
+        (" ", "/ ' (no such file)"),
+        ("\\t", "/\\t' (no such file)"),
+        ("\\u0000", "got '\\x00' (no such file)"),  # no path holds a NUL: not made absolute, not opened
+        ("nope.toml", "/nope.toml' (no such file)"),
+        (".", "' (not a file)"),  # the run file's own directory
+    ],
+)
+def test_a_robot_that_is_no_file_is_named_on_one_line(tmp_path, capsys, robot, shown):
+    p = tmp_path / "bad.toml"
+    p.write_text(f'robot = "{robot}"\n[task]\nkind = "reach"\ngoal = [1.0, 2.0]\n')
+    with pytest.raises(SpecError) as e:
+        load_run(p)
+    text = str(e.value)
+    assert text.startswith(f'{p}: robot: expected a [robot] table or robot = "a robot file", got ') and shown in text
+    assert text.isprintable(), text
+    assert cli_main(["run", str(p), "--out", str(tmp_path / "x"), "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert err == f"kinswarm: error: {text}\n"
+
+
+def test_a_file_or_field_name_that_breaks_the_line_is_quoted():
+    e = SpecError("run\n.toml", "task.\n", "got 'x'\nand more")
+    assert str(e) == "'run\\n.toml': 'task.\\n': got 'x'\\nand more"
+    assert (e.source, e.where, e.what) == ("run\n.toml", "task.\n", "got 'x'\nand more")  # kept as they were
+
+
+def test_what_is_missing_is_said_in_the_files_words(tmp_path):
+    """A joint without a length said `got None` of a field never written, and nothing of the [task] not given."""
+    p = tmp_path / "r.toml"
+    robot = '[robot]\nname = "x"\n[[robot.agent]]\nid = "a1"\n'
+    p.write_text(robot)
+    with pytest.raises(SpecError) as e:
+        load_run(p)
+    assert str(e.value) == f"{p}: task: missing: give a [task] table with kind = one of {', '.join(kinds())}"
+    p.write_text(robot + '[task]\nkind = "reach"\ngoal = [1.0, 2.0]\n')
+    with pytest.raises(SpecError) as e:
+        load_run(p)
+    assert (
+        str(e.value)
+        == f"{p}: robot.agent[0].link_length: missing: a1's link needs a length, here or in [robot.defaults]"
+    )
+    p.write_text('[task]\nkind = "reach"\ngoal = [1.0, 2.0]\n')
+    with pytest.raises(SpecError, match=r"r.toml: robot: missing: give a \[robot\] table"):
+        load_run(p)
+    p.write_text(robot.replace('id = "a1"', 'id = "a1"\nlink_length = 2.0') + '[task]\nkind = "reach"\ngoal = [1, 1]\n')
+    assert load_run(p, run_id="r").topo().agents["a1"].link_length == 2.0
