@@ -30,12 +30,12 @@ from kinswarm.protocol.topology import Topology
 log = logging.getLogger("kinswarm")
 
 
-def _plan_run(plan: Plan, given: Path | None, sets: list[str] = (), **kw: Any) -> RunConfig:
+def _plan_run(plan: Plan, given: Path | None, sets: list[str | tuple[str, str]] = (), **kw: Any) -> RunConfig:
     """The run a plan's leader runs: its [run] file (or `given`) with the plan's and the command line's overrides."""
     path = given if given is not None else (Path(plan.run_file) if plan.run_file else None)
     if path is None:
         raise PlanError(plan.source, "run.file", "no run file: give one in [run] file or pass --run-file")
-    return load_run(path, [*plan.run_sets, *sets], **kw)
+    return load_run(path, [*((s, f"{plan.source}: run.set") for s in plan.run_sets), *sets], **kw)
 
 
 def _up(a: argparse.Namespace) -> tuple[dict, RunConfig]:

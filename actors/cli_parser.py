@@ -45,24 +45,26 @@ _SHORTHANDS = {
 }
 
 
-def sets_of(a: argparse.Namespace) -> list[str]:
-    """The run file's overrides from the command line: the shorthands, then --set in order (the last one wins)."""
-    out = []
+def sets_of(a: argparse.Namespace) -> list[str | tuple[str, str]]:
+    """The run file's overrides from the command line: the shorthands, then --set in order (the last one wins). A
+    shorthand comes with the flag it was given as, so a problem with its value names that flag (`--epochs 0`)."""
+    out: list[str | tuple[str, str]] = []
     for name, key in _SHORTHANDS.items():
         v = getattr(a, name, None)
         if v is None:
             continue
         if isinstance(v, bool):
-            text = "true" if v else "false"
+            text, given = ("true" if v else "false"), ("on" if v else "off")
         elif isinstance(v, Path):
-            text = json.dumps(str(v))
+            text, given = json.dumps(str(v)), str(v)
         else:
-            text = json.dumps(v) if isinstance(v, str) else repr(v)
-        out.append(f"{key}={text}")
+            text, given = (json.dumps(v) if isinstance(v, str) else repr(v)), str(v)
+        flag = "--from" if name == "from_dir" else f"--{name.replace('_', '-')}"
+        out.append((f"{key}={text}", f"{flag} {given}"))
     if getattr(a, "goal", None):
-        out.append(a.goal)
+        out.append((a.goal, "--goal"))
     if getattr(a, "successive", False):
-        out.append("run.successive=true")
+        out.append(("run.successive=true", "--successive"))
     return out + list(getattr(a, "set", None) or [])
 
 

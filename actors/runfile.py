@@ -28,7 +28,8 @@ A recipe that is another with a few changes names it: `base = "corridor7-inner20
 first and lays this one's tables over it, field by field (a list replaces a list). `--set section.field=VALUE`
 overrides one field before anything is checked (VALUE is a TOML value: 0.97, true, [1, 2], "text"; a bare word is a
 string). Paths in a file are relative to the file; paths given on the command line to the working directory. Every
-problem is one line naming the file, the field and what was expected.
+problem is one line naming where the bad value was written (the file, or the flag: `--set task.goal=abc`, `--epochs
+0`), the field and what was expected, in TOML's words (a list, a table, a string).
 `write_resolved` writes the resolved run as a run file (`<out>/run.toml`), from which the run can be made again.
 """
 
@@ -87,31 +88,62 @@ def read_toml(path: str | Path) -> dict[str, Any]:
 
 
 def parse_set(text: str) -> tuple[tuple[str, ...], Any]:
-    """`section.field=VALUE` -> (path, value); VALUE is read as TOML, a bare word as a string."""
+    """`section.field=VALUE` -> (path, value); VALUE is read as TOML, a bare word as a string. What opens a TOML list,
+    table or string (`[`, `{`, a quote) must be one: `task.goal=[1,` is an unclosed list, not the string "[1,"."""
     name, sep, raw = text.partition("=")
     path = tuple(name.strip().split("."))
     if not sep or len(path) < 2 or not all(re.fullmatch(r"[A-Za-z0-9_-]+", p) for p in path):
         raise ConfigError(f"--set {text!r}: expected SECTION.FIELD=VALUE, e.g. learner.gamma=0.97")
     if path[0] not in SECTIONS:
         raise ConfigError(f"--set {text!r}: no section {path[0]!r} (expected one of {', '.join(SECTIONS)})")
+    raw = raw.strip()
     try:
-        value = tomllib.loads(f"v = {raw.strip()}")["v"]
-    except tomllib.TOMLDecodeError:
-        value = raw.strip()
+        value = tomllib.loads(f"v = {raw}")["v"]
+    except tomllib.TOMLDecodeError as e:
+        if raw[:1] in ("[", "{", '"', "'"):
+            why = re.sub(r" \(at .*\)$", "", str(e)).lower()  # its position is in "v = VALUE", not in the flag
+            raise ConfigError(
+                f'--set {text!r}: the value is not TOML ({why}): a list is [1, 2], a table {{a = 1}}, a string "text"'
+            ) from None
+        value = raw
     return path, value
+
+
+Override = str | tuple[str, str]  # `SECTION.FIELD=VALUE` as --set takes it, or (that, where it was written)
 
 
 def load_run(
     path: str | Path,
-    sets: Iterable[str] = (),
+    sets: Iterable[Override] = (),
     *,
     run_id: str | None = None,
     out: str | Path | None = None,
     listen: str | None = None,
 ) -> RunConfig:
-    """Resolve the run file at `path` with `--set` overrides into the run's config."""
-    overrides = [parse_set(s) for s in sets]
-    return resolve(read_run_file(path), str(path), overrides, run_id=run_id, out=out, listen=listen)
+    """Resolve the run file at `path` with `--set` overrides into the run's config. A problem with an overridden
+    value is the override's, and names it: `--set task.goal=abc: task.goal: expected a list, got a string 'abc'`;
+    an override written elsewhere (a plan's [run] set) comes as (text, where) and is named as that place."""
+    given = [(s, f"--set {s}") if isinstance(s, str) else s for s in sets]
+    overrides = [parse_set(text) for text, _ in given]
+    source = str(path)
+    try:
+        return resolve(read_run_file(path), source, overrides, run_id=run_id, out=out, listen=listen)
+    except SpecError as e:
+        if e.source != source:  # the robot file's own fields, say
+            raise
+        for (_, origin), (keys, _) in reversed(list(zip(given, overrides, strict=True))):  # the last one won
+            if _overrode(keys, e):
+                raise SpecError(origin, e.where, e.what) from None
+        raise
+
+
+def _overrode(keys: tuple[str, ...], e: SpecError) -> bool:
+    """Whether the override of `keys` is what `e` is about: the field itself or a part of its value, or the table it
+    lies in when the message names the field (a check of several fields: "gamma must be in [0, 1]")."""
+    key = ".".join(keys)
+    if e.where == key or e.where.startswith((f"{key}.", f"{key}[")):
+        return True
+    return key.startswith(f"{e.where}.") and re.search(rf"\b{re.escape(keys[-1])}\b", e.what) is not None
 
 
 def read_run_file(path: str | Path, _seen: tuple[Path, ...] = ()) -> dict[str, Any]:
@@ -180,7 +212,7 @@ def resolve(
             RunConfig,
         )
     except msgspec.ValidationError as e:
-        raise _spec_error(e, source, "run") from None
+        raise _spec_error(e, source, "run", fields) from None
     if cfg.scenario is not None:  # a bad scenario is refused before anything starts, one that cannot fire too
         from kinswarm.actors.scenario import ScenarioError, load_scenario
 
@@ -259,7 +291,7 @@ def learner_settings(task: TaskDef, learner: Mapping[str, Any], source: str = "<
     try:
         typed = msgspec.convert(dict(learner), LearnerSettings)
     except msgspec.ValidationError as e:
-        raise _spec_error(e, source, "learner") from None
+        raise _spec_error(e, source, "learner", learner) from None
     given = {k: getattr(typed, k) for k in learner}
     out = {}
     for agent in task.topo.dof_agents:
@@ -341,7 +373,7 @@ def _task(data: Any, topo: Topology, scene: SceneSpec, source: str) -> TaskDef:
     try:
         settings = msgspec.convert(settings_table, cls.Settings)
     except msgspec.ValidationError as e:
-        raise _spec_error(e, source, "task") from None
+        raise _spec_error(e, source, "task", settings_table) from None
     if topo.spatial != cls.spatial:
         kinds_for = ", ".join(k for k in kinds() if task_class(k).spatial == topo.spatial)
         what = "a robot from URDF" if topo.spatial else "a planar robot"
@@ -355,21 +387,61 @@ def _task(data: Any, topo: Topology, scene: SceneSpec, source: str) -> TaskDef:
     return task
 
 
-def _spec_error(e: msgspec.ValidationError, source: str, section: str) -> SpecError:
+def _spec_error(e: msgspec.ValidationError, source: str, section: str, values: Any = None) -> SpecError:
     """msgspec's "Expected `int`, got `str` - at `$.seed`" or a __post_init__'s "field: what" (of a nested table too:
-    "radius: must be > 0 - at `$.circle`") as a SpecError naming the field."""
+    "radius: must be > 0 - at `$.circle`") as a SpecError naming the field, in TOML's words ("expected an integer,
+    got a string 'x'"). `values`: the section's table, where the value found wrong is looked up to be shown."""
     text = str(e)
     where = section
     m = re.fullmatch(r"(.*) - at `\$\.?(.*)`", text, re.S)
     if m:
         text, path = m.group(1), m.group(2).replace("$", "")
         where = f"{section}.{path}" if path else section
-        text = re.sub(r"`(\w+)`", r"\1", text)
+        text = _toml_words(text, _value_at(values, path))
         text = text[0].lower() + text[1:]
     field, sep, what = text.partition(": ")
     if sep and re.fullmatch(r"[a-z_]+", field):
         return SpecError(source, f"{where}.{'from' if field == 'from_dir' else field}", what)
     return SpecError(source, where, text)
+
+
+# msgspec's names of types as a TOML file has them; `null` is a field left out (TOML has no null)
+_TOML_TYPES = {
+    "int": "an integer",
+    "float": "a number",
+    "str": "a string",
+    "bool": "true or false",
+    "array": "a list",
+    "object": "a table",
+}
+_NOTHING = object()
+
+
+def _toml_words(text: str, value: Any = _NOTHING) -> str:
+    """`Expected `array | null`, got `str`` -> `Expected a list, got a string '[1,'`."""
+
+    def names(m: re.Match[str]) -> str:
+        kinds = [_TOML_TYPES.get(t.strip(), t.strip()) for t in m.group(1).split("|") if t.strip() != "null"]
+        return " or ".join(kinds) or m.group(0)
+
+    got = re.fullmatch(r"(Expected `[^`]+`), got `(\w+)`", text)
+    if got:
+        shown = f" {value!r:.60}" if isinstance(value, (str, int, float)) and not isinstance(value, bool) else ""
+        text = f"{got.group(1)}, got {_TOML_TYPES.get(got.group(2), got.group(2))}{shown}"
+    text = re.sub(r"Expected `array` of length (\d+), got (\d+)", r"Expected a list of \1 values, got \2", text)
+    text = re.sub(r"`([a-z]+(?: \| [a-z]+)*)`", names, text)
+    return re.sub(r"`(\w+)`", r"\1", text)
+
+
+def _value_at(values: Any, path: str) -> Any:
+    """The value at a msgspec path (`goal[1]`, `extra_state[0].name`) of a table, or _NOTHING."""
+    node = values
+    for name, index in re.findall(r"(\w+)|\[(\d+)\]", path):
+        try:
+            node = node[name] if name else node[int(index)]
+        except (KeyError, IndexError, TypeError):
+            return _NOTHING
+    return node if path else _NOTHING
 
 
 def _absolute_paths(data: dict[str, Any], base: Path) -> None:

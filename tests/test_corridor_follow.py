@@ -46,6 +46,6 @@ def test_follow_leader_settings_and_agents():
     assert behind(on, "a3", "a2", "a1") == [None, None, None]
     assert behind([], "a7") == [None]
     assert behind(["task.follow_leader=1.0", "task.follow_leader_links=2"], "a7", "a6", "a5") == [0.0, 1.0, None]
-    # without via there is no axis: a clear error naming the file
-    with pytest.raises(SpecError, match=r"corridor7.toml: task.follow_leader: needs via"):
+    # without via there is no axis: a clear error naming the override
+    with pytest.raises(SpecError, match=r"^--set task.follow_leader=1.0: task.follow_leader: needs via"):
         run_config(EXAMPLES / "corridor7.toml", ["task.follow_leader=1.0"])

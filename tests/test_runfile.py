@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import re
 import shutil
 
 import pytest
@@ -60,7 +61,7 @@ def test_bad_set_is_one_line(text, why):
     ("sets", "where", "what"),
     [
         (["learner.gamma=1.5"], "learner", "gamma must be in [0, 1]"),
-        (['learner.gamma="x"'], "learner.gamma", "expected float, got str"),
+        (['learner.gamma="x"'], "learner.gamma", "expected a number, got a string 'x'"),
         (["learner.act_from=1"], "learner.act_from", "unknown field"),  # a probe measured and not kept
         (["learner.tabu_memory=0.1"], "learner.tabu_memory", "unknown field"),
         (["learner.clearance_state=true"], "learner.clearance_state", "unknown field"),  # the corridor task's now
@@ -71,7 +72,7 @@ def test_bad_set_is_one_line(text, why):
             "a1 cannot read 'g_dist'; here it takes: g_perp",
         ),
         (["task.kind=walk"], "task.kind", "expected one of"),
-        (["task.goal=[1]"], "task.goal", "expected array of length 2"),
+        (["task.goal=[1]"], "task.goal", "expected a list of 2 values, got 1"),
         (["task.colour=1"], "task.colour", "unknown field"),
         (["run.epochs=0"], "run.epochs", "expected an integer >= 1"),
         (["run.seed=-1"], "run.seed", "expected an integer >= 0"),
@@ -84,7 +85,7 @@ def test_every_field_is_checked_and_named(sets, where, what):
     with pytest.raises((SpecError, ConfigError)) as e:
         run_config(CHAIN4, sets)
     text = str(e.value)
-    assert text.startswith(str(CHAIN4)) or where.startswith("run"), text
+    assert text.startswith(f"--set {sets[-1]}: {where}"), text  # the flag's problem, not the file's
     assert where in text and what in text and "\n" not in text
 
 
@@ -259,3 +260,48 @@ def test_what_is_missing_is_said_in_the_files_words(tmp_path):
         load_run(p)
     p.write_text(robot.replace('id = "a1"', 'id = "a1"\nlink_length = 2.0') + '[task]\nkind = "reach"\ngoal = [1, 1]\n')
     assert load_run(p, run_id="r").topo().agents["a1"].link_length == 2.0
+
+
+def test_what_opens_a_toml_value_must_be_one():
+    """`task.goal=[1,` was taken as the string "[1," and refused later in msgspec's words, blamed on the file."""
+    for text in ("task.goal=[1,", 'task.reward="settle', "scene.object={mu = }"):
+        with pytest.raises(ConfigError) as e:
+            parse_set(text)
+        assert str(e.value).startswith(f"--set {text!r}: the value is not TOML (") and "\n" not in str(e.value)
+    assert parse_set("run.scenario=faults/a b.toml") == (("run", "scenario"), "faults/a b.toml")  # a bare word
+
+
+@pytest.mark.parametrize(
+    ("args", "line"),
+    [
+        (["--set", "task.goal=[1,"], "--set 'task.goal=[1,': the value is not TOML (invalid value): a list is [1, 2]"),
+        (["--set", "task.goal=abc"], "--set task.goal=abc: task.goal: expected a list, got a string 'abc'"),
+        (["--set", 'task.goal=[1, "a"]'], '--set task.goal=[1, "a"]: task.goal[1]: expected a number, got a string'),
+        (["--set", "task.goal={a = 1}"], "--set task.goal={a = 1}: task.goal: expected a list, got a table"),
+        (["--set", "learner.top_k=1.5"], "--set learner.top_k=1.5: learner.top_k: expected an integer, got a number"),
+        (["--set", "learner.gamma=2"], "--set learner.gamma=2: learner: gamma must be in [0, 1], got 2"),
+        (["--set", "run.learn=1"], "--set run.learn=1: run.learn: expected true or false, got an integer 1"),
+        (["--epochs", "0"], "--epochs 0: run.epochs: expected an integer >= 1, got 0"),
+        (["--lease-ms", "5"], "--lease-ms 5: run.lease_ms: expected an integer >= 100, got 5"),
+        (["--reward", "nice"], "--reward nice: task.reward: 'nice' is not one of"),
+        (["--goal=90,0"], "--goal: task.goal: (90, 0) lies 90 from the robot's base (0, 0), beyond its reach 12"),
+    ],
+)
+def test_a_problem_of_the_command_line_names_the_flag_in_tomls_words(tmp_path, capsys, args, line):
+    assert cli_main(["run", str(CHAIN4), *args, "--out", str(tmp_path / "x"), "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"kinswarm: error: {line}") and err.count("\n") == 1, err
+    assert str(CHAIN4) not in err and "`" not in err and not re.search(r"\b(array|null|str|float|int|object)\b", err)
+
+
+def test_the_files_own_problem_stays_the_files(tmp_path):
+    """An override elsewhere does not take the blame for a field of the file, nor a robot file's for the run's."""
+    p = tmp_path / "r.toml"
+    p.write_text(CHAIN4.read_text().replace("goal = [4.16, 6.18]", 'goal = "up"'))
+    with pytest.raises(SpecError) as e:
+        load_run(p, ["learner.gamma=0.5", "task.reward=strict"])
+    assert str(e.value) == f"{p}: task.goal: expected a list, got a string 'up'"
+    # a plan's overrides come with the place they were written in
+    with pytest.raises(SpecError) as e:
+        load_run(CHAIN4, [("run.epochs=0", "plan.toml: run.set")])
+    assert str(e.value) == "plan.toml: run.set: run.epochs: expected an integer >= 1, got 0"
