@@ -305,3 +305,41 @@ def test_the_files_own_problem_stays_the_files(tmp_path):
     with pytest.raises(SpecError) as e:
         load_run(CHAIN4, [("run.epochs=0", "plan.toml: run.set")])
     assert str(e.value) == "plan.toml: run.set: run.epochs: expected an integer >= 1, got 0"
+
+
+@pytest.mark.parametrize("file", ["chain4.toml", "grasp3.toml", "iiwa-pose.toml", "reach-generalise.toml"])
+def test_the_resolved_file_holds_the_learner_settings_used(tmp_path, monkeypatch, file):
+    """run.toml's [learner] was the overrides only (empty for the default run): a change of a default in the code
+    changed what `kinswarm run run.toml` made. Now it holds the values used; the same settings come out of it."""
+    from kinswarm.actors.learning.settings import LearnerSettings
+    from kinswarm.actors.runfile import learner_settings, write_resolved
+
+    cfg = load_run(EXAMPLES / file, run_id="r", out=tmp_path)
+    written = read_run_file(write_resolved(cfg, tmp_path / "run.toml"))["learner"]
+    assert set(cfg.learner) <= set(written) and {"lr", "gamma", "T_max", "s", "epsilon", "slope"} <= set(written)
+    used = learner_settings(task_of(cfg), cfg.learner)
+    again = load_run(tmp_path / "run.toml", run_id="r")
+    assert learner_settings(task_of(again), again.learner) == used
+    # a default changed in the code: a run of the example follows it, one of the resolved file does not
+    for name in ("for_reach", "for_plane", "for_turn"):
+        made = getattr(LearnerSettings, name).__func__
+        monkeypatch.setattr(
+            LearnerSettings, name, classmethod(lambda c, *a, _made=made, **o: _made(c, *a, **{"lr": 0.1, **o}))
+        )
+    changed = load_run(EXAMPLES / file, run_id="r")
+    assert {s.lr for s in learner_settings(task_of(changed), changed.learner).values()} == {0.1}
+    again = load_run(tmp_path / "run.toml", run_id="r")
+    assert learner_settings(task_of(again), again.learner) == used
+
+
+def test_a_baseline_run_is_named_as_one():
+    """`kinswarm baseline` runs went to runs/chain4-<time>-<hex> like the learning runs, told apart by nothing."""
+    learning = load_run(CHAIN4)
+    assert re.fullmatch(r"chain4-\d{8}-\d{6}-[0-9a-f]{4}", learning.run_id), learning.run_id
+    for law in ("pinv", "greedy", "rule"):
+        cfg = load_run(CHAIN4, [f'run.controller="{law}"'])
+        assert re.fullmatch(rf"baseline-{law}-chain4-\d{{8}}-\d{{6}}-[0-9a-f]{{4}}", cfg.run_id), cfg.run_id
+        assert cfg.out.endswith(f"/runs/{cfg.run_id}")
+    assert load_run(CHAIN4, ['run.controller="pinv"'], run_id="mine").run_id == "mine"  # a given id is kept
+    with pytest.raises(SpecError, match="run.controller: 'x y' is not one of"):  # the field's problem, not the id's
+        load_run(CHAIN4, ['run.controller="x y"'])
