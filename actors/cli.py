@@ -164,11 +164,9 @@ def _view(a: argparse.Namespace) -> int:
         stream.disconnect()  # the file's footer
     print(f"{a.save or 'the viewer'}: {epochs} epochs of {a.run_dir}")
     if a.web and a.save is None:  # the served viewer lives as long as this process
-        print("kinswarm: serving; Ctrl-C to stop")
-        import time
+        from kinswarm.actors.recording import serve_until_interrupted
 
-        while True:
-            time.sleep(3600)
+        serve_until_interrupted()
     return 0
 
 

@@ -16,6 +16,7 @@ import math
 import multiprocessing
 import os
 import sys
+import time
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -281,6 +282,7 @@ class LiveRecording:
     (median of paired ratios; medians 720 steps/s without, 760 with: within that machine's noise)."""
 
     def __init__(self, cfg: RunConfig, view: str) -> None:
+        self.view, self.out = view, cfg.out
         ctx = multiprocessing.get_context("spawn")
         self.queue: Any = ctx.Queue()
         config = Path(cfg.out) / "config.json"
@@ -298,6 +300,28 @@ class LiveRecording:
             log.warning("viewer: the recorder did not finish within %.0f s; stopped", timeout)
             self.proc.kill()
             self.proc.join()
+        if self.view == "web":  # the served viewer lives in the recorder's process: it went with it
+            print(web_gone(self.out), file=sys.stderr, flush=True)
+
+
+def web_gone(out: str) -> str:
+    """What `--view web` says when its viewer goes away with the run, and how to see the run again."""
+    return f"kinswarm: the live viewer stopped with the run; `kinswarm view {out} --web` serves the whole run again"
+
+
+def serve_until_interrupted() -> None:
+    """`kinswarm view … --web`: the viewer is served from this process, so it waits here until Ctrl-C, then ends the
+    process at once. Left to the interpreter's exit, the served stream's own shutdown (RecordingStream.__del__, rerun's
+    atexit flush) ran with the interrupt and printed `Exception ignored in: RecordingStream.__del__`; nothing it
+    would flush has anywhere to go once the process that serves it ends."""
+    print("kinswarm: serving; Ctrl-C to stop", flush=True)
+    try:
+        while True:
+            time.sleep(3600)
+    except KeyboardInterrupt:
+        print("kinswarm: the viewer stopped", file=sys.stderr, flush=True)
+        sys.stdout.flush()
+        os._exit(130)
 
 
 def _live(config: str, view: str, rows: Any) -> None:
