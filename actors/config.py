@@ -24,7 +24,7 @@ from kinswarm.protocol.keys import check_id
 from kinswarm.protocol.scene import SceneSpec, parse_scene
 from kinswarm.protocol.topology import Topology, parse_robot
 
-PLACEMENTS = ("process", "single")
+PLACEMENTS = ("process", "single", "inprocess")
 LEASE_RANGE_MS = (100, 60_000)  # the Zenoh leases accepted: [run] lease_ms and a plan's [zenoh] lease_ms
 #: the learning agents, or a model-based law (sim/controller.py)
 CONTROLLERS = ("agents", "pinv", "greedy", "rule", "turn")
@@ -85,7 +85,7 @@ class RunConfig:
     epochs: int = 60
     steps: int = 500  # steps per epoch
     seed: int = 0
-    placement: str = "process"  # one OS process per actor, or all in one ("single")
+    placement: str = "process"  # one OS process per actor, all in one ("single"), or a plain loop ("inprocess")
     learn: bool = True  # TD updates and fictitious-play counts; off: the swarm runs as trained
     explore: bool = True  # off: greedy actions
     # Every epoch after the first starts where the last one ended, not at the initial angles: the paper's
