@@ -185,6 +185,8 @@ def resolve(
             if e.fault.robot is not None and e.fault.robot >= cfg.fleet:
                 what = f"robot {e.fault.robot}: the run's fleet has {cfg.fleet} (run.fleet; robots 0..{cfg.fleet - 1})"
                 raise ScenarioError(cfg.scenario, f"event[{i}].robot", what)
+    if cfg.placement == "inprocess":
+        check_inprocess(cfg, topo)
     if cfg.controller == "turn" and not (task.topo.spatial and len(task.topo.end_effectors) == 1):
         raise ConfigError("controller: the turn rule moves the one end effector of a robot from URDF")
     if cfg.fleet > 1 and cfg.fleet_goals == "spread" and task.goal(0, cfg.steps)[1]:
@@ -192,6 +194,27 @@ def resolve(
     if cfg.from_dir is not None:  # and checkpoints that do not fit this run's learners
         check_checkpoints(Path(cfg.from_dir), task, learner, source)
     return cfg
+
+
+def check_inprocess(cfg: RunConfig, topo: Topology) -> None:
+    """What the `inprocess` placement (a plain loop: no processes, no messages) cannot run, refused in one line."""
+    if cfg.fleet > 1:
+        raise ConfigError("placement: inprocess runs one robot; a fleet (run.fleet) runs in the process or single one")
+    if cfg.controller != "agents":
+        raise ConfigError(
+            f"placement: inprocess runs the learning agents; the {cfg.controller} law runs in the process placement"
+        )
+    if cfg.scenario is not None:
+        from kinswarm.actors.scenario import ScenarioError, load_scenario
+        from kinswarm.protocol.faults import JOINT_FAULTS
+
+        for i, e in enumerate(load_scenario(cfg.scenario, topo).entries):
+            if e.fault.fault not in JOINT_FAULTS:
+                what = (
+                    f"{e.fault.fault!r} acts on an agent's process or messages, which the inprocess placement does not "
+                    "have: run it with --placement process"
+                )
+                raise ScenarioError(cfg.scenario, f"event[{i}].fault", what)
 
 
 def check_checkpoints(run_dir: Path, task: TaskDef, learner: Mapping[str, Any], source: str = "<memory>") -> None:
