@@ -20,15 +20,20 @@ from functools import cached_property
 from pathlib import Path
 from typing import Any
 
-from kinswarm.protocol.faults import PROCESS_FAULTS
+from kinswarm.protocol.faults import LINK_FAULTS, PROCESS_FAULTS
 from kinswarm.protocol.keys import check_id
 from kinswarm.protocol.scene import SceneSpec, parse_scene
 from kinswarm.protocol.topology import Topology, parse_robot
 
-PLACEMENTS = ("process", "single")
-#: The process faults each placement can apply (actors/supervisor/placements.py's `supports`): a task in one process
-#: can be cancelled and started again, but not stopped and continued as a process is by SIGSTOP and SIGCONT.
-PLACEMENT_FAULTS: dict[str, tuple[str, ...]] = {"process": PROCESS_FAULTS, "single": ("kill", "restart")}
+PLACEMENTS = ("process", "single", "inprocess")
+#: The process and link faults each placement can apply (actors/supervisor/placements.py's `supports`): a task in one
+#: process can be cancelled and started again, but not stopped and continued as a process is by SIGSTOP and SIGCONT;
+#: the inprocess placement's plain loop has neither processes nor messages.
+PLACEMENT_FAULTS: dict[str, tuple[str, ...]] = {
+    "process": PROCESS_FAULTS + LINK_FAULTS,
+    "single": ("kill", "restart", *LINK_FAULTS),
+    "inprocess": (),
+}
 LEASE_RANGE_MS = (100, 60_000)  # the Zenoh leases accepted: [run] lease_ms and a plan's [zenoh] lease_ms
 #: the learning agents, or a model-based law (sim/controller.py)
 CONTROLLERS = ("agents", "pinv", "greedy", "rule", "turn")
@@ -69,7 +74,7 @@ class ConfigError(ValueError):
 def placement_problem(fault: str, placement: str) -> str:
     """What stops `placement` from applying `fault` ("" when nothing does): checked when a scenario is resolved and
     again when a fault is requested live."""
-    if fault not in PROCESS_FAULTS or fault in PLACEMENT_FAULTS.get(placement, ()):
+    if fault not in PROCESS_FAULTS + LINK_FAULTS or fault in PLACEMENT_FAULTS.get(placement, ()):
         return ""
     able = " or ".join(p for p, faults in PLACEMENT_FAULTS.items() if fault in faults)
     return f"{fault}: needs --placement {able} (this run's placement is {placement})"
@@ -98,7 +103,7 @@ class RunConfig:
     epochs: int = 60
     steps: int = 500  # steps per epoch
     seed: int = 0
-    placement: str = "process"  # one OS process per actor, or all in one ("single")
+    placement: str = "process"  # one OS process per actor, all in one ("single"), or a plain loop ("inprocess")
     learn: bool = True  # TD updates and fictitious-play counts; off: the swarm runs as trained
     explore: bool = True  # off: greedy actions
     # Every epoch after the first starts where the last one ended, not at the initial angles: the paper's

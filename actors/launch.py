@@ -11,8 +11,9 @@ import os
 import signal
 import statistics
 import sys
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from kinswarm.actors.config import ConfigError, RunConfig
 from kinswarm.actors.plan import Plan, local_plan
@@ -21,6 +22,9 @@ from kinswarm.actors.runfile import write_resolved
 from kinswarm.actors.runtime import NetSpec, open_session
 from kinswarm.protocol.messages import EpochDone
 from kinswarm.protocol.topology import Topology
+
+if TYPE_CHECKING:
+    from kinswarm.actors.supervisor.core import RunResult
 
 log = logging.getLogger("kinswarm.launch")
 
@@ -70,7 +74,6 @@ async def _supervise(
     view: str | None = None,
 ) -> dict:
     from kinswarm.actors.deploy import control_net
-    from kinswarm.actors.report import write_plots, write_summary
     from kinswarm.actors.supervisor import ProcessPlacement, SinglePlacement, Supervisor
 
     out = Path(cfg.out)
@@ -91,14 +94,39 @@ async def _supervise(
         identity = plan.identity(role, ident, host)
         return write_net(out / "net" / f"{identity}.json", plan.net(host, identity, supervisor=False, topo=topo))
 
+    on_epoch, close_watchers = _watchers(cfg, progress and lead, view if lead else None)
+
+    placement: ProcessPlacement | SinglePlacement
+    if cfg.placement == "single":
+        placement = SinglePlacement(cfg, topo, session)
+    else:
+        placement = ProcessPlacement(out / "config.json", nets, out / "logs", supervisor=sup_id)
+    sup = Supervisor(cfg, topo, session, placement, on_epoch=on_epoch, plan=plan, host=host)
+    sup.hosts_wait_s = wait_s
+    with _signals_stop_once():
+        try:
+            result = await sup.run()
+        finally:
+            close_watchers()
+            session.close()
+        if not lead:
+            return {"host": host, "error": result.error, "interrupted": result.interrupted, "restarts": result.restarts}
+        return _finish(cfg, result, progress)
+
+
+OnEpoch = Callable[[EpochDone], None]
+
+
+def _watchers(cfg: RunConfig, progress: bool, view: str | None) -> tuple[OnEpoch, Callable[[], None]]:
+    """What watches the epochs as they end: the progress bar, the live viewer; (on_epoch, close)."""
     bar = None
     if progress:
         from tqdm import tqdm
 
-        bar = tqdm(total=cfg.epochs, unit="epoch", desc=cfg.run_id, dynamic_ncols=True) if lead else None
+        bar = tqdm(total=cfg.epochs, unit="epoch", desc=cfg.run_id, dynamic_ncols=True)
 
     live = None
-    if view is not None and lead:
+    if view is not None:
         from kinswarm.actors.recording import LiveRecording
 
         live = LiveRecording(cfg, view)
@@ -113,40 +141,49 @@ async def _supervise(
             bar.set_postfix(final=f"{d.final_error:.3f}", mean=f"{d.mean_error:.3f}", **fleet, steps_s=f"{rate:.0f}")
             bar.update(1)
 
-    placement: ProcessPlacement | SinglePlacement
-    if cfg.placement == "single":
-        placement = SinglePlacement(cfg, topo, session)
-    else:
-        placement = ProcessPlacement(out / "config.json", nets, out / "logs", supervisor=sup_id)
-    sup = Supervisor(cfg, topo, session, placement, on_epoch=on_epoch, plan=plan, host=host)
-    sup.hosts_wait_s = wait_s
-    with _signals_stop_once():
-        try:
-            result = await sup.run()
-        finally:
-            if bar is not None:
-                bar.close()
-            if live is not None:
-                live.close()
-            session.close()
-        if not lead:
-            return {"host": host, "error": result.error, "interrupted": result.interrupted, "restarts": result.restarts}
-        summary = write_summary(
-            out,
-            {
-                "wall_seconds": result.wall_seconds,
-                "interrupted": result.interrupted,
-                "error": result.error,
-                "rejected_messages": result.rejected,
-                "rejected_by_actor": result.rejected_by,
-                "restarts": result.restarts,
-                "tokens_lost": result.tokens_lost,
-            },
-        )
-        write_plots(out)
-        if cfg.record:
-            write_records(out, progress)
+    def close() -> None:
+        if bar is not None:
+            bar.close()
+        if live is not None:
+            live.close()
+
+    return on_epoch, close
+
+
+def _finish(cfg: RunConfig, result: RunResult, progress: bool) -> dict:
+    """The run's summary, plots and records, from what the leader gathered."""
+    from kinswarm.actors.report import write_plots, write_summary
+
+    out = Path(cfg.out)
+    summary = write_summary(
+        out,
+        {
+            "wall_seconds": result.wall_seconds,
+            "interrupted": result.interrupted,
+            "error": result.error,
+            "rejected_messages": result.rejected,
+            "rejected_by_actor": result.rejected_by,
+            "restarts": result.restarts,
+            "tokens_lost": result.tokens_lost,
+        },
+    )
+    write_plots(out)
+    if cfg.record:
+        write_records(out, progress)
     return summary
+
+
+def _run_inprocess(cfg: RunConfig, topo: Topology, progress: bool, view: str | None) -> dict:
+    """The `inprocess` placement: the run as one plain loop (actors/supervisor/inprocess.py)."""
+    from kinswarm.actors.supervisor.inprocess import InProcessRun
+    from kinswarm.actors.supervisor.recorder import Recorder
+
+    on_epoch, close_watchers = _watchers(cfg, progress, view)
+    try:
+        result = InProcessRun(cfg, topo).run(Recorder(Path(cfg.out)), on_epoch)
+    finally:
+        close_watchers()
+    return _finish(cfg, result, progress)
 
 
 def write_records(out: Path, progress: bool) -> None:
@@ -192,4 +229,6 @@ def run_swarm(
         if host == plan.leader:
             write_resolved(cfg, out / "run.toml")
             (out / "metrics.jsonl").write_text("")
+        if cfg.placement == "inprocess":
+            return _run_inprocess(cfg, topo, progress, view)
         return asyncio.run(_supervise(cfg, topo, progress, plan, host, wait_s, view))

@@ -233,6 +233,8 @@ def resolve(
                 raise ScenarioError(cfg.scenario, f"event[{i}].fault", what)
             if problem := placement_problem(e.fault.fault, cfg.placement):
                 raise ScenarioError(cfg.scenario, f"event[{i}].fault", problem)
+    if cfg.placement == "inprocess":
+        check_inprocess(cfg)
     if cfg.controller == "turn" and not (task.topo.spatial and len(task.topo.end_effectors) == 1):
         raise ConfigError("controller: the turn rule moves the one end effector of a robot from URDF")
     if cfg.fleet > 1 and cfg.fleet_goals == "spread" and task.goal(0, cfg.steps)[1]:
@@ -240,6 +242,17 @@ def resolve(
     if cfg.from_dir is not None:  # and checkpoints that do not fit this run's learners
         check_checkpoints(Path(cfg.from_dir), task, learner, source)
     return cfg
+
+
+def check_inprocess(cfg: RunConfig) -> None:
+    """What the `inprocess` placement (a plain loop: one robot, no processes, no messages) cannot run, refused in one
+    line (its scenario's process and link faults are refused with every placement's, above)."""
+    if cfg.fleet > 1:
+        raise ConfigError("placement: inprocess runs one robot; a fleet (run.fleet) runs in the process or single one")
+    if cfg.controller != "agents":
+        raise ConfigError(
+            f"placement: inprocess runs the learning agents; the {cfg.controller} law runs in the process placement"
+        )
 
 
 def check_checkpoints(run_dir: Path, task: TaskDef, learner: Mapping[str, Any], source: str = "<memory>") -> None:

@@ -15,7 +15,6 @@ moves at random, a faulty motor or encoder moves or reads wrong; the agents are 
 from __future__ import annotations
 
 import asyncio
-import dataclasses
 import logging
 import time
 from typing import Any
@@ -23,8 +22,8 @@ from typing import Any
 import zenoh
 from kinswarm.actors.config import RunConfig
 from kinswarm.actors.runtime import Node
-from kinswarm.actors.scenario import ScenarioEntry, load_scenario
-from kinswarm.protocol.faults import JOINT_FAULTS, check_fault, describe, expand_targets
+from kinswarm.actors.scenario import load_scenario
+from kinswarm.protocol.faults import JOINT_FAULTS, describe
 from kinswarm.protocol.messages import (
     Bye,
     Cmd,
@@ -34,13 +33,10 @@ from kinswarm.protocol.messages import (
     Fault,
     Heartbeat,
     JointStatus,
-    Obs,
     Stop,
-    Task,
 )
 from kinswarm.protocol.topology import Topology
-from kinswarm.sim.faults import JointFaults
-from kinswarm.sim.scenes import build_scene
+from kinswarm.sim.robot import Robot
 from kinswarm.sim.world import World
 
 # Timers and liveliness changes go through the mailbox under keys no Zenoh key can equal (those start
@@ -56,29 +52,18 @@ class SimActor:
         self.cfg, self.topo, self.node, self.keys = cfg, topo, node, node.keys
         # Read before the world exists: a bad file fails the actor without leaking a PyBullet client.
         self.scenario = load_scenario(cfg.scenario, topo) if cfg.scenario else None
-        self.world = self._world(topo)
-        try:
-            self.scene = build_scene(self.world, cfg.scene_spec, cfg.action_rad)
-        except BaseException:
-            self.world.close()
-            raise
+        self.body = Robot(topo, cfg.scene_spec, cfg.action_rad, cfg.seed, self.scenario, self._world(topo))
+        self.world, self.scene, self.faults = self.body.world, self.body.scene, self.body.faults
         self.robot = 0  # which robot of a fleet this is (sim/fleet.py): a joint fault for another is not its
         self.dof = topo.dof_agents
         self.dof_set = frozenset(self.dof)
         self._obs_first = [a for a in self.dof if a == topo.root]  # the root's reading goes out with the task
         self._obs_after = [a for a in self.dof if a != topo.root]
-        self.max_step = cfg.action_rad * (1 + 1e-9)
         self.epoch: EpochStart | None = None
         self.last_epoch = -1  # the last accepted EpochStart
-        self.t = 0
         self.cmds: dict[str, float] = {}
         self.waiting: set[str] = set()  # agents whose cmd the current step still waits for
         self.down: set[str] = set()  # agents whose liveliness token went away (and has not come back)
-        self.faults = JointFaults(list(self.dof), cfg.seed)
-        self.applied: dict[str, float] = dict.fromkeys(self.dof, 0.0)  # last increment per joint
-        self.errors: list[float] = []
-        self.angles: list[list[float]] = []  # the true pose after each step of the epoch
-        self.tips: dict[str, tuple[float, float, float]] = {}
         self.missed = 0
         self.late: dict[str, int] = {}  # agent -> steps in a row that ended at the deadline without its cmd
         self.total_steps = 0
@@ -100,11 +85,8 @@ class SimActor:
         self._host_prefix = self.keys.host("")
         self._status: asyncio.TimerHandle | None = None
         self._cmd_prefix = self.keys.cmd_all[:-1]
-        self._due: dict[int, list[tuple[int, ScenarioEntry]]] = {}  # scenario entries by step
         if self.scenario is not None:
-            for i, entry in enumerate(self.scenario.entries):
-                self._due.setdefault(entry.step, []).append((i, entry))
-            late = sorted({s for s in self._due if s >= cfg.steps})
+            late = [s for s in self.body.due_steps if s >= cfg.steps]
             if late:
                 node.log.warning(
                     "scenario %s: steps %s are beyond --steps %d, never reached", cfg.scenario, late, cfg.steps
@@ -151,7 +133,7 @@ class SimActor:
                 if timer is not None:
                     timer.cancel()
             watch.undeclare()
-            self.world.close()
+            self.body.close()
 
     def handle(self, key: str, payload: bytes) -> bool:
         """Dispatch one mailbox item; True means stop."""
@@ -221,18 +203,9 @@ class SimActor:
             return
         self.epoch = e
         self.last_epoch = e.epoch
-        if not (self.cfg.successive and e.epoch > 0):
-            try:  # faults persist, angles do not: a locked joint is locked at the epoch's start angle
-                self.world.reset(e.start or None)
-            except ValueError as err:  # a start pose this robot cannot take: its home instead, said once
-                self.node.log.warning("epoch %d: %s; starting from the robot's home", e.epoch, err)
-                self.world.reset()
-            self.faults.reset()
-        self.tips = self.world.tip_poses()
-        self.scene.reset()
-        self.t = 0
-        self.errors = []
-        self.angles = []
+        warning = self.body.start(e.goal, e.path, e.start, keep_pose=self.cfg.successive and e.epoch > 0)
+        if warning:  # a start pose this robot cannot take: its home instead, said once
+            self.node.log.warning("epoch %d: %s", e.epoch, warning)
         self.missed = 0
         self.started = time.perf_counter()
         self.longest_step = 0.0
@@ -253,7 +226,7 @@ class SimActor:
             self.node.log.warning("rejected cmd for %r: not a joint of %s", agent, self.topo.name)
             return
         # Counted even for a locked joint (the step must not wait); _advance decides what moves.
-        self.cmds[agent] = max(-self.max_step, min(self.max_step, m.delta))
+        self.cmds[agent] = self.body.clip(m.delta)
         self.late.pop(agent, None)
         self.waiting.discard(agent)
         if not self.waiting:
@@ -324,7 +297,7 @@ class SimActor:
                 epoch=epoch,
                 step=step,
                 q=self.world.joint_positions(),
-                delta=dict(self.applied),
+                delta=dict(self.body.applied),
                 faults=self.faults.summary(),
                 late={a: n for a, n in self.late.items() if a not in self.down},
             ),
@@ -337,19 +310,11 @@ class SimActor:
         they are for the supervisor and the runtimes."""
         if f.fault not in JOINT_FAULTS or f.robot not in (None, self.robot):
             return
-        problem = check_fault(f, list(self.topo.order))
-        if problem:  # the supervisor checks live faults first: this is a scenario's, or a message not its
-            self.node.log.warning("ignored fault %s: %s", f.id, problem)
-            self._event("refused", ",".join(f.targets) or "-", f"{describe(f)}: {problem}")
-            return
-        detail = describe(f)
-        for a in expand_targets(f.targets, list(self.dof)):
-            if a not in self.dof_set:
-                self.node.log.warning("ignored fault %s on %s: a compound agent has no joint", f.id, a)
-                self._event("refused", a, f"{detail}: {a} has no joint (a compound agent)")
-                continue
-            self.faults.apply(f, a)
-            self._event(f.fault, a, detail)
+        events, refused = self.body.apply_fault(f)
+        for problem in refused:
+            self.node.log.warning(problem)
+        for name, target, detail in events:
+            self._event(name, target, detail)
 
     def now(self) -> tuple[int, int]:
         """(epoch, step) for events: the running step, or where the last epoch ended (-1 before any)."""
@@ -362,33 +327,30 @@ class SimActor:
         self.node.send(self.keys.metrics("event"), event)
 
     def _apply_due(self, epoch: int) -> None:
-        for i, entry in self._due.get(self.t, ()):
-            if entry.epoch is not None and entry.epoch != epoch:
-                continue
-            f = dataclasses.replace(entry.fault, id=f"scenario-{epoch}-{self.t}-{i}")
-            if entry.is_joint:
-                self.apply_fault(f)
-            else:
-                self.node.log.info("scenario: requesting %s (%s)", describe(f), f.id)
-                self.node.send(self.keys.fault("request"), f)
-                # on the timeline at its exact step: the supervisor that applies it knows the step only roughly
-                self._event("scenario", ",".join(f.targets), f"{describe(f)} requested")
+        joint, others = self.body.due(epoch)
+        for f in joint:
+            self.apply_fault(f)
+        for f in others:
+            self.node.log.info("scenario: requesting %s (%s)", describe(f), f.id)
+            self.node.send(self.keys.fault("request"), f)
+            # on the timeline at its exact step: the supervisor that applies it knows the step only roughly
+            self._event("scenario", ",".join(f.targets), f"{describe(f)} requested")
 
     # -- the step ----------------------------------------------------------------------------------
     def _publish_step(self) -> None:
         e = self.epoch
         assert e is not None
-        if self._due:
+        body, k, send = self.body, self.keys, self.node.send
+        if self.scenario is not None:
             self._apply_due(e.epoch)
-        k, send, scene, t = self.keys, self.node.send, self.scene, self.t
-        q = self.faults.readings(self.world.joint_positions())  # what the encoders read
+        q = body.readings()  # what the encoders read
         # The root begins once it holds both the task and its own reading: put them back to back, so they
         # reach it in one burst (one wake-up); the others' readings are needed only a hop later.
         for a in self._obs_first:
-            send(k.obs(a), Obs(epoch=e.epoch, step=t, q=q[a], sense=scene.agent_sense(a)))
-        send(k.task, Task(epoch=e.epoch, step=t, goal=self.goal(), tips=self.tips, sense=scene.task_sense()))
+            send(k.obs(a), body.obs(a, e.epoch, q[a]))
+        send(k.task, body.task(e.epoch))
         for a in self._obs_after:
-            send(k.obs(a), Obs(epoch=e.epoch, step=t, q=q[a], sense=scene.agent_sense(a)))
+            send(k.obs(a), body.obs(a, e.epoch, q[a]))
         self.cmds = {}
         self.step_started = time.perf_counter()
         # Nobody expected (every agent down): the deadline runs the step rather than the joints racing.
@@ -399,47 +361,34 @@ class SimActor:
     def _advance(self) -> None:
         e = self.epoch
         assert e is not None
-        faults = self.faults
-        self.applied = self.scene.move(faults.increments(self.cmds) if faults.moves_changed else self.cmds)
-        self.tips = self.world.tip_poses()
-        self.errors.append(self.scene.error(self.tips, self.goal()))
-        q = self.world.joint_positions()
-        self.angles.append([q[a] for a in self.dof])
+        for name, target, detail in self.body.move(self.cmds):
+            self._event(name, target, detail)
         self.longest_step = max(self.longest_step, time.perf_counter() - self.step_started)
-        self.t += 1
         self.total_steps += 1
-        if faults.disturbed:
-            for a, detail in faults.count_step():
-                self._event("disturb_end", a, detail)
-        if self.t < e.steps:
+        if self.body.t < e.steps:
             if self.paused:
                 self.held = True
                 return
             self._publish_step()
             return
-        self._done(
-            EpochDone(
-                epoch=e.epoch,
-                steps=e.steps,
-                final_error=self.errors[-1],
-                mean_error=sum(self.errors) / len(self.errors),
-                errors=self.errors,
-                final_angles=self.world.joint_positions(),
-                missed_cmds=self.missed,
-                seconds=time.perf_counter() - self.started,
-                max_step_seconds=self.longest_step,
-                traces=self.scene.traces(),
-                angles=self.angles,
-            ),
-        )
+        seconds = time.perf_counter() - self.started
+        self._done(self.body.done(e.epoch, e.steps, self.missed, seconds, self.longest_step))
         self.epoch = None
 
     def _done(self, m: EpochDone) -> None:
         """The epoch is over: its metrics to the observers (a fleet's sim sends every robot's in one)."""
         self.node.send(self.keys.metrics("epoch"), m)
 
-    def goal(self) -> tuple[float, float]:
-        """The goal of the running step: it moves along the epoch's path, if it has one."""
-        e = self.epoch
-        assert e is not None
-        return e.path[self.t] if e.path else e.goal
+    @property
+    def applied(self) -> dict[str, float]:
+        """The increments the last step applied, by joint."""
+        return self.body.applied
+
+    @property
+    def t(self) -> int:
+        """The running step of the epoch."""
+        return self.body.t
+
+    def goal(self) -> tuple[float, ...]:
+        """The goal of the running step."""
+        return self.body.goal()

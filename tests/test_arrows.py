@@ -89,8 +89,8 @@ def test_the_product_never_imports_the_lab(folder: str) -> None:
 
 def test_the_check_sees_a_violation(tmp_path: Path) -> None:
     """The parser finds imports of every form (a check that finds nothing could not fail)."""
-    names = [n for _, n in _imports(ROOT / "sim" / "actor.py")]
-    assert "kinswarm.actors.config" in names and "kinswarm.sim.scenes" in names
+    names = [n for _, n in _imports(ROOT / "sim" / "robot.py")]
+    assert "kinswarm.actors.scenario" in names and "kinswarm.sim.scenes" in names
     rel = [n for _, n in _imports(ROOT / "sim" / "scenes" / "object.py")]
     assert "kinswarm.sim.scenes.contact" in rel and "kinswarm.sim.scenes.base" in rel
     found = _violations("sim", lambda n, p: not n.startswith("kinswarm.actors.config"))

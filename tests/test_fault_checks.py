@@ -12,7 +12,7 @@ from kinswarm.actors.cli import main as cli_main
 from kinswarm.actors.config import PLACEMENT_FAULTS
 from kinswarm.actors.scenario import ScenarioError
 from kinswarm.actors.supervisor.placements import ProcessPlacement, SinglePlacement
-from kinswarm.protocol.faults import PROCESS_FAULTS
+from kinswarm.protocol.faults import LINK_FAULTS, PROCESS_FAULTS
 from test_faults import Run
 
 
@@ -24,8 +24,9 @@ def _scenario(tmp_path: Path, fault: str, extra: str = "") -> Path:
 
 def test_the_loader_knows_what_each_placement_applies():
     """The table the loader checks against is the placements' own."""
-    assert PLACEMENT_FAULTS == {"process": ProcessPlacement.supports, "single": SinglePlacement.supports}
-    assert set(PLACEMENT_FAULTS["process"]) == set(PROCESS_FAULTS)
+    process_faults = {p: tuple(f for f in faults if f in PROCESS_FAULTS) for p, faults in PLACEMENT_FAULTS.items()}
+    assert process_faults == {"process": ProcessPlacement.supports, "single": SinglePlacement.supports, "inprocess": ()}
+    assert set(PLACEMENT_FAULTS["process"]) == set(PROCESS_FAULTS + LINK_FAULTS)
 
 
 @pytest.mark.parametrize(("fault", "extra"), [("freeze", "seconds = 2\n"), ("freeze", ""), ("thaw", "")])

@@ -254,13 +254,22 @@ def test_disturbance_replays_with_the_seed(tmp_path, chain4):
 
 
 def test_other_faults_and_bad_faults_are_ignored(tmp_path, chain4):
+    """Faults that are not the robot's pass it by unseen; a bad joint fault changes nothing and is a `refused` event
+    with its reason."""
+
     async def body() -> None:
         sim = make_sim(tmp_path, chain4)
         sim.apply_fault(fault("kill", "a2"))
         sim.apply_fault(fault("drop", "a2", rate=0.5))
+        assert not sim.node.sent  # type: ignore[attr-defined]
         sim.apply_fault(fault("lock", "zz"))  # not an agent
         sim.apply_fault(fault("disturb", "a1"))  # no steps
-        assert not sim.faults.moves_changed and not sim.node.sent  # type: ignore[attr-defined]
+        assert not sim.faults.moves_changed
+        sent = [(m.event, m.target, m.detail) for _, m in sim.node.sent]  # type: ignore[attr-defined]
+        assert sent == [
+            ("refused", "zz", "lock zz: lock: 'zz' is not an agent of this run (a1, a2, a3, a4)"),
+            ("refused", "a1", "disturb a1: disturb: needs steps"),
+        ]
 
     asyncio.run(body())
 

@@ -25,7 +25,6 @@ import zlib
 from dataclasses import dataclass, field
 from typing import Any
 
-import numpy as np
 from kinswarm.actors.config import RunConfig
 from kinswarm.actors.learning.learner import Learner
 from kinswarm.actors.runfile import learner_settings, task_of
@@ -34,8 +33,8 @@ from kinswarm.actors.tasks.base import StepView
 from kinswarm.protocol.messages import Bye, Checkpoint, Cmd, Down, Fault, Obs, Readings, Stop, Task, Up
 from kinswarm.protocol.topology import Topology
 
-from .geometry import geometry_of
 from .memory import Memory
+from .passes import AgentStep, Begun, visible_actions
 from .standin import StandIn, WakeGuard
 from .trace import StepTrace
 
@@ -50,15 +49,10 @@ def agent_seed(seed: int, agent: str) -> list[int]:
 @dataclass
 class _Step:
     key: Key
-    frame: tuple[float, ...]  # frames, goals and tips of the robot's kind (geometry.py)
-    end: tuple[float, ...]
-    q: float
-    goal: tuple[float, ...]
-    reward: float | None
+    begun: Begun  # frame, link end, reading, goal, r(t-1), context (passes.py)
     waiting: frozenset[str]  # the live agents whose `up` this step needs: children, or adopted ones' children
     tips: dict[str, tuple[float, ...]]  # end effectors of adopted leaves, computed here
     ups: dict[str, Up] = field(default_factory=dict)  # by sender
-    sense: Readings = field(default_factory=dict)  # my Obs.sense over the context from above
 
 
 class Agent:
@@ -67,27 +61,22 @@ class Agent:
         default its own."""
         self.cfg, self.topo, self.node, self.id = cfg, topo, node, agent_id
         self.spec = topo.agents[agent_id]
-        self.geom = geometry_of(topo)
         self.keys = node.keys
         self._root_len = len(node.keys.root) + 1
         self.is_root = self.spec.parent is None
-        # The paper's neighbourhood: an agent sees the agents one level below it (its DOF children).
-        self.visible = [c for c in self.spec.children if topo.agents[c].has_dof]
-        self.leaves = topo.subtree_leaves(agent_id)
         task = task_of(cfg)
         self.learner: Learner | None = None
-        self.n_task_vars = len(task.state_variables(agent_id))
-        self.extra_names: tuple[str, ...] = ()  # the learner's own extra variables, after the task's
+        settings = None
         if self.spec.has_dof:
             settings = learner_settings(task, cfg.learner, cfg.source)[agent_id]
-            self.learner = learner or Learner(settings, len(self.visible), agent_seed(cfg.seed, agent_id))
-            self.extra_names = tuple(v.name for v in settings.extra_state[self.n_task_vars :])
-        self.unsigned_g3 = self.learner is not None and self.learner.settings.g3 == "unsigned"
-        self.state_kind = "" if self.learner is None else self.learner.settings.state
+            n_visible = sum(topo.agents[c].has_dof for c in self.spec.children)
+            self.learner = learner or Learner(settings, n_visible, agent_seed(cfg.seed, agent_id))
+        self.passes = AgentStep(topo, agent_id, task, self.learner.settings if self.learner else None, cfg.action_rad)
+        self.geom, self.visible = self.passes.geom, self.passes.visible
         self.trace = None  # what it saw and chose, for the recording (run.record_agents)
         if cfg.record_agents and self.learner is not None:
             self.trace = StepTrace(agent_id, self.learner.settings.state_names)
-        self.task = task.agent(agent_id, self.learner.settings if self.learner else None)
+        self.task = self.passes.task
         self.memory = Memory(self)
         self.standin = StandIn(self)
         self.waking = WakeGuard(node, cfg.lease_ms / 1000)
@@ -256,34 +245,11 @@ class Agent:
             self.learner.resync(step)  # a missed step: no TD update across the gap
         self.standin.announce(adopted)
 
-        children: dict[str, tuple[tuple[float, ...], float | None, Readings]] = {}
-        if isinstance(head, Task):  # the root: the world's base; its task turns the observation into the reward
-            h = self.task.head(head)
-            base, goal, reward, context, children = self.topo.base, h.goal, h.reward, {}, dict(h.children)
-        else:
-            base, goal, reward, context = head.base, head.goal, head.reward, head.sense
-        frame = self.geom.joint_frame(self.spec, base, q.get(self.id, 0.0))
-        end = self.geom.link_end(self.spec, frame)
+        begun = self.passes.begin(head, q.get(self.id, 0.0), own)
         tips: dict[str, tuple[float, ...]] = {}
-        for child, child_base in self.standin.frames_below(self.id, end, q, tips):
-            c_goal, c_reward, c_context = children.get(child, (goal, reward, context))
-            self.node.send(
-                self.keys.down(child),
-                Down(epoch=epoch, step=step, base=child_base, goal=c_goal, reward=c_reward, sense=c_context),
-            )
-        sense = {**context, **own}
-        self.current = _Step(
-            key,
-            frame,
-            end,
-            q.get(self.id, 0.0),
-            goal,
-            reward,
-            frozenset(waiting),
-            tips,
-            self.ups_early.pop(key, {}),
-            sense,
-        )
+        for child, child_base in self.standin.frames_below(self.id, begun.end, q, tips):
+            self.node.send(self.keys.down(child), self.passes.down(begun, child, epoch, step, child_base))
+        self.current = _Step(key, begun, frozenset(waiting), tips, self.ups_early.pop(key, {}))
         self.ups_early = {kk: v for kk, v in self.ups_early.items() if kk > key}
         self._try_finish()
 
@@ -309,20 +275,12 @@ class Agent:
             return
         self.current = None
         epoch, step = cur.key
-        if self.spec.is_leaf:
-            tips = {self.id: self.geom.tip(self.spec, cur.end)}
-        else:
-            tips = dict(cur.tips)
-            for c in cur.waiting:
-                tips.update(cur.ups[c].tips)
         d = self.decided
         last = d[1] if d is not None and d[0] == (epoch, step - 1) else None
-        tip = self.geom.centroid([tips[leaf] for leaf in self.leaves if leaf in tips])
         ups = {c: cur.ups[c] for c in cur.waiting}
-        view = StepView(epoch, step, cur.frame, cur.end, tip, cur.goal, cur.sense, ups, last, cur.q)
+        tips, view = self.passes.finish(cur.begun, epoch, step, ups, last, cur.tips)
         if not self.is_root:  # first: the parent's state needs only the tips (and the task's aggregate)
-            up = Up(epoch=epoch, step=step, tips=tips, action=-1 if last is None else last, sense=self.task.up(view))
-            self.node.send(self.keys.up(self.spec.parent), up)  # type: ignore[arg-type]
+            self.node.send(self.keys.up(self.spec.parent), self.passes.up(view, tips))  # type: ignore[arg-type]
         if self.learner is None:
             self._finished(cur)
         else:  # a fleet's robots' ups leave first, all of them (Node.after_sending): then each robot learns
@@ -331,17 +289,9 @@ class Agent:
     def _learn(self, cur: _Step, view: StepView, tips: dict[str, tuple[float, ...]]) -> None:
         """The rest of the step once `up` has left: the state S_i, the TD update, a(t), and `cmd`."""
         assert self.learner is not None
-        epoch, step, tip = view.epoch, view.step, view.tip
+        epoch, step = view.epoch, view.step
         self._observe(cur)
-        s = self.geom.state(self.spec, cur.frame, cur.q, tip, cur.goal, self.unsigned_g3, self.state_kind)
-        values = self.task.state(view)
-        if self.extra_names:  # the learner's own extra variables: from my geometry, else from my readings
-            local = {**cur.sense, **self.geom.extras(self.extra_names, cur.frame, tip, cur.goal)}
-            values += [local.get(n, 0.0) for n in self.extra_names]
-        if values:
-            s = np.concatenate([s, values])
-        reward = self.task.reward(view, cur.reward)
-        avoid = self.task.avoid(view)
+        s, reward, avoid, scale = self.passes.decide_from(cur.begun, view)
         action = self.learner.decide(s, reward, learn=self.cfg.learn, explore=self.cfg.explore, avoid=avoid)
         self.decided = (cur.key, action)
         if self.trace is not None:
@@ -361,11 +311,7 @@ class Agent:
                 self.keys.up(self.spec.parent),  # type: ignore[arg-type]
                 Up(epoch=epoch, step=self.cfg.steps, tips=tips, action=action),
             )
-        delta = (action - 1) * self.cfg.action_rad  # actions 0, 1, 2: decrease, keep, increase
-        scale = self.task.scale(view)
-        if scale != 1.0:
-            delta *= scale
-        self.node.send(self.keys.cmd(self.id), Cmd(epoch=epoch, step=step, delta=delta))
+        self.node.send(self.keys.cmd(self.id), Cmd(epoch=epoch, step=step, delta=self.passes.delta(action, scale)))
         self._finished(cur)
 
     def _finished(self, cur: _Step) -> None:
@@ -380,7 +326,7 @@ class Agent:
         epoch, step = cur.key
         if obs is None or obs[0] != (epoch, step - 1):
             return  # none awaited: the epoch's first step, or after a gap (_try_begin resynced the learner)
-        acts = [1 if c in obs[1] else (cur.ups[c].action if c in cur.ups else -1) for c in self.visible]
+        acts = visible_actions(self.visible, {c: m.action for c, m in cur.ups.items()}, obs[1])
         self._observed(acts, step)
 
     def _observed(self, acts: list[int], step: int) -> None:
@@ -404,4 +350,4 @@ class Agent:
             return
         self.observing = None
         del self.closing[obs[0]]
-        self._observed([1 if c in obs[1] else acts[c] for c in self.visible], obs[0][1] + 1)
+        self._observed(visible_actions(self.visible, acts, obs[1]), obs[0][1] + 1)

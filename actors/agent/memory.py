@@ -4,13 +4,32 @@ checkpoints (`--from`), and a restart's resume from this run's newest good one (
 from __future__ import annotations
 
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from kinswarm.actors.checkpoint import CheckpointError, digest, load_checkpoint, load_latest, save_checkpoint
 from kinswarm.protocol.messages import Checkpoint, Event, Saved
 
 if TYPE_CHECKING:
     from .actor import Agent
+
+
+def checkpoint_meta(agent: str, topology: str, epochs_before: int, epoch: int, seed: int) -> dict:
+    """What a checkpoint records beside the learned arrays."""
+    return {
+        "agent": agent,
+        "topology": topology,
+        "epochs_trained": epochs_before + epoch + 1,
+        "epochs_before": epochs_before,
+        "run_epoch": epoch,
+        "seed": seed,
+    }
+
+
+def restore_learner(learner: Any, path: Path, agent: str) -> int:
+    """A previous run's checkpoint into `learner` (`--from`): the epochs it was trained, for the lr schedule."""
+    arrays, meta = load_checkpoint(path, agent=agent)
+    learner.load_state_dict(arrays)
+    return int(meta.get("epochs_trained", 0))
 
 
 class Memory:
@@ -24,9 +43,7 @@ class Memory:
         a = self.agent
         if a.learner is None:
             return
-        arrays, meta = load_checkpoint(directory / f"{a.id}.npz", agent=a.id)
-        a.learner.load_state_dict(arrays)
-        self.epochs_before = int(meta.get("epochs_trained", 0))
+        self.epochs_before = restore_learner(a.learner, directory / f"{a.id}.npz", a.id)
 
     def resume(self, directory: Path) -> None:
         """A restart: the learned state of this run's newest good checkpoint (else the one before it);
@@ -65,18 +82,8 @@ class Memory:
         error = ""
         if a.learner is not None:
             try:
-                save_checkpoint(
-                    path,
-                    a.learner.state_dict(),
-                    {
-                        "agent": a.id,
-                        "topology": a.topo.name,
-                        "epochs_trained": self.epochs_before + m.epoch + 1,
-                        "epochs_before": self.epochs_before,
-                        "run_epoch": m.epoch,
-                        "seed": a.cfg.seed,
-                    },
-                )
+                meta = checkpoint_meta(a.id, a.topo.name, self.epochs_before, m.epoch, a.cfg.seed)
+                save_checkpoint(path, a.learner.state_dict(), meta)
             except OSError as e:
                 error = f"cannot write {path}: {e}"
                 a.node.log.error(error)

@@ -12,9 +12,28 @@ from typing import TYPE_CHECKING
 from kinswarm.protocol.messages import Checkpoint, EpochDone, EpochStart, JointStatus, Saved
 
 if TYPE_CHECKING:
+    from kinswarm.actors.config import RunConfig
+    from kinswarm.actors.tasks.base import TaskDef
+
     from .core import Supervisor
 
 log = logging.getLogger("kinswarm.supervisor")
+
+
+def epoch_start(cfg: RunConfig, task: TaskDef, epoch: int) -> EpochStart:
+    """The epoch's start: its goal, and each step's when the task's goal moves."""
+    if cfg.fleet > 1 and cfg.fleet_goals == "spread":  # robot b: the task's epoch e*B + b
+        goals = [task.goal(epoch * cfg.fleet + b, cfg.steps)[0] for b in range(cfg.fleet)]  # not moving (runfile)
+        starts = [task.start(epoch * cfg.fleet + b) for b in range(cfg.fleet)]
+        return EpochStart(epoch=epoch, steps=cfg.steps, goal=goals[0], start=starts[0], goals=goals, starts=starts)
+    goal, path = task.goal(epoch, cfg.steps)
+    return EpochStart(epoch=epoch, steps=cfg.steps, goal=goal, path=path, start=task.start(epoch))
+
+
+def checkpoint_due(cfg: RunConfig, epoch: int) -> bool:
+    """The learners checkpoint after this epoch: the last, and every `checkpoint_every`."""
+    every = cfg.checkpoint_every
+    return cfg.learn and (epoch == cfg.epochs - 1 or bool(every and (epoch + 1) % every == 0))
 
 
 class EpochLoop:
@@ -39,21 +58,11 @@ class EpochLoop:
             done = await self.run_epoch(epoch)
             sup.result.epochs.append(done)
             sup.recorder.epoch(done)
-            last = epoch == cfg.epochs - 1
-            every = cfg.checkpoint_every
-            if sup.agents and cfg.learn and (last or (every and (epoch + 1) % every == 0)):
+            if sup.agents and checkpoint_due(cfg, epoch):
                 await self.checkpoint(epoch)
 
     def epoch_start(self, epoch: int) -> EpochStart:
-        """The epoch's start: its goal, and each step's when the task's goal moves."""
-        cfg, task = self.sup.cfg, self.sup.task
-        if cfg.fleet > 1 and cfg.fleet_goals == "spread":  # robot b: the task's epoch e*B + b
-            goals = [task.goal(epoch * cfg.fleet + b, cfg.steps)[0] for b in range(cfg.fleet)]  # not moving (runfile)
-            starts = [task.start(epoch * cfg.fleet + b) for b in range(cfg.fleet)]
-            return EpochStart(epoch=epoch, steps=cfg.steps, goal=goals[0], start=starts[0], goals=goals, starts=starts)
-        goal, path = task.goal(epoch, cfg.steps)
-        start = task.start(epoch)
-        return EpochStart(epoch=epoch, steps=cfg.steps, goal=goal, path=path, start=start)
+        return epoch_start(self.sup.cfg, self.sup.task, epoch)
 
     async def run_epoch(self, epoch: int) -> EpochDone:
         from .core import NoMessage

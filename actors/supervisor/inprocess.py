@@ -1,0 +1,170 @@
+"""The `inprocess` placement: the whole run as one plain loop over the step library — no actors, no messages, no
+Zenoh. Each step the robot (sim/robot.py) gives the encoder readings and the root's task observation, the agents'
+top-down and bottom-up passes run in the topology's order (actors/agent/passes.py), every agent with a joint learns
+and decides, and the robot moves. It computes what the other placements compute, in the same order per agent, so a
+run gives the same `final_error` lists, metrics and records as they do for the same seed; it is the fastest way to
+run an experiment that needs no messages.
+
+What has no meaning without processes and messages is refused before the run starts (actors/runfile.py): process
+and link faults (kill, freeze, drop, ...), fleets, the model-based controllers and several hosts. Joint and model
+faults from the run's scenario apply as in the simulator actor.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+from kinswarm.actors.agent.actor import agent_seed
+from kinswarm.actors.agent.memory import checkpoint_meta, restore_learner
+from kinswarm.actors.agent.passes import AgentStep, visible_actions
+from kinswarm.actors.agent.trace import StepTrace
+from kinswarm.actors.checkpoint import save_checkpoint
+from kinswarm.actors.config import RunConfig
+from kinswarm.actors.learning.learner import Learner
+from kinswarm.actors.runfile import learner_settings, task_of
+from kinswarm.actors.scenario import load_scenario
+from kinswarm.protocol.messages import EpochDone, Up
+from kinswarm.protocol.topology import Topology
+from kinswarm.sim.robot import Robot
+
+from .core import RunResult
+from .epochs import checkpoint_due, epoch_start
+from .recorder import Recorder
+
+log = logging.getLogger("kinswarm.inprocess")
+
+
+class InProcessRun:
+    """One run's agents and robot, stepped in a plain loop (`run`), or one epoch at a time (`epoch`)."""
+
+    def __init__(self, cfg: RunConfig, topo: Topology) -> None:
+        self.cfg, self.topo = cfg, topo
+        self.task = task_of(cfg)
+        settings = learner_settings(self.task, cfg.learner, cfg.source)
+        self.order = list(topo.order)  # top-down: every parent before its children
+        self.agents = {a: AgentStep(topo, a, self.task, settings.get(a), cfg.action_rad) for a in self.order}
+        self.learners = {
+            a: Learner(settings[a], len(self.agents[a].visible), agent_seed(cfg.seed, a)) for a in topo.dof_agents
+        }
+        self.epochs_before = dict.fromkeys(self.learners, 0)
+        if cfg.from_dir:
+            for a, learner in self.learners.items():
+                self.epochs_before[a] = restore_learner(learner, Path(cfg.from_dir) / "agents" / f"{a}.npz", a)
+        self.traces = (
+            {a: StepTrace(a, learner.settings.state_names) for a, learner in self.learners.items()}
+            if cfg.record_agents
+            else {}
+        )
+        scenario = load_scenario(cfg.scenario, topo) if cfg.scenario else None
+        self.robot = Robot(topo, cfg.scene_spec, cfg.action_rad, cfg.seed, scenario)
+        self.first = [a for a in topo.dof_agents if a == topo.root]  # sensed in the sim actor's order
+        self.after = [a for a in topo.dof_agents if a != topo.root]
+        self.deciders = [a for a in reversed(self.order) if a in self.learners]  # leaves first, as the up pass
+
+    def close(self) -> None:
+        self.robot.close()
+
+    def epoch(self, epoch: int, on_event: Callable[[int, int, str, str, str], None]) -> EpochDone:
+        """Run epoch `epoch` to its end; `on_event(epoch, step, event, target, detail)` gets the robot's events."""
+        cfg, robot, agents, learners = self.cfg, self.robot, self.agents, self.learners
+        e = epoch_start(cfg, self.task, epoch)
+        warning = robot.start(e.goal, e.path, e.start, keep_pose=cfg.successive and epoch > 0)
+        if warning:  # a start pose this robot cannot take: its home instead, said once
+            log.warning("epoch %d: %s", epoch, warning)
+        for a in self.order:
+            agents[a].task.start_epoch()
+        for a, learner in learners.items():
+            learner.start_epoch(self.epochs_before[a] + epoch, t=0)
+        learn, explore = cfg.learn, cfg.explore
+        started = time.perf_counter()
+        longest = 0.0
+        last: dict[str, int] = {}  # each agent's action at the step before
+        for t in range(cfg.steps):
+            step_started = time.perf_counter()
+            joint, _ = robot.due(epoch)  # the others were refused before the run (actors/runfile.py)
+            for f in joint:
+                for event in robot.apply_fault(f)[0]:
+                    on_event(epoch, t, *event)
+            q = robot.readings()
+            sense = {a: robot.scene.agent_sense(a) for a in self.first}
+            head = robot.task(epoch)
+            sense.update((a, robot.scene.agent_sense(a)) for a in self.after)
+            begun = {}
+            for a in self.order:  # the top-down pass
+                st = agents[a]
+                if not st.is_root:
+                    parent = begun[st.spec.parent]
+                    head = agents[st.spec.parent].down(parent, a, epoch, t, parent.end)
+                begun[a] = st.begin(head, q.get(a, 0.0), sense.get(a, {}))
+            ups: dict[str, Up] = {}
+            views = {}
+            for a in reversed(self.order):  # the bottom-up pass
+                st = agents[a]
+                children = {c: ups[c] for c in st.spec.children}
+                tips, views[a] = st.finish(begun[a], epoch, t, children, last.get(a))
+                if not st.is_root:
+                    ups[a] = st.up(views[a], tips)
+            cmds, now = {}, {}
+            for a in self.deciders:  # each joint's learner: the children's actions of t-1, then a(t)
+                st, learner = agents[a], learners[a]
+                if st.visible and t > 0:
+                    self._observe(learner, visible_actions(st.visible, last), t)
+                s, reward, avoid, scale = st.decide_from(begun[a], views[a])
+                action = learner.decide(s, reward, learn=learn, explore=explore, avoid=avoid)
+                if a in self.traces:
+                    self.traces[a].add(epoch, t, s, action, learner.E, learner.P)
+                if not st.visible:
+                    learner.observe([], learn=learn)
+                cmds[a] = robot.clip(st.delta(action, scale))
+                now[a] = action
+            last = now
+            for event in robot.move(cmds):
+                on_event(epoch, robot.t, *event)
+            longest = max(longest, time.perf_counter() - step_started)
+        for a in self.deciders:  # the epoch's last step: the children's closing actions
+            if agents[a].visible:
+                self._observe(learners[a], visible_actions(agents[a].visible, last), cfg.steps)
+        return robot.done(epoch, cfg.steps, 0, time.perf_counter() - started, longest)
+
+    def _observe(self, learner: Learner, acts: list[int], step: int) -> None:
+        if all(0 <= b < learner.n_actions for b in acts):
+            learner.observe(acts, learn=self.cfg.learn)
+        else:
+            learner.resync(step)
+
+    def checkpoint(self, epoch: int) -> None:
+        """Every learner's state into the run's `agents/`, as the agents write it."""
+        directory = Path(self.cfg.out) / "agents"
+        for a, learner in self.learners.items():
+            meta = checkpoint_meta(a, self.topo.name, self.epochs_before[a], epoch, self.cfg.seed)
+            save_checkpoint(directory / f"{a}.npz", learner.state_dict(), meta)
+
+    def run(self, recorder: Recorder, on_epoch: Callable[[EpochDone], None] | None = None) -> RunResult:
+        """Every epoch of the run, recorded as the supervisor records a swarm's; Ctrl-C ends it after the rows
+        written so far."""
+        t0 = time.perf_counter()
+        result = RunResult(restarts=dict.fromkeys(self.learners, 0))
+        recorder.open_events()
+        recorder.open_metrics()
+        try:
+            for epoch in range(self.cfg.epochs):
+                done = self.epoch(epoch, recorder.event)
+                result.epochs.append(done)
+                recorder.epoch(done)
+                for trace in self.traces.values():
+                    recorder.agent(trace.take())
+                if on_epoch is not None:
+                    on_epoch(done)
+                if self.learners and checkpoint_due(self.cfg, epoch):
+                    self.checkpoint(epoch)
+        except KeyboardInterrupt:
+            result.interrupted = True
+            log.warning("interrupted: the run stops after %d epochs", len(result.epochs))
+        finally:
+            recorder.close()
+            self.close()
+        result.wall_seconds = time.perf_counter() - t0
+        return result
