@@ -196,7 +196,7 @@ def reading_note(run_dir: Path, what: str) -> str | None:
     (ConfigError) when it holds no epoch to read, and why; a note when what it reads is not the whole run (still
     running, or ended without its summary); None for a run that ended as runs end."""
     s = run_state(run_dir)
-    if s.live:
+    if s.live and s.summary is None:  # (with its summary written, a run holds its lock only to draw its plots)
         if not s.epochs:
             raise ConfigError(f"run {s.run_id} is still running and has not finished its first epoch: no {what} yet")
         done = f"{len(s.epochs)} of {s.planned} epochs done"
