@@ -14,6 +14,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+import zenoh
 from kinswarm.actors.checkpoint import CheckpointError
 from kinswarm.actors.cli_parser import build_parser, joined, sets_of
 from kinswarm.actors.config import ConfigError, RunConfig
@@ -23,6 +24,7 @@ from kinswarm.actors.report import error_line
 from kinswarm.actors.rundir import check_dir, failed_start, reading_note, run_state
 from kinswarm.actors.runfile import load_run
 from kinswarm.actors.runtime import setup_logging
+from kinswarm.actors.runtime.net import zenoh_reason
 from kinswarm.protocol.faults import describe
 from kinswarm.protocol.spec import SpecError
 from kinswarm.protocol.topology import Topology
@@ -260,6 +262,9 @@ def _main(argv: list[str] | None) -> int:
             summary = run_swarm(cfg, topo, progress=not a.no_progress and sys.stderr.isatty(), view=a.view)
     except (SpecError, ConfigError, CheckpointError, ScenarioError, ControlError, ValueError, DeployError) as e:
         print(f"kinswarm: error: {e}", file=sys.stderr)
+        return 2
+    except zenoh.ZError as e:  # a session a tool opens (router, down, a follower's fetch): Zenoh's words, one line
+        print(f"kinswarm: error: {zenoh_reason(e)}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("kinswarm: interrupted", file=sys.stderr)

@@ -259,6 +259,12 @@ def test_a_supervisor_that_does_not_answer_is_one_line_without_rust_paths(tmp_pa
     one_line_error(capsys, f"cannot reach run r at tcp/127.0.0.1:{port}: nothing answers at tcp/127.0.0.1:{port}")
 
 
+@pytest.mark.timeout(60)
+def test_a_router_on_a_taken_port_is_one_line(capsys, busy_port):
+    assert cli(["router", "--listen", f"tcp/127.0.0.1:{busy_port}"]) == 2
+    one_line_error(capsys, f"tcp/127.0.0.1:{busy_port} is taken")
+
+
 def test_zenoh_errors_in_a_users_words():
     at = " at /root/.cargo/git/checkouts/zenoh-9c599d5ef3e0480e/cc83980/io/zenoh-links/src/unicast.rs:338."
     bound = f"Can not create a new TCP listener bound to tcp/127.0.0.1:9: [127.0.0.1:9: Address already in use{at}]"
