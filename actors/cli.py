@@ -14,15 +14,17 @@ import time
 from pathlib import Path
 from typing import Any
 
+import zenoh
 from kinswarm.actors.checkpoint import CheckpointError
 from kinswarm.actors.cli_parser import build_parser, joined, sets_of
 from kinswarm.actors.config import ConfigError, RunConfig
 from kinswarm.actors.launch import run_swarm
 from kinswarm.actors.plan import Plan, PlanError, load_plan
 from kinswarm.actors.report import error_line
-from kinswarm.actors.rundir import check_dir
+from kinswarm.actors.rundir import check_dir, failed_start, reading_note, run_state
 from kinswarm.actors.runfile import load_run
 from kinswarm.actors.runtime import setup_logging
+from kinswarm.actors.runtime.net import zenoh_reason
 from kinswarm.protocol.faults import describe
 from kinswarm.protocol.spec import SpecError
 from kinswarm.protocol.topology import Topology
@@ -91,7 +93,15 @@ def _resolve(a: argparse.Namespace, controller: str | None) -> tuple[RunConfig, 
 
 
 def _control(a: argparse.Namespace) -> int:
-    from kinswarm.actors.control import Client, make_fault, parse_duration, run_config, show_status, tool_net
+    from kinswarm.actors.control import (
+        Client,
+        ControlError,
+        make_fault,
+        parse_duration,
+        run_config,
+        show_status,
+        tool_net,
+    )
 
     f = None
     if a.command == "fault":  # the fault first: what is wrong with it needs no run to say
@@ -109,6 +119,15 @@ def _control(a: argparse.Namespace) -> int:
         )
     cfg = run_config(a.run_id, a.run_dir)
     run_dir = a.run_dir or Path("runs") / a.run_id
+    state = run_state(run_dir)
+    if f is not None and state.summary is not None:  # said at once: no supervisor is there to ask
+        raise ControlError(f"run {a.run_id} {state.how} at {state.when}; nothing to fault")
+    if state.summary is None and not state.live and a.connect is None:  # its lock is free: no process runs it here
+        why = "its start failed" if failed_start(run_dir) else "it was killed"
+        raise ControlError(
+            f"run {a.run_id} is not running ({why}: nothing holds {run_dir / '.lock'} and it has no summary); "
+            "for a run on another host pass --connect ENDPOINT"
+        )
     connect = tool_net(run_dir, cfg, a.connect)
     if f is None:
         asyncio.run(show_status(cfg, connect, a.watch, run_dir))
@@ -149,13 +168,15 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _view(a: argparse.Namespace) -> int:
-    from kinswarm.actors.recording import open_stream, record_run, rerun_module
+    from kinswarm.actors.recording import open_stream, record_run, rerun_module, shown_epochs
 
     rerun_module()
-    if not (a.run_dir / "config.json").is_file():
-        raise ConfigError(f"{a.run_dir}: not a run directory (no config.json)")
+    note = reading_note(a.run_dir, "recording")
+    if not shown_epochs(a.run_dir):  # before a file is written or a viewer opened: never an empty recording
+        raise ConfigError(f"{a.run_dir}: no epoch with both its metrics and its poses recorded: nothing to show")
     if a.save is not None and not a.save.parent.is_dir():
         raise ConfigError(f"--save {a.save}: no such directory {a.save.parent}")
+    _note(note)
     run_id = a.run_dir.resolve().name
     stream = open_stream(run_id, save=a.save, web=a.web)
     epochs = record_run(a.run_dir, stream)
@@ -168,6 +189,12 @@ def _view(a: argparse.Namespace) -> int:
 
         serve_until_interrupted()
     return 0
+
+
+def _note(note: str | None) -> None:
+    """A reader's note on a run it reads only part of (still running, or ended without its summary)."""
+    if note:
+        print(f"kinswarm: {note}", file=sys.stderr)
 
 
 def _epoch_list(text: str | None) -> list[int] | None:
@@ -196,8 +223,7 @@ def _main(argv: list[str] | None) -> int:
         if a.command == "report":
             from kinswarm.actors.report import torn_rows, write_plots
 
-            if not (a.run_dir / "config.json").is_file():
-                raise ConfigError(f"{a.run_dir}: not a run directory (no config.json)")
+            _note(reading_note(a.run_dir, "report"))
             for line in torn_rows(a.run_dir):
                 print(f"kinswarm: {line}", file=sys.stderr)
             for path in write_plots(a.run_dir, log=a.log):
@@ -206,8 +232,7 @@ def _main(argv: list[str] | None) -> int:
         if a.command == "animate":
             from kinswarm.actors.animate import write_animation
 
-            if not (a.run_dir / "config.json").is_file():
-                raise ConfigError(f"{a.run_dir}: not a run directory (no config.json)")
+            _note(reading_note(a.run_dir, "animation"))
             print(write_animation(a.run_dir, _epoch_list(a.epochs), a.out))
             return 0
         if a.command == "view":
@@ -235,6 +260,9 @@ def _main(argv: list[str] | None) -> int:
             summary = run_swarm(cfg, topo, progress=not a.no_progress and sys.stderr.isatty(), view=a.view)
     except (SpecError, ConfigError, CheckpointError, ScenarioError, ControlError, ValueError, DeployError) as e:
         print(f"kinswarm: error: {e}", file=sys.stderr)
+        return 2
+    except zenoh.ZError as e:  # a session a tool opens (router, down, a follower's fetch): Zenoh's words, one line
+        print(f"kinswarm: error: {zenoh_reason(e)}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("kinswarm: interrupted", file=sys.stderr)

@@ -17,6 +17,7 @@ from pathlib import Path
 
 from kinswarm.actors.config import ConfigError, RunConfig, load_run_config
 from kinswarm.actors.runtime import NetSpec, Node, open_session
+from kinswarm.actors.runtime.net import zenoh_reason
 from kinswarm.protocol.faults import check_fault
 from kinswarm.protocol.keys import Keys
 from kinswarm.protocol.messages import Fault, FaultReply, JointStatus, SwarmStatus
@@ -67,7 +68,7 @@ class Client:
         try:
             self.session = open_session(self.net)
         except Exception as e:
-            raise ControlError(f"cannot reach {self.connect}: {e}") from None
+            raise ControlError(f"cannot reach run {self.cfg.run_id} at {self.connect}: {zenoh_reason(e)}") from None
         self.node = Node(self.session, Keys(self.cfg.run_id), "cli", f"cli-{os.getpid()}", self.cfg.key)
         return self
 

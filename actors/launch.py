@@ -15,11 +15,12 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from kinswarm.actors.config import ConfigError, RunConfig
-from kinswarm.actors.plan import Plan, local_plan
-from kinswarm.actors.rundir import claim
+from kinswarm.actors.config import ENDPOINT, ConfigError, RunConfig
+from kinswarm.actors.plan import Plan, PlanError, local_plan
+from kinswarm.actors.rundir import Claim, claim
 from kinswarm.actors.runfile import write_resolved
 from kinswarm.actors.runtime import NetSpec, open_session
+from kinswarm.actors.runtime.net import zenoh_reason
 from kinswarm.protocol.messages import EpochDone
 from kinswarm.protocol.topology import Topology
 
@@ -70,6 +71,7 @@ async def _supervise(
     progress: bool,
     plan: Plan,
     host: str,
+    claimed: Claim,
     wait_s: float = 600.0,
     view: str | None = None,
 ) -> dict:
@@ -86,7 +88,7 @@ async def _supervise(
         where = ", ".join(spec.listen) or ", ".join(spec.connect)
         hint = "pass --listen tcp/127.0.0.1:PORT" if plan.name == "local" else "check the plan's endpoints"
         raise ConfigError(
-            f"cannot open the supervisor's session on {where} ({e}); is another run using it? {hint}"
+            f"cannot open the supervisor's session on {where} ({zenoh_reason(e)}); is another run using it? {hint}"
         ) from None
     write_net(out / "net" / "cli.json", control_net(plan, host, topo))  # for `kinswarm fault/status`
 
@@ -94,15 +96,19 @@ async def _supervise(
         identity = plan.identity(role, ident, host)
         return write_net(out / "net" / f"{identity}.json", plan.net(host, identity, supervisor=False, topo=topo))
 
-    on_epoch, close_watchers = _watchers(cfg, progress and lead, view if lead else None)
-
-    placement: ProcessPlacement | SinglePlacement
-    if cfg.placement == "single":
-        placement = SinglePlacement(cfg, topo, session)
-    else:
-        placement = ProcessPlacement(out / "config.json", nets, out / "logs", supervisor=sup_id)
-    sup = Supervisor(cfg, topo, session, placement, on_epoch=on_epoch, plan=plan, host=host)
-    sup.hosts_wait_s = wait_s
+    with contextlib.ExitStack() as undo:  # until the run begins, a failure leaves nothing of it (its port free again)
+        undo.callback(session.close)
+        on_epoch, close_watchers = _watchers(cfg, progress and lead, view if lead else None)
+        undo.callback(close_watchers)
+        placement: ProcessPlacement | SinglePlacement
+        if cfg.placement == "single":
+            placement = SinglePlacement(cfg, topo, session)
+        else:
+            placement = ProcessPlacement(out / "config.json", nets, out / "logs", supervisor=sup_id)
+        sup = Supervisor(cfg, topo, session, placement, on_epoch=on_epoch, plan=plan, host=host)
+        sup.hosts_wait_s = wait_s
+        undo.pop_all()
+    claimed.begin()  # from here on the run directory is the run's, however it ends
     with _signals_stop_once():
         try:
             result = await sup.run()
@@ -224,11 +230,28 @@ def run_swarm(
     plan = plan if plan is not None else local_plan(cfg.listen, cfg.lease_ms)
     host = host if host is not None else plan.leader
     out = Path(cfg.out)
-    with claim(out):  # one run, once: refused before anything is written or spawned
+    check_start(plan, topo)
+    with claim(out) as claimed:  # one run, once: refused before anything is written or spawned
         cfg.write(out / "config.json")
         if host == plan.leader:
             write_resolved(cfg, out / "run.toml")
             (out / "metrics.jsonl").write_text("")
         if cfg.placement == "inprocess":
+            claimed.begin()  # nothing to open: the run begins here
             return _run_inprocess(cfg, topo, progress, view)
-        return asyncio.run(_supervise(cfg, topo, progress, plan, host, wait_s, view))
+        return asyncio.run(_supervise(cfg, topo, progress, plan, host, claimed, wait_s, view))
+
+
+def check_start(plan: Plan, topo: Topology) -> None:
+    """What would fail a start, said before the run directory is touched: every actor placed once, and no
+    supervisor on port 0 (the system would pick a port nobody else knows: the actors and the other hosts are
+    told the endpoint as written)."""
+    plan.placement(topo)
+    for name, h in plan.hosts.items():
+        m = ENDPOINT.fullmatch(h.listen)
+        if m is None or int(m.group(3)) != 0:
+            continue
+        why = "port 0 lets the system pick a port the actors cannot know: give a free port"
+        if plan.name == "local" and plan.source == "(local)":
+            raise ConfigError(f"--listen {h.listen}: {why}, e.g. --listen tcp/127.0.0.1:7448")
+        raise PlanError(plan.source, f"host {name}.listen", f"{h.listen}: {why}")

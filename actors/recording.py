@@ -220,6 +220,16 @@ def record_run(run_dir: Path, stream: Any) -> int:
     return done
 
 
+def shown_epochs(run_dir: Path) -> list[int]:
+    """The epochs `record_run` shows: those with both a metrics row and their poses."""
+    from kinswarm.actors.animate import read_poses
+
+    poses = read_poses(run_dir)
+    if not poses or not (run_dir / "metrics.jsonl").exists():
+        return []
+    return [r["epoch"] for r in read_metrics(run_dir) if r.get("epoch") in poses]
+
+
 def read_agent_rows(run_dir: Path) -> dict[int, list[dict[str, Any]]]:
     """agents.jsonl (run.record_agents) by epoch; {} for a run that did not record its agents."""
     path = run_dir / "agents.jsonl"

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import re
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -105,3 +106,19 @@ def open_session(spec: NetSpec | None = None, **kw: Any) -> zenoh.Session:
         kw = {k: tuple(v) if k in ("listen", "connect") else v for k, v in kw.items()}
         spec = NetSpec(**kw)
     return zenoh.open(zenoh_config(spec))
+
+
+_RUST_AT = re.compile(r"\s*\bat\s+\S+\.rs:\d+\.?")  # where in Zenoh's Rust source an error was raised
+_IN_USE = re.compile(r"bound to (\S+?):? \[.*Address already in use")
+_NO_ANSWER = re.compile(r"Unable to connect to any of \[(?:Single\()?([^)\]]+)")
+
+
+def zenoh_reason(e: BaseException) -> str:
+    """A Zenoh error in one line in a user's words: the common ones said plainly, any other without the Rust source
+    paths Zenoh appends to each of its nested causes."""
+    text = " ".join(_RUST_AT.sub("", str(e)).split())
+    if m := _IN_USE.search(text):
+        return f"{m.group(1)} is taken: another program listens on that port"
+    if m := _NO_ANSWER.search(text):
+        return f"nothing answers at {m.group(1)}"
+    return text or type(e).__name__
