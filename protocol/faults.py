@@ -1,4 +1,4 @@
-"""The fault vocabulary (DESIGN §5) and the one check every fault passes, wherever it comes from
+"""The fault vocabulary (docs/faults.md) and the one check every fault passes, wherever it comes from
 (the `kinswarm fault` CLI, a scenario file, the supervisor receiving a request)."""
 
 from __future__ import annotations

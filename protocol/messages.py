@@ -1,4 +1,4 @@
-"""Typed messages of the step protocol and of supervision (DESIGN §3).
+"""Typed messages of the step protocol and of supervision (docs/architecture.md: the keys, the step).
 
 Every message travels as a msgpack map: the envelope `v` (schema version), `kind`, `run`, `src`,
 then the fields below. Frames and tips are (x, y, heading) in the world frame for a planar robot, 7-float frames

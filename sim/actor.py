@@ -6,7 +6,7 @@ missing command means that joint holds — hands the increments (clipped to the 
 the scene, which moves the robot as it allows, and records the error. At the end of an epoch it publishes
 `metrics/epoch`. What surrounds the robot is the run's scene (sim/scenes/): this file names none.
 
-It is also where joint faults live (DESIGN §5, sim/faults.py): a locked joint ignores its agent, a disturbed one
+It is also where joint faults live (docs/faults.md, sim/faults.py): a locked joint ignores its agent, a disturbed one
 moves at random, a faulty motor or encoder moves or reads wrong; the agents are not told. Faults come live on
 `ctl/fault` or from the run's scenario file; every change is published on `metrics/event`, and the joints' state on
 `metrics/joints`.

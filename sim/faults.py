@@ -1,4 +1,4 @@
-"""The robot's joint faults (DESIGN §5), as the simulator applies them: unknown to the agents, who see only what
+"""The robot's joint faults (docs/faults.md), as the simulator applies them: unknown to the agents, who see only what
 a real robot would show them — a joint that does not move as commanded, an encoder that reads wrong.
 
 - `lock`: the joint holds, whatever its agent commands.

@@ -1,4 +1,4 @@
-"""The arrows point one way (DESIGN §1, §7), checked on the source: `protocol` imports nothing of ours,
+"""The arrows point one way, checked on the source: `protocol` imports nothing of ours,
 `actors/learning` imports only numpy and numba (and itself), `sim` imports no agent, task or learner code, and the
 product imports nothing of `experiments` but the CLI's lazy dispatch. Every import is counted, at module level or
 inside a function: a lazy import is still a dependency."""

@@ -1,4 +1,4 @@
-"""The agent actor: one joint (or a compound agent with no joint) running DESIGN §3's lockstep step (actor.py),
+"""The agent actor: one joint (or a compound agent with no joint) running the lockstep step (actor.py),
 standing in for lost children (standin.py) and keeping its learned state in checkpoints (memory.py)."""
 
 from .actor import Agent, agent_seed

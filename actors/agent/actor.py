@@ -1,4 +1,5 @@
-"""The agent actor: one joint (or a compound agent with no joint) running DESIGN §3's lockstep step.
+"""The agent actor: one joint (or a compound agent with no joint) running the lockstep step
+(docs/architecture.md, "The step").
 
 Step t, as seen by agent i:
   begin   when it holds its encoder reading q_i (sim/obs) and its base frame (the parent's `down`; the root reads

@@ -1,4 +1,4 @@
-"""Re-wiring (DESIGN §5): an agent standing in for lost descendants.
+"""Re-wiring (docs/faults.md): an agent standing in for lost descendants.
 
 When a descendant's liveliness token goes away (killed, frozen, cut off), the nearest live ancestor adopts its
 children: it reads the lost joint's encoder, composes the frames the lost agent would have sent, sends them down and

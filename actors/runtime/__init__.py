@@ -35,7 +35,7 @@ the tree and, where a handler is busy further up, through the mailbox. Measured 
 messages, ~4050 with the matching status kept by a listener rather than asked at every send. A Node's step
 subscriptions hear only other sessions through Zenoh (`allowed_origin=REMOTE`), so nothing arrives twice.
 
-Link faults (DESIGN §5, `Node.apply_fault`): drop, delay, duplicate and corrupt act on a node's step
+Link faults (docs/faults.md, `Node.apply_fault`): drop, delay, duplicate and corrupt act on a node's step
 links only — what it sends and receives under `sim/` and `a/` — never on ctl/, rep/, metrics/, fault/ or
 liveliness, so a faulted swarm stays controllable. With none active, sending and receiving cost one
 attribute check more than without the feature; with some active, received step messages are handed to

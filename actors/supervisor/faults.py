@@ -1,4 +1,4 @@
-"""Fault routing (DESIGN §5): every fault request is checked once, then applied where it lives. Process faults
+"""Fault routing (docs/faults.md): every fault request is checked once, then applied where it lives. Process faults
 (kill, freeze, thaw, restart) by signals to this host's placement, forwarded to the host that owns the others;
 joint faults through the sim and link faults through the targets' runtimes, by forwarding the same message on
 ctl/fault. A freeze with a duration thaws by a timer (a THAW item in the mailbox), not by polling."""

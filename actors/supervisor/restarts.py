@@ -1,4 +1,4 @@
-"""The restart policy (DESIGN §5): an agent that ends is restarted from its newest checkpoint after a backoff (0.1,
+"""The restart policy (docs/faults.md): an agent that ends is restarted from its newest checkpoint after a backoff (0.1,
 0.2, 0.4 ... 2 s), at most `max_restarts` times within `window_s` seconds, else the run fails saying so. A
 `restart` fault respawns at once, outside the budget."""
 
