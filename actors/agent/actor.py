@@ -27,8 +27,8 @@ from typing import Any
 
 import numpy as np
 from kinswarm.actors.config import RunConfig
-from kinswarm.actors.learning.learner import Learner
-from kinswarm.actors.runfile import learner_settings, task_of
+from kinswarm.actors.learning.kinds import JointLearner
+from kinswarm.actors.runfile import kind_of, learner_settings, task_of
 from kinswarm.actors.runtime import Node
 from kinswarm.actors.tasks.base import StepView
 from kinswarm.protocol.messages import Bye, Checkpoint, Cmd, Down, Fault, Obs, Readings, Stop, Task, Up
@@ -75,19 +75,22 @@ class Agent:
         self.visible = [c for c in self.spec.children if topo.agents[c].has_dof]
         self.leaves = topo.subtree_leaves(agent_id)
         task = task_of(cfg)
-        self.learner: Learner | None = None
+        self.learner: JointLearner | None = None
         self.n_task_vars = len(task.state_variables(agent_id))
         self.extra_names: tuple[str, ...] = ()  # the learner's own extra variables, after the task's
+        obs = None  # what S_i holds (the task's)
         if self.spec.has_dof:
             settings = learner_settings(task, cfg.learner, cfg.source)[agent_id]
-            self.learner = learner or Learner(settings, len(self.visible), agent_seed(cfg.seed, agent_id))
-            self.extra_names = tuple(v.name for v in settings.extra_state[self.n_task_vars :])
-        self.unsigned_g3 = self.learner is not None and self.learner.settings.g3 == "unsigned"
-        self.state_kind = "" if self.learner is None else self.learner.settings.state
+            obs = settings.observation
+            seed = agent_seed(cfg.seed, agent_id)
+            self.learner = learner or kind_of(cfg.learner, cfg.source).build(settings, len(self.visible), seed)
+            self.extra_names = tuple(v.name for v in obs.extra_state[self.n_task_vars :])
+        self.unsigned_g3 = obs is not None and obs.g3 == "unsigned"
+        self.state_kind = "" if obs is None else obs.state
         self.trace = None  # what it saw and chose, for the recording (run.record_agents)
-        if cfg.record_agents and self.learner is not None:
-            self.trace = StepTrace(agent_id, self.learner.settings.state_names)
-        self.task = task.agent(agent_id, self.learner.settings if self.learner else None)
+        if cfg.record_agents and obs is not None:
+            self.trace = StepTrace(agent_id, obs.names)
+        self.task = task.agent(agent_id, obs)
         self.memory = Memory(self)
         self.standin = StandIn(self)
         self.waking = WakeGuard(node, cfg.lease_ms / 1000)
@@ -345,7 +348,7 @@ class Agent:
         action = self.learner.decide(s, reward, learn=self.cfg.learn, explore=self.cfg.explore, avoid=avoid)
         self.decided = (cur.key, action)
         if self.trace is not None:
-            self.trace.add(epoch, step, s, action, self.learner.E, self.learner.P)
+            self.trace.add(epoch, step, s, action, self.learner)
             if step == self.cfg.steps - 1:
                 self.node.send(self.keys.metrics("agent"), self.trace.take())
         if self.visible:

@@ -7,6 +7,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from kinswarm.actors.checkpoint import CheckpointError, digest, load_checkpoint, load_latest, save_checkpoint
+from kinswarm.actors.learning.kinds import DEFAULT
 from kinswarm.protocol.messages import Checkpoint, Event, Saved
 
 if TYPE_CHECKING:
@@ -18,13 +19,14 @@ class Memory:
         self.agent = agent
         self.epochs_before = 0  # epochs trained before this run (from --from), for the lr schedule
         self.restored: Event | None = None  # what a restart restored, announced once alive
+        self.kind: str = agent.cfg.learner.get("kind", DEFAULT)  # the learner kind its checkpoints hold the state of
 
     def restore(self, directory: Path) -> None:
         """Start from a previous run's checkpoint (`--from`)."""
         a = self.agent
         if a.learner is None:
             return
-        arrays, meta = load_checkpoint(directory / f"{a.id}.npz", agent=a.id)
+        arrays, meta = load_checkpoint(directory / f"{a.id}.npz", agent=a.id, learner=self.kind)
         a.learner.load_state_dict(arrays)
         self.epochs_before = int(meta.get("epochs_trained", 0))
 
@@ -36,7 +38,7 @@ class Memory:
             self.restored = Event(epoch=-1, step=-1, event="restored", target=a.id, detail="no learned state")
             return
         try:
-            arrays, meta, used, refused = load_latest(directory / f"{a.id}.npz", agent=a.id)
+            arrays, meta, used, refused = load_latest(directory / f"{a.id}.npz", agent=a.id, learner=self.kind)
         except CheckpointError as e:
             if a.cfg.from_dir:
                 self.restore(Path(a.cfg.from_dir) / "agents")
@@ -70,6 +72,7 @@ class Memory:
                     a.learner.state_dict(),
                     {
                         "agent": a.id,
+                        "learner": self.kind,
                         "topology": a.topo.name,
                         "epochs_trained": self.epochs_before + m.epoch + 1,
                         "epochs_before": self.epochs_before,
