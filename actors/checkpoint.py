@@ -1,7 +1,9 @@
 """Checkpoints: one `.npz` per agent, written atomically (temp file + fsync + rename + directory fsync),
 carrying a format version and a SHA-256 over every array, so a torn or foreign file is refused with a
 clear error instead of loading corrupted learned state. The previous checkpoint is kept as
-`<id>.prev.npz`; `load_latest` falls back to it when the newest one is refused."""
+`<id>.prev.npz`; `load_latest` falls back to it when the newest one is refused. The header names the learner kind
+(actors/learning/kinds.py) whose state the arrays are: a checkpoint of another kind is refused, not loaded into a
+learner that would read the same arrays otherwise (a tabular learner's phi is shaped as a fuzzy one's)."""
 
 from __future__ import annotations
 
@@ -17,6 +19,8 @@ import numpy as np
 
 FORMAT = "kinswarm-agent-checkpoint"
 FORMAT_VERSION = 1
+#: the learner kind of a checkpoint whose header names none (written before there were kinds)
+UNNAMED_KIND = "fuzzy"
 
 
 class CheckpointError(ValueError):
@@ -59,8 +63,11 @@ def save_checkpoint(path: Path, arrays: dict[str, np.ndarray], meta: dict) -> No
         os.close(dfd)
 
 
-def load_checkpoint(path: Path, *, agent: str | None = None) -> tuple[dict[str, np.ndarray], dict]:
-    """Return (arrays, meta); raise CheckpointError naming the file and what is wrong."""
+def load_checkpoint(
+    path: Path, *, agent: str | None = None, learner: str | None = None
+) -> tuple[dict[str, np.ndarray], dict]:
+    """Return (arrays, meta); raise CheckpointError naming the file and what is wrong (with `agent` and `learner`: a
+    checkpoint of another agent, or of another learner kind, too)."""
     path = Path(path)
     try:
         with np.load(path, allow_pickle=False) as z:
@@ -84,6 +91,10 @@ def load_checkpoint(path: Path, *, agent: str | None = None) -> tuple[dict[str, 
         raise CheckpointError(f"{path}: checksum mismatch: the file is corrupted")
     if agent is not None and meta.get("agent") != agent:
         raise CheckpointError(f"{path}: belongs to agent {meta.get('agent')!r}, not {agent!r}")
+    theirs = meta.get("learner", UNNAMED_KIND)
+    if learner is not None and theirs != learner:
+        what = f"the state of a {theirs!r} learner, not of this run's {learner!r} ([learner] kind)"
+        raise CheckpointError(f"{path}: {what}")
     return arrays, meta
 
 
@@ -93,13 +104,15 @@ def previous(path: Path) -> Path:
     return path.with_name(f"{path.stem}.prev{path.suffix}")
 
 
-def load_latest(path: Path, *, agent: str) -> tuple[dict[str, np.ndarray], dict, Path, list[str]]:
+def load_latest(
+    path: Path, *, agent: str, learner: str | None = None
+) -> tuple[dict[str, np.ndarray], dict, Path, list[str]]:
     """The newest good checkpoint at `path`, else its `.prev`: (arrays, meta, file used, refusals).
     Raises CheckpointError when neither is good, naming both reasons."""
     refused: list[str] = []
     for candidate in (Path(path), previous(path)):
         try:
-            arrays, meta = load_checkpoint(candidate, agent=agent)
+            arrays, meta = load_checkpoint(candidate, agent=agent, learner=learner)
         except CheckpointError as e:
             refused.append(str(e))
             continue

@@ -20,8 +20,8 @@ kind = "free"
 kind = "reach"
 goal = [4.16, 6.18]
 
-[learner]                  # optional: LearnerSettings overrides (actors/learning/settings.py)
-gamma = 0.9
+[learner]                  # optional: kind (actors/learning/kinds.py; default "fuzzy") and LearnerSettings
+gamma = 0.9                # overrides (actors/learning/settings.py): the observation's fields, the learner's own
 ```
 
 A recipe that is another with a few changes names it: `base = "corridor7-inner200.toml"` (top level) reads that file
@@ -48,6 +48,7 @@ from typing import Any
 import msgspec
 import tomli_w
 from kinswarm.actors.config import CONTROLLERS, RUN_KEYS, ConfigError, RunConfig, check_endpoint, placement_problem
+from kinswarm.actors.learning.kinds import DEFAULT, LearnerKind, learner_kind
 from kinswarm.actors.learning.settings import SPATIAL_STATES, LearnerSettings
 from kinswarm.actors.learning.state import OWN_EXTRAS
 from kinswarm.actors.tasks import kinds, task_class
@@ -185,7 +186,8 @@ def resolve(
     robot, topo = _robot(data.get("robot"), source)
     scene = parse_scene(data.get("scene"), topo, source)
     task = _task(data.get("task"), topo, scene, source)
-    learner = table(source, "learner", data.get("learner", {}), {f.name for f in dataclasses.fields(LearnerSettings)})
+    learner_keys = {"kind", *(f.name for f in dataclasses.fields(LearnerSettings))}
+    learner = table(source, "learner", data.get("learner", {}), learner_keys)
     learner_settings(task, learner, source)  # every agent's, checked now
     run = table(source, "run", data.get("run", {}), set(RUN_KEYS))
     fields = {("from_dir" if k == "from" else k): v for k, v in run.items()}
@@ -259,7 +261,6 @@ def check_checkpoints(run_dir: Path, task: TaskDef, learner: Mapping[str, Any], 
     """Every DOF agent's checkpoint in `run_dir` loads into the learner this run gives it (the same state variables
     and neighbours), or the one line that says whose does not and why."""
     from kinswarm.actors.checkpoint import CheckpointError, load_checkpoint
-    from kinswarm.actors.learning.learner import Learner
 
     topo = task.topo
     if not run_dir.is_dir():
@@ -276,11 +277,12 @@ def check_checkpoints(run_dir: Path, task: TaskDef, learner: Mapping[str, Any], 
             f"run's {topo.name!r} (joints {', '.join(topo.dof_agents)})"
         )
     settings = learner_settings(task, learner, source)
+    kind = kind_of(learner, source)
     for agent in topo.dof_agents:
-        arrays, _ = load_checkpoint(run_dir / "agents" / f"{agent}.npz", agent=agent)
+        arrays, _ = load_checkpoint(run_dir / "agents" / f"{agent}.npz", agent=agent, learner=kind.name)
         visible = sum(topo.agents[c].has_dof for c in topo.agents[agent].children)
         try:
-            Learner(settings[agent], visible, 0).load_state_dict(arrays)
+            kind.build(settings[agent], visible, 0).load_state_dict(arrays)
         except ValueError as e:
             raise CheckpointError(
                 f"run.from {run_dir}: {agent}'s checkpoint does not fit this run's learner ({e}); "
@@ -296,8 +298,22 @@ def task_of(cfg: RunConfig) -> TaskDef:
     return task_class(kind)(settings, cfg.topo(), cfg.scene_spec)
 
 
+def kind_of(learner: Mapping[str, Any], source: str = "<memory>") -> LearnerKind:
+    """The learner kind a [learner] table names (`kind`; the paper's fuzzy learner when it names none)."""
+    try:
+        return learner_kind(learner.get("kind", DEFAULT))
+    except ValueError as e:
+        raise SpecError(source, "learner.kind", str(e)) from None
+
+
 def learner_settings(task: TaskDef, learner: Mapping[str, Any], source: str = "<memory>") -> dict[str, LearnerSettings]:
-    """Every DOF agent's learner settings: the [learner] overrides on the task's scale and state variables."""
+    """Every DOF agent's learner settings: the [learner] overrides on the task's scale and state variables (its
+    `kind` checked: known, and given only settings it takes)."""
+    kind = kind_of(learner, source)
+    learner = {k: v for k, v in learner.items() if k != "kind"}
+    if (refused := kind.refused(learner)) is not None:
+        field, _, why = refused.partition(": ")
+        raise SpecError(source, f"learner.{field}", why)
     fits = SPATIAL_STATES if task.topo.spatial else ("planar",)
     state = learner.get("state")
     if isinstance(state, str) and state not in fits:  # before the settings' own checks, which assume a kind's sets

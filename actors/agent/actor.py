@@ -27,8 +27,8 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from kinswarm.actors.config import RunConfig
-from kinswarm.actors.learning.learner import Learner
-from kinswarm.actors.runfile import learner_settings, task_of
+from kinswarm.actors.learning.kinds import JointLearner
+from kinswarm.actors.runfile import kind_of, learner_settings, task_of
 from kinswarm.actors.runtime import Node
 from kinswarm.actors.tasks.base import StepView
 from kinswarm.protocol.messages import Bye, Checkpoint, Cmd, Down, Fault, Obs, Readings, Stop, Task, Up
@@ -66,17 +66,19 @@ class Agent:
         self._root_len = len(node.keys.root) + 1
         self.is_root = self.spec.parent is None
         task = task_of(cfg)
-        self.learner: Learner | None = None
-        settings = None
+        self.learner: JointLearner | None = None
+        obs = None  # what S_i holds (the task's)
         if self.spec.has_dof:
             settings = learner_settings(task, cfg.learner, cfg.source)[agent_id]
+            obs = settings.observation
             n_visible = sum(topo.agents[c].has_dof for c in self.spec.children)
-            self.learner = learner or Learner(settings, n_visible, agent_seed(cfg.seed, agent_id))
-        self.passes = AgentStep(topo, agent_id, task, self.learner.settings if self.learner else None, cfg.action_rad)
+            seed = agent_seed(cfg.seed, agent_id)
+            self.learner = learner or kind_of(cfg.learner, cfg.source).build(settings, n_visible, seed)
+        self.passes = AgentStep(topo, agent_id, task, obs, cfg.action_rad)
         self.geom, self.visible = self.passes.geom, self.passes.visible
         self.trace = None  # what it saw and chose, for the recording (run.record_agents)
-        if cfg.record_agents and self.learner is not None:
-            self.trace = StepTrace(agent_id, self.learner.settings.state_names)
+        if cfg.record_agents and obs is not None:
+            self.trace = StepTrace(agent_id, obs.names)
         self.task = self.passes.task
         self.memory = Memory(self)
         self.standin = StandIn(self)
@@ -296,7 +298,7 @@ class Agent:
         action = self.learner.decide(s, reward, learn=self.cfg.learn, explore=self.cfg.explore, avoid=avoid)
         self.decided = (cur.key, action)
         if self.trace is not None:
-            self.trace.add(epoch, step, s, action, self.learner.E, self.learner.P)
+            self.trace.add(epoch, step, s, action, self.learner)
             if step == self.cfg.steps - 1:
                 self.node.send(self.keys.metrics("agent"), self.trace.take())
         if self.visible:

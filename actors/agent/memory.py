@@ -7,16 +7,18 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from kinswarm.actors.checkpoint import CheckpointError, digest, load_checkpoint, load_latest, save_checkpoint
+from kinswarm.actors.learning.kinds import DEFAULT
 from kinswarm.protocol.messages import Checkpoint, Event, Saved
 
 if TYPE_CHECKING:
     from .actor import Agent
 
 
-def checkpoint_meta(agent: str, topology: str, epochs_before: int, epoch: int, seed: int) -> dict:
-    """What a checkpoint records beside the learned arrays."""
+def checkpoint_meta(agent: str, kind: str, topology: str, epochs_before: int, epoch: int, seed: int) -> dict:
+    """What a checkpoint records beside the learned arrays (`kind`: the learner kind whose state they are)."""
     return {
         "agent": agent,
+        "learner": kind,
         "topology": topology,
         "epochs_trained": epochs_before + epoch + 1,
         "epochs_before": epochs_before,
@@ -25,9 +27,10 @@ def checkpoint_meta(agent: str, topology: str, epochs_before: int, epoch: int, s
     }
 
 
-def restore_learner(learner: Any, path: Path, agent: str) -> int:
-    """A previous run's checkpoint into `learner` (`--from`): the epochs it was trained, for the lr schedule."""
-    arrays, meta = load_checkpoint(path, agent=agent)
+def restore_learner(learner: Any, path: Path, agent: str, kind: str) -> int:
+    """A previous run's checkpoint into `learner` of `kind` (`--from`): the epochs it was trained, for the lr
+    schedule."""
+    arrays, meta = load_checkpoint(path, agent=agent, learner=kind)
     learner.load_state_dict(arrays)
     return int(meta.get("epochs_trained", 0))
 
@@ -37,13 +40,14 @@ class Memory:
         self.agent = agent
         self.epochs_before = 0  # epochs trained before this run (from --from), for the lr schedule
         self.restored: Event | None = None  # what a restart restored, announced once alive
+        self.kind: str = agent.cfg.learner.get("kind", DEFAULT)  # the learner kind its checkpoints hold the state of
 
     def restore(self, directory: Path) -> None:
         """Start from a previous run's checkpoint (`--from`)."""
         a = self.agent
         if a.learner is None:
             return
-        self.epochs_before = restore_learner(a.learner, directory / f"{a.id}.npz", a.id)
+        self.epochs_before = restore_learner(a.learner, directory / f"{a.id}.npz", a.id, self.kind)
 
     def resume(self, directory: Path) -> None:
         """A restart: the learned state of this run's newest good checkpoint (else the one before it);
@@ -53,7 +57,7 @@ class Memory:
             self.restored = Event(epoch=-1, step=-1, event="restored", target=a.id, detail="no learned state")
             return
         try:
-            arrays, meta, used, refused = load_latest(directory / f"{a.id}.npz", agent=a.id)
+            arrays, meta, used, refused = load_latest(directory / f"{a.id}.npz", agent=a.id, learner=self.kind)
         except CheckpointError as e:
             if a.cfg.from_dir:
                 self.restore(Path(a.cfg.from_dir) / "agents")
@@ -82,7 +86,7 @@ class Memory:
         error = ""
         if a.learner is not None:
             try:
-                meta = checkpoint_meta(a.id, a.topo.name, self.epochs_before, m.epoch, a.cfg.seed)
+                meta = checkpoint_meta(a.id, self.kind, a.topo.name, self.epochs_before, m.epoch, a.cfg.seed)
                 save_checkpoint(path, a.learner.state_dict(), meta)
             except OSError as e:
                 error = f"cannot write {path}: {e}"

@@ -18,9 +18,9 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
+from kinswarm.actors.learning.observation import Observation
 from kinswarm.actors.tasks.base import AgentTask, StepView, TaskDef
 from kinswarm.protocol.messages import Down, Readings, Task, Up
 from kinswarm.protocol.topology import Topology
@@ -50,8 +50,10 @@ class AgentStep:
     """One agent's constants for the step (its place in the robot, its task, its learner's observation) and the
     passes over them."""
 
-    def __init__(self, topo: Topology, agent_id: str, task: TaskDef, settings: Any, action_rad: float) -> None:
-        """`settings`: the agent's LearnerSettings (None for a compound agent with no joint)."""
+    def __init__(
+        self, topo: Topology, agent_id: str, task: TaskDef, obs: Observation | None, action_rad: float
+    ) -> None:
+        """`obs`: what the agent's state S_i holds (its task's: None for a compound agent with no joint)."""
         self.topo, self.id = topo, agent_id
         self.spec = topo.agents[agent_id]
         self.geom = geometry_of(topo)
@@ -60,14 +62,14 @@ class AgentStep:
         self.visible = [c for c in self.spec.children if topo.agents[c].has_dof]
         self.leaves = topo.subtree_leaves(agent_id)
         self.action_rad = action_rad
-        self.task: AgentTask = task.agent(agent_id, settings)
+        self.task: AgentTask = task.agent(agent_id, obs)
         n_task_vars = len(task.state_variables(agent_id))
-        self.extra_names: tuple[str, ...] = ()  # the learner's own extra variables, after the task's
+        self.extra_names: tuple[str, ...] = ()  # the run's extra variables, after the task's
         self.unsigned_g3, self.state_kind = False, ""
-        if settings is not None:
-            self.extra_names = tuple(v.name for v in settings.extra_state[n_task_vars:])
-            self.unsigned_g3 = settings.g3 == "unsigned"
-            self.state_kind = settings.state
+        if obs is not None:
+            self.extra_names = tuple(v.name for v in obs.extra_state[n_task_vars:])
+            self.unsigned_g3 = obs.g3 == "unsigned"
+            self.state_kind = obs.state
 
     # -- the top-down pass -------------------------------------------------------------------------
     def begin(self, head: Task | Down, q: float, own: Readings) -> Begun:

@@ -1,16 +1,27 @@
 """The learning core: fuzzy Q-learning with joint action selection (paper §4), in numpy, its per-step arithmetic
-compiled with numba (kernels.py).
+compiled with numba (kernels.py); what an agent observes (observation.py); the learner kinds a run chooses from and
+the protocol they meet (kinds.py: fuzzy, independent, tabular).
 
-The parts that run compiled code (FuzzyPartition, SparseFuzzyQ, Learner) are imported when first asked for, so that
-a process that only reads settings or states (the supervisor, the command line) does not load numba (~0.15 s)."""
+The parts that run compiled code (FuzzyPartition, SparseFuzzyQ and the learners) are imported when first asked for,
+so that a process that only reads settings or states (the supervisor, the command line) does not load numba
+(~0.15 s)."""
 
 from importlib import import_module
 
 from .jasm import boltzmann, expected_values, explore_probability, probabilities, select_action, temperature
+from .kinds import JointLearner, kinds, learner_kind
+from .observation import Observation
 from .settings import STATE_NAMES, LearnerSettings, StateVariable
 from .state import agent_state, goal_along_motion, joint_frame, link_end
 
-_COMPILED = {"FuzzyPartition": "fuzzy", "memberships_1d": "fuzzy", "SparseFuzzyQ": "qlearning", "Learner": "learner"}
+_COMPILED = {
+    "FuzzyPartition": "fuzzy",
+    "memberships_1d": "fuzzy",
+    "SparseFuzzyQ": "qlearning",
+    "Learner": "learner",
+    "IndependentLearner": "independent",
+    "TabularLearner": "tabular",
+}
 
 
 def __getattr__(name: str) -> object:
@@ -22,16 +33,22 @@ def __getattr__(name: str) -> object:
 __all__ = [
     "STATE_NAMES",
     "FuzzyPartition",
+    "IndependentLearner",
+    "JointLearner",
     "Learner",
     "LearnerSettings",
+    "Observation",
     "SparseFuzzyQ",
     "StateVariable",
+    "TabularLearner",
     "agent_state",
     "boltzmann",
     "expected_values",
     "explore_probability",
     "goal_along_motion",
     "joint_frame",
+    "kinds",
+    "learner_kind",
     "link_end",
     "memberships_1d",
     "probabilities",

@@ -6,7 +6,8 @@ its pending joint action, its own action, and the step t of the temperature sche
 its own into the learner for the length of each call, so lane b's calls compute exactly what one learner's calls
 would, on the Q and counts the calls before it left (one thing is refreshed: a rule of s(t-1) that had no row of
 phi when lane b decided may have been given one by another robot's update since); the agent makes them in a fixed
-order (robot 0 first), so a fleet's run is as deterministic as one robot's.
+order (robot 0 first), so a fleet's run is as deterministic as one robot's. Every learner kind (kinds.py) is a
+Learner keeping its transition in these fields, so each kind's lanes are these.
 """
 
 from __future__ import annotations
@@ -28,6 +29,8 @@ class LearnerLane:
     anything else (settings, E, P just after its decide, checkpoints) is the learner's."""
 
     def __init__(self, learner: Learner) -> None:
+        if not isinstance(learner, Learner):  # another learner's transition lives elsewhere: it needs its own lane
+            raise TypeError(f"a fleet's lanes share a Learner, not a {type(learner).__name__}")
         self.learner = learner
         self.settings, self.n_actions, self.n_visible = learner.settings, learner.n_actions, learner.n_visible
         fired = np.zeros_like(learner._fired)

@@ -1,9 +1,15 @@
-"""Settings of one agent's learner (paper §4, §5.1): one dataclass, a help line per field.
+"""Settings of one agent's fuzzy learner (paper §4, §5.1): one dataclass, a help line per field.
 
-Only the learner's own knobs live here. What a task adds (the corridor's clearance and collision variables, a grasp
-finger's fine steps, reward constants, reflexes such as the shield or the tabu) lives with the task
-(actors/tasks/); the task hands its state variables to the learner as extra state variables. Options that were
-measured and not kept are gone from the code; their numbers are in docs/notebook/.
+Two kinds of field, kept in one flat table because that is what the run file's [learner] table is:
+- the observation's (OBSERVATION_FIELDS: state, g3, ranges, extra_state): what S_i holds, the task's to give
+  (observation.py; `settings.observation` is that part alone);
+- the learner's own: the fuzzy grid over the observation (n_sets, slope, top_k) and the learning (gamma, lr*,
+  T_max, s, epsilon*, count_*). Which of them a learner kind takes: actors/learning/kinds.py.
+
+What a task adds (the corridor's clearance and collision variables, a grasp finger's fine steps, reward constants,
+reflexes such as the shield or the tabu) lives with the task (actors/tasks/); the task hands its state variables to
+the learner as extra state variables. Options that were measured and not kept are gone from the code; their numbers
+are in docs/notebook/.
 """
 
 from __future__ import annotations
@@ -11,61 +17,46 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, replace
 
-#: Names of the six state variables S_i = <q_i, theta_i, d_i, g1, g2, g3> (paper §3.3).
-STATE_NAMES: tuple[str, ...] = ("q", "theta", "d", "g1", "g2", "g3")
-#: The rotation-plane state of a spatial joint (state.plane_state): S_i = <q, d, g_perp, g_axial, g_radial, |w|>.
-PLANE_STATE_NAMES: tuple[str, ...] = ("q", "d", "g_perp", "g_axial", "g_radial", "w")
-#: The turn state of a spatial joint: S_i = <g_q>, the move to its own best value within its limits (frames.best_turn).
-TURN_STATE_NAMES: tuple[str, ...] = ("g_q",)
-#: The state kinds: the paper's planar S_i; a joint of a robot from URDF: its rotation plane, or its turn.
-STATE_KINDS: dict[str, tuple[str, ...]] = {"planar": STATE_NAMES, "plane": PLANE_STATE_NAMES, "turn": TURN_STATE_NAMES}
-#: The kinds a robot from URDF takes (a planar robot takes "planar")
-SPATIAL_STATES: tuple[str, ...] = ("plane", "turn")
-#: g3 as the bearing of the goal from the end effector (signed, the default) or its size only (unsigned).
-G3_MODES: tuple[str, ...] = ("signed", "unsigned")
+from .observation import (
+    DEFAULT_REACH,
+    G3_MODES,
+    OBSERVATION_FIELDS,
+    PLANE_STATE_NAMES,
+    SPATIAL_STATES,
+    STATE_KINDS,
+    STATE_NAMES,
+    TURN_RANGES,
+    TURN_STATE_NAMES,
+    Observation,
+    StateVariable,
+    check_observation,
+    plane_ranges,
+    ranges_for,
+)
+
 #: Own actions: 0 decrease, 1 keep, 2 increase the joint angle by the run's action size.
 N_ACTIONS = 3
-#: Reach of the paper's planar 4R chain (4 links of length 3); default ranges scale with it.
-DEFAULT_REACH = 12.0
+#: The sets of a spatial joint's rotation-plane variables (LearnerSettings.for_plane)
+PLANE_SETS: tuple[int, ...] = (5, 5, 9, 5, 5, 6)
+#: The grid and learning rate of a spatial joint's turn state (LearnerSettings.for_turn)
+TURN_LEARNER: dict[str, object] = {"n_sets": (9,), "lr": 0.5 / 64}
 
-
-def _ranges_for(reach: float) -> tuple[tuple[float, float], ...]:
-    return (
-        (-math.pi, math.pi),  # q: joint angle
-        (-math.pi, math.pi),  # theta: bearing of the end effector in the agent frame
-        (0.0, reach),  # d: distance joint -> end effector
-        (-2.0 * reach, 2.0 * reach),  # g1: goal - tip, x in the agent frame
-        (-2.0 * reach, 2.0 * reach),  # g2: goal - tip, y in the agent frame
-        (-math.pi, math.pi),  # g3: bearing of the goal from the end effector
-    )
-
-
-@dataclass(frozen=True)
-class StateVariable:
-    """An extra state variable appended to S_i: its name, how many membership sets, and the range they span.
-
-    Its value comes from the agent's task (e.g. the corridor's "clearance"), from the agent's own geometry
-    ("g_perp": the goal's component along the direction the agent's joint moves the tip, state.goal_along_motion),
-    or else from the readings the agent holds (its Obs.sense and the Down.sense from its parent) by that name."""
-
-    name: str
-    sets: int
-    range: tuple[float, float]
-
-    def __post_init__(self) -> None:
-        r = tuple(self.range) if isinstance(self.range, (list, tuple)) else ()
-        if len(r) != 2 or not all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in r):
-            raise ValueError(
-                f"extra state variable {self.name!r}: range must be two numbers [lo, hi], got {self.range!r}"
-            )
-        object.__setattr__(self, "range", (float(r[0]), float(r[1])))
-        lo, hi = self.range
-        if not (isinstance(self.name, str) and self.name):
-            raise ValueError(f"extra state variable: a name is needed, got {self.name!r}")
-        if not (isinstance(self.sets, int) and not isinstance(self.sets, bool) and self.sets >= 1):
-            raise ValueError(f"extra state variable {self.name!r}: sets must be an int >= 1, got {self.sets!r}")
-        if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
-            raise ValueError(f"extra state variable {self.name!r}: range must be finite with lo < hi, got {self.range}")
+__all__ = [
+    "DEFAULT_REACH",
+    "G3_MODES",
+    "N_ACTIONS",
+    "OBSERVATION_FIELDS",
+    "PLANE_SETS",
+    "PLANE_STATE_NAMES",
+    "SPATIAL_STATES",
+    "STATE_KINDS",
+    "STATE_NAMES",
+    "TURN_LEARNER",
+    "TURN_STATE_NAMES",
+    "LearnerSettings",
+    "Observation",
+    "StateVariable",
+]
 
 
 @dataclass(frozen=True)
@@ -79,7 +70,7 @@ class LearnerSettings:
     """
 
     n_sets: tuple[int, ...] = (20, 20, 13, 7, 7, 7)  # membership sets per variable of S_i (§5.1)
-    ranges: tuple[tuple[float, float], ...] = _ranges_for(DEFAULT_REACH)  # (lo, hi) per variable; outside clips
+    ranges: tuple[tuple[float, float], ...] = ranges_for(DEFAULT_REACH)  # (lo, hi) per variable; outside clips
     slope: float = 4.0  # steepness of the sigmoid sets (Eq. 3), as sigma x set spacing
     top_k: int = 2  # memberships kept per variable: top_k ** n rules fire per state (Eq. 4, sparse)
     gamma: float = 0.9  # discount of Eq. 5
@@ -101,6 +92,11 @@ class LearnerSettings:
     state: str = "planar"  # what S_i holds (STATE_KINDS): the paper's six, a spatial joint's "plane" or its "turn"
 
     @property
+    def observation(self) -> Observation:
+        """The observation these settings lay the fuzzy grid over (what S_i holds)."""
+        return Observation(self.state, self.g3, self.ranges, self.extra_state)
+
+    @property
     def state_names(self) -> tuple[str, ...]:
         return STATE_KINDS[self.state] + tuple(v.name for v in self.extra_state)
 
@@ -113,38 +109,32 @@ class LearnerSettings:
         return self.ranges + tuple(v.range for v in self.extra_state)
 
     @classmethod
+    def on(cls, observation: Observation, **learner: object) -> LearnerSettings:
+        """The learner's own settings (no observation field) over `observation`."""
+        mixed = sorted(set(learner) & set(OBSERVATION_FIELDS))
+        if mixed:
+            raise ValueError(f"{mixed[0]} is the observation's, not the learner's")
+        o = observation
+        return cls(state=o.state, g3=o.g3, ranges=o.ranges, extra_state=o.extra_state, **learner)  # type: ignore[arg-type]
+
+    @classmethod
     def for_reach(cls, reach: float, **overrides: object) -> LearnerSettings:
         """Settings with d in [0, reach] and g1, g2 in [-2 reach, 2 reach]; overrides replace any field."""
         if not (isinstance(reach, (int, float)) and math.isfinite(reach) and reach > 0):
             raise ValueError(f"reach must be a positive finite number, got {reach!r}")
-        kwargs: dict[str, object] = {"ranges": _ranges_for(float(reach))}
+        kwargs: dict[str, object] = {"ranges": ranges_for(float(reach))}
         kwargs.update(overrides)
         return cls(**kwargs)  # type: ignore[arg-type]
 
     @classmethod
     def for_plane(cls, reach: float, lever: float, limits: tuple[float, float], **overrides: object) -> LearnerSettings:
         """Settings of a spatial joint's rotation-plane state (state.plane_state) on a robot of `reach` (m) whose
-        tip can lie up to `lever` from this joint: q over its limits (5 sets), d over [0, lever] (5), g_perp over
-        ±reach/10 (9: the fine sets decide the direction near the goal), g_axial and g_radial over ±reach/3 (5), |w|
-        over [0, reach/2.4] (6). On the iiwa (reach 1.2 m): ±0.12, ±0.4, ±0.4 and [0, 0.5] m, the ranges an
-        independent prototype measured frozen skills with (docs/results/reach3d)."""
-        for name, v in (("reach", reach), ("lever", lever)):
-            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
-                raise ValueError(f"{name} must be a positive finite number, got {v!r}")
-        lo, hi = limits
-        r = float(reach)
-        kwargs: dict[str, object] = {
-            "state": "plane",
-            "n_sets": (5, 5, 9, 5, 5, 6),
-            "ranges": (
-                (lo, hi),
-                (0.0, float(lever)),
-                (-r / 10, r / 10),
-                (-r / 3, r / 3),
-                (-r / 3, r / 3),
-                (0.0, r / 2.4),
-            ),
-        }
+        tip can lie up to `lever` from this joint (observation.plane_ranges): q over its limits (5 sets), d over
+        [0, lever] (5), g_perp over ±reach/10 (9: the fine sets decide the direction near the goal), g_axial and
+        g_radial over ±reach/3 (5), |w| over [0, reach/2.4] (6). On the iiwa (reach 1.2 m): ±0.12, ±0.4, ±0.4 and
+        [0, 0.5] m, the ranges an independent prototype measured frozen skills with (docs/results/reach3d)."""
+        ranges = plane_ranges(reach, lever, limits)
+        kwargs: dict[str, object] = {"state": "plane", "n_sets": PLANE_SETS, "ranges": ranges}
         kwargs.update(overrides)
         return cls(**kwargs)  # type: ignore[arg-type]
 
@@ -155,12 +145,7 @@ class LearnerSettings:
         rules see every step's noisy reward: at lr 0.5 the iiwa's learners reached 36 / 32 % of unseen poses (sets
         A / B), at 0.05 35 / 27 %, at 0.5 / 64 88 / 90 %, at 0.002 91 / 83 % (experiments/research/reach3d_loop.py,
         turn*; g_q's sets over ±45° instead: 85 / 82 %)."""
-        kwargs: dict[str, object] = {
-            "state": "turn",
-            "n_sets": (9,),
-            "ranges": ((-math.pi / 12, math.pi / 12),),
-            "lr": 0.5 / 64,
-        }
+        kwargs: dict[str, object] = {"state": "turn", "ranges": TURN_RANGES, **TURN_LEARNER}
         kwargs.update(overrides)
         return cls(**kwargs)  # type: ignore[arg-type]
 
@@ -172,25 +157,15 @@ class LearnerSettings:
         return self.replace(extra_state=(*variables, *self.extra_state)) if variables else self
 
     def __post_init__(self) -> None:
-        if self.state not in STATE_KINDS:
-            raise ValueError(f"state must be one of {', '.join(STATE_KINDS)}, got {self.state!r}")
+        check_observation(self)  # state, g3, ranges, extra_state: observation.py
         base_names = STATE_KINDS[self.state]
         n = len(base_names)
         object.__setattr__(self, "n_sets", tuple(int(m) for m in self.n_sets))
-        object.__setattr__(self, "ranges", tuple((float(lo), float(hi)) for lo, hi in self.ranges))
-        object.__setattr__(self, "extra_state", tuple(_variable(v) for v in self.extra_state))
         if len(self.n_sets) != n:
             raise ValueError(f"n_sets needs {n} entries {base_names}, got {len(self.n_sets)}")
-        if len(self.ranges) != n:
-            raise ValueError(f"ranges needs {n} (lo, hi) pairs {base_names}, got {len(self.ranges)}")
-        for name, m, (lo, hi) in zip(base_names, self.n_sets, self.ranges, strict=True):
+        for name, m in zip(base_names, self.n_sets, strict=True):
             if m < 1:
                 raise ValueError(f"n_sets[{name}] must be >= 1, got {m}")
-            if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
-                raise ValueError(f"ranges[{name}] must be finite with lo < hi, got ({lo}, {hi})")
-        names = self.state_names
-        if len(set(names)) != len(names):
-            raise ValueError(f"state variable names must differ, got {list(names)}")
         if not (isinstance(self.top_k, int) and 1 <= self.top_k <= min(self.state_sets)):
             raise ValueError(f"top_k must be an int in [1, the fewest sets {min(self.state_sets)}], got {self.top_k}")
         if not (math.isfinite(self.slope) and self.slope > 0):
@@ -224,25 +199,3 @@ class LearnerSettings:
         freeze = self.count_freeze
         if not (isinstance(freeze, int) and not isinstance(freeze, bool) and freeze >= 0):
             raise ValueError(f"count_freeze must be an epoch (int >= 0; 0 for never), got {self.count_freeze!r}")
-        if self.g3 not in G3_MODES:
-            raise ValueError(f"g3 must be one of {G3_MODES}, got {self.g3!r}")
-        if self.g3 == "unsigned" and self.state == "planar" and self.ranges[5][0] < 0.0:
-            raise ValueError(
-                f"g3 'unsigned' lies in [0, pi], but ranges[g3] starts at {self.ranges[5][0]:g}: "
-                "the sets below 0 would never fire (use e.g. (0, pi))"
-            )
-
-
-def _variable(v: object) -> StateVariable:
-    """A StateVariable, or one from a mapping {name, sets, range} or a (name, sets, range) triple."""
-    if isinstance(v, StateVariable):
-        return v
-    if isinstance(v, dict):
-        unknown, missing = set(v) - {"name", "sets", "range"}, {"name", "sets", "range"} - set(v)
-        if unknown or missing:
-            what = f"unknown field {sorted(unknown)[0]!r}" if unknown else f"missing {sorted(missing)[0]!r}"
-            raise ValueError(f"extra state variable: {what} (it takes name, sets, range)")
-        return StateVariable(v["name"], v["sets"], v["range"])
-    if isinstance(v, (list, tuple)) and len(v) == 3:
-        return StateVariable(v[0], v[1], tuple(v[2]))  # type: ignore[arg-type]
-    raise ValueError(f"extra state variable: expected {{name, sets, range}}, got {v!r}")

@@ -23,8 +23,8 @@ from kinswarm.actors.agent.passes import AgentStep, visible_actions
 from kinswarm.actors.agent.trace import StepTrace
 from kinswarm.actors.checkpoint import save_checkpoint
 from kinswarm.actors.config import RunConfig
-from kinswarm.actors.learning.learner import Learner
-from kinswarm.actors.runfile import learner_settings, task_of
+from kinswarm.actors.learning.kinds import JointLearner
+from kinswarm.actors.runfile import kind_of, learner_settings, task_of
 from kinswarm.actors.scenario import load_scenario
 from kinswarm.protocol.messages import EpochDone, Up
 from kinswarm.protocol.topology import Topology
@@ -44,20 +44,20 @@ class InProcessRun:
         self.cfg, self.topo = cfg, topo
         self.task = task_of(cfg)
         settings = learner_settings(self.task, cfg.learner, cfg.source)
+        obs = {a: s.observation for a, s in settings.items()}
+        self.kind = kind_of(cfg.learner, cfg.source)
         self.order = list(topo.order)  # top-down: every parent before its children
-        self.agents = {a: AgentStep(topo, a, self.task, settings.get(a), cfg.action_rad) for a in self.order}
+        self.agents = {a: AgentStep(topo, a, self.task, obs.get(a), cfg.action_rad) for a in self.order}
         self.learners = {
-            a: Learner(settings[a], len(self.agents[a].visible), agent_seed(cfg.seed, a)) for a in topo.dof_agents
+            a: self.kind.build(settings[a], len(self.agents[a].visible), agent_seed(cfg.seed, a))
+            for a in topo.dof_agents
         }
         self.epochs_before = dict.fromkeys(self.learners, 0)
         if cfg.from_dir:
             for a, learner in self.learners.items():
-                self.epochs_before[a] = restore_learner(learner, Path(cfg.from_dir) / "agents" / f"{a}.npz", a)
-        self.traces = (
-            {a: StepTrace(a, learner.settings.state_names) for a, learner in self.learners.items()}
-            if cfg.record_agents
-            else {}
-        )
+                path = Path(cfg.from_dir) / "agents" / f"{a}.npz"
+                self.epochs_before[a] = restore_learner(learner, path, a, self.kind.name)
+        self.traces = {a: StepTrace(a, obs[a].names) for a in self.learners} if cfg.record_agents else {}
         scenario = load_scenario(cfg.scenario, topo) if cfg.scenario else None
         self.robot = Robot(topo, cfg.scene_spec, cfg.action_rad, cfg.seed, scenario)
         self.first = [a for a in topo.dof_agents if a == topo.root]  # sensed in the sim actor's order
@@ -115,7 +115,7 @@ class InProcessRun:
                 s, reward, avoid, scale = st.decide_from(begun[a], views[a])
                 action = learner.decide(s, reward, learn=learn, explore=explore, avoid=avoid)
                 if a in self.traces:
-                    self.traces[a].add(epoch, t, s, action, learner.E, learner.P)
+                    self.traces[a].add(epoch, t, s, action, learner)
                 if not st.visible:
                     learner.observe([], learn=learn)
                 cmds[a] = robot.clip(st.delta(action, scale))
@@ -129,7 +129,7 @@ class InProcessRun:
                 self._observe(learners[a], visible_actions(agents[a].visible, last), cfg.steps)
         return robot.done(epoch, cfg.steps, 0, time.perf_counter() - started, longest)
 
-    def _observe(self, learner: Learner, acts: list[int], step: int) -> None:
+    def _observe(self, learner: JointLearner, acts: list[int], step: int) -> None:
         if all(0 <= b < learner.n_actions for b in acts):
             learner.observe(acts, learn=self.cfg.learn)
         else:
@@ -139,7 +139,7 @@ class InProcessRun:
         """Every learner's state into the run's `agents/`, as the agents write it."""
         directory = Path(self.cfg.out) / "agents"
         for a, learner in self.learners.items():
-            meta = checkpoint_meta(a, self.topo.name, self.epochs_before[a], epoch, self.cfg.seed)
+            meta = checkpoint_meta(a, self.kind.name, self.topo.name, self.epochs_before[a], epoch, self.cfg.seed)
             save_checkpoint(directory / f"{a}.npz", learner.state_dict(), meta)
 
     def run(self, recorder: Recorder, on_epoch: Callable[[EpochDone], None] | None = None) -> RunResult:

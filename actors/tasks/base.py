@@ -4,7 +4,8 @@ A task is a module of this package holding a `TaskDef` subclass (its settings ar
 
   supervisor    `goal(epoch)`: the goal of each epoch, and the goal of every step when it moves (a path);
                 `start(epoch)`: the pose it starts from (default: the robot's home);
-  every agent   `learner(agent)`: the agent's LearnerSettings (the task's state variables first among the extras);
+  every agent   `observation(agent)`: what the agent's state S_i holds (its kind, g3, bounds, the task's variables
+                first among the extras); `learner(agent)`: the fuzzy learner's settings over it (the grid's defaults);
                 `agent(agent)`: the agent's `AgentTask`, which the agent calls at each step:
     root          head(task observation)    -> Head: the goal, the reward r(t-1), what each child is sent;
     all           up(view)                  -> readings for the parent's `Up.sense` (a subtree's aggregate);
@@ -24,7 +25,8 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
-from kinswarm.actors.learning.settings import LearnerSettings, StateVariable
+from kinswarm.actors.learning.observation import OBSERVATION_FIELDS, Observation, StateVariable
+from kinswarm.actors.learning.settings import LearnerSettings
 from kinswarm.protocol.messages import Readings, Task, Up
 from kinswarm.protocol.scene import SceneSpec
 from kinswarm.protocol.topology import Topology
@@ -131,12 +133,18 @@ class TaskDef:
         """The task's own state variables for this agent (they come first among the learner's extras)."""
         return ()
 
-    def learner(self, agent: str, overrides: Mapping[str, Any]) -> LearnerSettings:
-        """The agent's learner settings: the run's [learner] overrides on the task's scale, plus its variables."""
-        base = LearnerSettings.for_reach(self.reach(agent), **dict(overrides))
-        return base.with_task_state(self.state_variables(agent))
+    def observation(self, agent: str, overrides: Mapping[str, Any]) -> Observation:
+        """The agent's observation: the planar six on the task's scale (overrides: the run's [learner] fields that
+        are the observation's), then the task's variables, then the run's extra ones."""
+        given = {k: v for k, v in overrides.items() if k in OBSERVATION_FIELDS}
+        return Observation.for_reach(self.reach(agent), **given).with_task_state(self.state_variables(agent))
 
-    def agent(self, agent: str, settings: LearnerSettings | None) -> AgentTask:
+    def learner(self, agent: str, overrides: Mapping[str, Any]) -> LearnerSettings:
+        """The agent's learner settings: the run's [learner] overrides over the agent's observation."""
+        own = {k: v for k, v in overrides.items() if k not in OBSERVATION_FIELDS}
+        return LearnerSettings.on(self.observation(agent, overrides), **own)
+
+    def agent(self, agent: str, observation: Observation | None) -> AgentTask:
         """The agent's share of the task (the root's also computes the reward)."""
         return AgentTask()
 

@@ -28,7 +28,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from kinswarm.actors.learning.settings import LearnerSettings, StateVariable
+from kinswarm.actors.learning.observation import Observation, StateVariable
 from kinswarm.protocol.messages import Readings, Task
 from kinswarm.protocol.topology import Topology
 
@@ -83,7 +83,7 @@ class CorridorTask(ReachTask):
         s = self.settings
         return (CLEARANCE,) * s.clearance_state + (COLLIDED,) * s.collision_state
 
-    def agent(self, agent: str, settings: LearnerSettings | None) -> AgentTask:
+    def agent(self, agent: str, observation: Observation | None) -> AgentTask:
         return CorridorAgent(self.settings, self.topo, agent)
 
 

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from kinswarm.actors.learning.settings import LearnerSettings, StateVariable
+from kinswarm.actors.learning.observation import Observation, StateVariable
 from kinswarm.actors.learning.state import goal_along_motion
 from kinswarm.protocol.messages import Task
 
@@ -72,7 +72,7 @@ class GraspTask(TaskDef):
     def state_variables(self, agent: str) -> tuple[StateVariable, ...]:
         return (G_PERP,)
 
-    def agent(self, agent: str, settings: LearnerSettings | None) -> AgentTask:
+    def agent(self, agent: str, observation: Observation | None) -> AgentTask:
         if agent == self.topo.root:
             return GraspRoot(self)
         return GraspFinger(self.settings.fine_action)

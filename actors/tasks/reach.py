@@ -20,7 +20,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from kinswarm.actors.learning.settings import LearnerSettings
+from kinswarm.actors.learning.observation import Observation
 from kinswarm.protocol.messages import Task
 
 from .base import AgentTask, Head, TaskDef, Vec2, centroid
@@ -78,7 +78,7 @@ class ReachTask(TaskDef):
         goal = s.goals[epoch % len(s.goals)] if s.goals else s.goal
         return (float(goal[0]), float(goal[1])), []
 
-    def agent(self, agent: str, settings: LearnerSettings | None) -> AgentTask:
+    def agent(self, agent: str, observation: Observation | None) -> AgentTask:
         return ReachAgent(self.settings, self.topo.subtree_leaves(agent))
 
 

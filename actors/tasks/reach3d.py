@@ -29,7 +29,8 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from kinswarm.actors.learning.settings import LearnerSettings
+from kinswarm.actors.learning.observation import OBSERVATION_FIELDS, TURN_RANGES, Observation, plane_ranges
+from kinswarm.actors.learning.settings import PLANE_SETS, TURN_LEARNER, LearnerSettings
 from kinswarm.protocol import frames
 from kinswarm.protocol.messages import Task
 from kinswarm.protocol.topology import AgentSpec
@@ -138,16 +139,29 @@ class Reach3dTask(TaskDef):
             out[a] = min(max(math.radians(v), lo), hi)
         return out
 
-    def learner(self, agent: str, overrides: Mapping[str, Any]) -> LearnerSettings:
+    def observation(self, agent: str, overrides: Mapping[str, Any]) -> Observation:
         """A point's joints see their rotation plane, a pose's their turn, unless `state` says otherwise: the plane
         does not see the orientation (0 % of poses without it); with g_rot, the turn about its own axis the tool still
         needs, added, the swarm reached 52 % of unseen poses, with the turn 90-93 % (docs/notebook/reach3d.md)."""
-        if overrides.get("state", "turn" if self.settings.pose else "plane") == "turn":
-            return LearnerSettings.for_turn(**dict(overrides))
+        given = {k: v for k, v in overrides.items() if k in OBSERVATION_FIELDS}
+        if self._turns(overrides):
+            return Observation(**{"state": "turn", "ranges": TURN_RANGES, **given})
         topo = self.topo
-        return LearnerSettings.for_plane(topo.reach, topo.reach_below(agent), topo.agents[agent].limits, **overrides)
+        ranges = plane_ranges(topo.reach, topo.reach_below(agent), topo.agents[agent].limits)
+        return Observation(**{"state": "plane", "ranges": ranges, **given})
 
-    def agent(self, agent: str, settings: LearnerSettings | None) -> AgentTask:
+    def learner(self, agent: str, overrides: Mapping[str, Any]) -> LearnerSettings:
+        """The fuzzy grid (and learning rate) each state kind was measured with (LearnerSettings.for_turn,
+        for_plane), over the agent's observation."""
+        obs = self.observation(agent, overrides)
+        grid = TURN_LEARNER if obs.state == "turn" else {"n_sets": PLANE_SETS}
+        own = {k: v for k, v in overrides.items() if k not in OBSERVATION_FIELDS}
+        return LearnerSettings.on(obs, **{**grid, **own})
+
+    def _turns(self, overrides: Mapping[str, Any]) -> bool:
+        return overrides.get("state", "turn" if self.settings.pose else "plane") == "turn"
+
+    def agent(self, agent: str, observation: Observation | None) -> AgentTask:
         return Reach3dAgent(self.settings, self.topo.agents[agent])
 
 

@@ -31,7 +31,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from kinswarm.actors.learning.settings import LearnerSettings
+from kinswarm.actors.learning.observation import Observation
 from kinswarm.protocol.messages import Task
 
 from .base import AgentTask, Head, TaskDef, Vec2, centroid
@@ -111,7 +111,7 @@ class TrackTask(TaskDef):
         path = [self.settings.at(self.settings.speed * t) for t in range(steps)]
         return path[0], path
 
-    def agent(self, agent: str, settings: LearnerSettings | None) -> AgentTask:
+    def agent(self, agent: str, observation: Observation | None) -> AgentTask:
         return TrackAgent(self.settings, self.topo.subtree_leaves(agent))
 
 
