@@ -11,9 +11,10 @@ hits every row alike):
   wire (async)   benchmarks/wire_floor.py --mode async: a bare msgpack relay down and up a chain of 4 processes
                  over Zenoh, asyncio bridge; steps/s = one pass per 2*depth + 2 hops, as a swarm step needs
   wire (block)   the same with a blocking FifoChannel receive: the fastest any step can cross the wire here
-  in-process     the same four learners (Learner.decide/observe, the run's settings and seeds) and the planar
-                 kinematics (sim/kinematics.py) in a plain loop: no messages, no processes, no PyBullet —
-                 what the step costs in computation alone
+  inprocess      the same run with `--placement inprocess`: the step library in a plain loop, the real PyBullet
+                 world, no messages, no processes
+  in-process     the floor: the same loop on the planar robot in closed form (sim/kinematics.ModelWorld), nothing
+                 recorded — what the step costs in computation alone
   fleets         the same run with `run.fleet = B` (B robots through one swarm, sim/fleet.py), both placements,
                  --fleet-steps steps an epoch: robot-steps/s, and each over B = 1's in the same placement
 Ratios are each rate over a floor's median. Steps/s of a swarm come from the simulator's per-epoch timing with
@@ -26,64 +27,37 @@ import argparse
 import json
 import statistics
 import sys
+import tempfile
 import time
 from pathlib import Path
 
-from kinswarm.actors.agent.actor import agent_seed
-from kinswarm.actors.learning import state
-from kinswarm.actors.learning.learner import Learner
-from kinswarm.actors.runfile import learner_settings, load_run, task_of
-from kinswarm.protocol.messages import Task
+from kinswarm.actors.runfile import load_run
+from kinswarm.actors.supervisor.inprocess import InProcessRun
 from kinswarm.sim import kinematics
 from step_rate import ROOT, swarm_rate, wire_floor  # benchmarks/ is this script's directory, so first on sys.path
 
 CHAIN4 = ROOT / "examples" / "chain4.toml"
 
 
-def inprocess_rate(epochs: int, steps: int, seed: int) -> float:
-    """The chain's learners and kinematics in a plain loop, as the swarm computes a step: the root turns the
-    observation into the goal and the reward, each agent composes its state, observes its children's actions of the
-    step before (carried by their `up`), decides, and the joints move by the chosen increments within their limits."""
-    cfg = load_run(CHAIN4, [f"run.seed={seed}"])
-    topo, task = cfg.topo(), task_of(cfg)
-    settings = learner_settings(task, cfg.learner, cfg.source)
-    dof = topo.dof_agents
-    visible = {a: [c for c in topo.agents[a].children if topo.agents[c].has_dof] for a in dof}
-    learners = {a: Learner(settings[a], len(visible[a]), agent_seed(cfg.seed, a)) for a in dof}
-    if any(s.extra_state for s in settings.values()):
-        raise SystemExit("the in-process floor computes the planar state only; chain4's learners have extra variables")
-    tip_of = {a: topo.subtree_leaves(a)[0] for a in dof}  # a chain: one end effector below every agent
-    head = task.agent(topo.root, settings[topo.root])
-    order = [a for a in reversed(topo.order) if a in learners]  # leaves first, as the up pass
-    limits = {a: topo.agents[a].limits for a in dof}
-    seconds, done = 0.0, 0
-    for epoch in range(epochs):
-        angles = topo.initial_angles()
-        goal, _ = task.goal(epoch, steps)
-        for learner in learners.values():
-            learner.start_epoch(epoch)
-        head.start_epoch()
-        before: dict[str, int] | None = None
-        t0 = time.perf_counter()
-        for step in range(steps):
-            joints, ends = kinematics._walk(topo, angles)
-            tips = {leaf: ends[leaf] for leaf in topo.end_effectors}
-            h = head.head(Task(epoch=epoch, step=step, goal=goal, tips=tips, sense={}))
-            acts: dict[str, int] = {}
-            for a in order:
-                s = state.agent_state(joints[a], angles[a], tips[tip_of[a]], h.goal, settings[a].g3 == "unsigned")
-                if visible[a] and before is not None:
-                    learners[a].observe([before[c] for c in visible[a]], learn=cfg.learn)
-                acts[a] = learners[a].decide(s, h.reward, learn=cfg.learn, explore=cfg.explore)
-                if not visible[a]:
-                    learners[a].observe([], learn=cfg.learn)
-            for a in dof:
-                lo, hi = limits[a]
-                angles[a] = min(hi, max(lo, angles[a] + (acts[a] - 1) * cfg.action_rad))
-            before = acts
-        if epoch > 0 or epochs == 1:  # the first epoch warms caches, as in the swarm's rate
-            seconds += time.perf_counter() - t0
-            done += steps
+def floor_rate(epochs: int, steps: int, seed: int) -> float:
+    """The run's step as the step library computes it (actors/agent/passes.py: the passes, the task's hooks, each
+    agent's state, reward and choice; the learners' decide and observe), in the inprocess placement's plain loop, on the
+    planar robot in closed form (sim/kinematics.ModelWorld) instead of PyBullet, nothing recorded: what the step costs
+    in computation alone."""
+    with tempfile.TemporaryDirectory() as d:
+        cfg = load_run(CHAIN4, [f"run.seed={seed}", f"run.steps={steps}"], out=d)
+        topo = cfg.topo()
+        run = InProcessRun(cfg, topo, world=kinematics.ModelWorld(topo))
+        seconds, done = 0.0, 0
+        try:
+            for epoch in range(epochs):
+                t0 = time.perf_counter()
+                run.epoch(epoch, lambda *event: None)
+                if epoch > 0 or epochs == 1:  # the first epoch warms caches, as in the swarm's rate
+                    seconds += time.perf_counter() - t0
+                    done += steps
+        finally:
+            run.close()
     return done / seconds
 
 
@@ -98,7 +72,7 @@ def main() -> None:
     ap.add_argument("--json", type=Path, default=None)
     a = ap.parse_args()
     fleets = [int(b) for b in a.fleets.split(",") if b.strip()]
-    names = ["process", "single", "wire (async)", "wire (block)", "in-process"]
+    names = ["process", "single", "inprocess", "wire (async)", "wire (block)", "in-process"]
     names += [f"{p} B={b}" for b in fleets for p in ("process", "single")]
     rows: dict[str, list[float]] = {name: [] for name in names}
     for r in range(a.repeats):
@@ -106,14 +80,14 @@ def main() -> None:
             if " B=" in name:
                 placement, b = name.split(" B=")
                 v = swarm_rate(placement, a.epochs, a.fleet_steps, seed=r, fleet=int(b))
-            elif name in ("process", "single"):
+            elif name in ("process", "single", "inprocess"):
                 v = swarm_rate(name, a.epochs, a.steps, seed=r)
             elif name.startswith("wire"):
                 v = wire_floor(name[6:-1], a.passes)
                 if v is None:
                     raise SystemExit(f"benchmarks/wire_floor.py --mode {name[6:-1]} failed")
             else:
-                v = inprocess_rate(a.epochs, a.steps, seed=r)
+                v = floor_rate(a.epochs, a.steps, seed=r)
             rows[name].append(v)
             print(f"  repeat {r + 1}/{a.repeats}: {name:13} {v:8.0f} steps/s", file=sys.stderr, flush=True)
     med = {k: statistics.median(v) for k, v in rows.items()}
@@ -126,7 +100,7 @@ def main() -> None:
             continue
         ratios = "".join(f"{med[name] / med[f]:16.2f}" for f in floors)
         print(f"{name:14}{med[name]:9.0f}{min(v):9.0f}{max(v):9.0f}{ratios}")
-    print("steps/s; ratios of medians. Target: process >= 0.8 x wire (block).")
+    print("steps/s; ratios of medians. Targets: process >= 0.8 x wire (block); inprocess >= 0.8 x in-process.")
     if fleets:
         print(f"\nfleets: {a.epochs} epochs x {a.fleet_steps} steps, robot-steps/s (median), / the placement's B=1")
         print(f"{'B':>6}" + "".join(f"{p:>12}{'/ B=1':>8}" for p in ("process", "single")))

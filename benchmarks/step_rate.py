@@ -55,6 +55,8 @@ def swarm_rate(placement: str, epochs: int, steps: int, seed: int, fleet: int = 
                 f"tcp/127.0.0.1:{free_port()}",
                 "--set",
                 f"run.fleet={fleet}",
+                "--set",
+                "run.record=false",  # motion.gif and the recording: minutes of drawing, timed by no row
             ]
         )
         cfg, topo = _resolve(a, "agents")

@@ -75,3 +75,43 @@ def jacobian(topo: Topology, angles: Mapping[str, float], leaf_id: str) -> np.nd
             jac[0, col] = -(ty - jy)
             jac[1, col] = tx - jx
     return jac
+
+
+class ModelWorld:
+    """A planar robot's world in closed form, with `sim/world.World`'s interface (reset, joint_positions,
+    apply_increments, tip_poses, close): the robot without PyBullet, for the benchmarks' in-process floor. Its tips
+    are double precision where PyBullet's link states are single, so a run on it takes other paths than on the real
+    world after a few steps: a floor for speed, not a stand-in for results."""
+
+    def __init__(self, topo: Topology) -> None:
+        if topo.spatial:
+            raise ValueError(f"{topo.name}: the model world is planar; a robot from URDF needs PyBullet's")
+        self.topo = topo
+        self._limits = {a: topo.agents[a].limits for a in topo.dof_agents}
+        self._q = topo.initial_angles()
+
+    def reset(self, angles: Mapping[str, float] | None = None) -> None:
+        q = self.topo.initial_angles() if angles is None else dict(angles)
+        for a, v in q.items():
+            lo, hi = self._limits[a]
+            if not lo <= v <= hi:
+                raise ValueError(f"reset angle for {a!r}: {v} outside limits [{lo}, {hi}]")
+        self._q = {a: float(q[a]) for a in self._limits}
+
+    def joint_positions(self) -> dict[str, float]:
+        return dict(self._q)
+
+    def apply_increments(self, deltas: Mapping[str, float]) -> dict[str, float]:
+        applied = dict.fromkeys(self._limits, 0.0)
+        for a, d in deltas.items():
+            lo, hi = self._limits[a]
+            new = min(max(self._q[a] + d, lo), hi)
+            applied[a] = new - self._q[a]
+            self._q[a] = new
+        return applied
+
+    def tip_poses(self) -> dict[str, Pose]:
+        return tips(self.topo, self._q)
+
+    def close(self) -> None:
+        pass

@@ -16,6 +16,7 @@ import logging
 import time
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 from kinswarm.actors.agent.actor import agent_seed
 from kinswarm.actors.agent.memory import checkpoint_meta, restore_learner
@@ -40,7 +41,8 @@ log = logging.getLogger("kinswarm.inprocess")
 class InProcessRun:
     """One run's agents and robot, stepped in a plain loop (`run`), or one epoch at a time (`epoch`)."""
 
-    def __init__(self, cfg: RunConfig, topo: Topology) -> None:
+    def __init__(self, cfg: RunConfig, topo: Topology, world: Any = None) -> None:
+        """`world`: the robot's world (sim/world.World's interface); by default its PyBullet world."""
         self.cfg, self.topo = cfg, topo
         self.task = task_of(cfg)
         settings = learner_settings(self.task, cfg.learner, cfg.source)
@@ -59,7 +61,7 @@ class InProcessRun:
                 self.epochs_before[a] = restore_learner(learner, path, a, self.kind.name)
         self.traces = {a: StepTrace(a, obs[a].names) for a in self.learners} if cfg.record_agents else {}
         scenario = load_scenario(cfg.scenario, topo) if cfg.scenario else None
-        self.robot = Robot(topo, cfg.scene_spec, cfg.action_rad, cfg.seed, scenario)
+        self.robot = Robot(topo, cfg.scene_spec, cfg.action_rad, cfg.seed, scenario, world)
         self.first = [a for a in topo.dof_agents if a == topo.root]  # sensed in the sim actor's order
         self.after = [a for a in topo.dof_agents if a != topo.root]
         self.deciders = [a for a in reversed(self.order) if a in self.learners]  # leaves first, as the up pass
