@@ -1,43 +1,50 @@
-"""The top-down/bottom-up state passes, as the agents compute them, against closed-form planar kinematics."""
+"""The top-down/bottom-up state passes of the step library (actors/agent/passes.py, what every placement computes),
+against closed-form planar kinematics."""
 
 import math
 
 import numpy as np
 import pytest
-from kinswarm.actors.learning.state import agent_state, joint_frame, link_end
-from kinswarm.protocol.topology import load_robot
+from conftest import run_config
+from kinswarm.actors.agent.passes import AgentStep
+from kinswarm.actors.runfile import learner_settings, task_of
+from kinswarm.protocol.messages import Down
 from kinswarm.sim import kinematics
 
 
-def passes(topo, angles, goal):
-    """Replay what travels on the wire: down = base frames root -> leaves; up = tips leaves -> root."""
-    frames, ends = {}, {}
+def passes(cfg, angles, goal):
+    """The library's passes over a robot at `angles`: down = base frames root -> leaves; up = tips leaves -> root;
+    then each agent's state S_i (its first six variables)."""
+    topo, task = cfg.topo(), task_of(cfg)
+    obs = {a: s.observation for a, s in learner_settings(task, cfg.learner, cfg.source).items()}
+    agents = {a: AgentStep(topo, a, task, obs.get(a), cfg.action_rad) for a in topo.order}
+    begun = {}
     for a in topo.order:  # top-down
-        spec = topo.agents[a]
-        base = topo.base if spec.parent is None else ends[spec.parent]
-        frames[a] = joint_frame(base, spec.offset, angles.get(a, 0.0))
-        ends[a] = link_end(frames[a], spec.link_length)
-    tips = {}
-    for a in reversed(topo.order):  # bottom-up
-        if topo.agents[a].is_leaf:
-            tips[a] = {a: ends[a]}
+        parent = topo.agents[a].parent
+        if parent is None:
+            head = Down(epoch=0, step=0, base=topo.base, goal=goal, reward=None, sense={})
         else:
-            tips[a] = {k: v for c in topo.agents[a].children for k, v in tips[c].items()}
-    states = {}
-    for a in topo.order:
-        pts = np.array([t[:2] for t in tips[a].values()])
-        states[a] = agent_state(frames[a], angles.get(a, 0.0), pts.mean(axis=0), goal)
-    return frames, tips, states
+            head = agents[parent].down(begun[parent], a, 0, 0, begun[parent].end)
+        begun[a] = agents[a].begin(head, angles.get(a, 0.0), {})
+    ups, tips, states = {}, {}, {}
+    for a in reversed(topo.order):  # bottom-up
+        children = {c: ups[c] for c in topo.agents[a].children}
+        tips[a], view = agents[a].finish(begun[a], 0, 0, children, None)
+        if topo.agents[a].parent is not None:
+            ups[a] = agents[a].up(view, tips[a])
+        states[a] = agents[a].decide_from(begun[a], view)[0][:6]
+    return {a: b.frame for a, b in begun.items()}, tips, states
 
 
 @pytest.mark.parametrize("name", ["chain4", "tree5"])
 def test_passes_match_closed_form(name, chain4, tree5):
-    topo = load_robot({"chain4": chain4, "tree5": tree5}[name])
+    cfg = run_config({"chain4": chain4, "tree5": tree5}[name])
+    topo = cfg.topo()
     rng = np.random.default_rng(7)
     for _ in range(100):
         angles = {a: rng.uniform(*topo.agents[a].limits) for a in topo.dof_agents}
         goal = tuple(rng.uniform(-topo.reach, topo.reach, 2))
-        frames, tips, states = passes(topo, angles, goal)
+        frames, tips, states = passes(cfg, angles, goal)
         ref_frames = kinematics.frames(topo, angles)
         ref_tips = kinematics.tips(topo, angles)
         for a in topo.order:
