@@ -12,6 +12,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from hypothesis_timeout import pytest_timeout_set_timer  # noqa: F401  # the hook: a hung property ends at its timeout
 from kinswarm.actors.config import RunConfig
 from kinswarm.actors.runfile import load_run
 from kinswarm.actors.runtime import Mailbox
