@@ -319,3 +319,10 @@ def test_the_net_under_the_table_catches_a_real_run(no_work, monkeypatch, placem
     monkeypatch.setattr(launch, "run_swarm", REAL_RUN_SWARM)
     with pytest.raises(Forbidden):
         cli.main(["run", str(EXAMPLES / "chain4.toml"), "--placement", placement, "--epochs", "1"])
+
+
+def test_hypothesis_draws_as_a_users_run_does():
+    """CI=true would select Hypothesis's "ci" profile (fixed examples); conftest.py's profile draws afresh."""
+    from hypothesis import settings as current
+
+    assert current.default.derandomize is False and current.default.database is None
