@@ -6,7 +6,9 @@ import asyncio
 import dataclasses
 import logging
 import os
+import shutil
 import socket
+import tempfile
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -24,6 +26,23 @@ from kinswarm.protocol.keys import Keys
 # written outside tmp dirs (a failure prints its seed and blob to reproduce it). `--hypothesis-profile` still wins.
 settings.register_profile("kinswarm", derandomize=False, database=None, print_blob=True)
 settings.load_profile("kinswarm")
+
+
+_HYPOTHESIS_HOME = pytest.StashKey[str]()
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    """Hypothesis's caches (constants, unicode tables) in this session's tmp dir, not `.hypothesis/` in the checkout
+    (they are written while the tests are collected)."""
+    from hypothesis.configuration import set_hypothesis_home_dir
+
+    config.stash[_HYPOTHESIS_HOME] = home = tempfile.mkdtemp(prefix="hypothesis-")
+    set_hypothesis_home_dir(home)
+
+
+def pytest_unconfigure(config: pytest.Config) -> None:
+    shutil.rmtree(config.stash.get(_HYPOTHESIS_HOME, ""), ignore_errors=True)
+
 
 # Runs in tests draw no motion.gif and write no recording.rrd (RunConfig.record), unless a test asks: seconds a
 # run, hundreds of runs. Subprocesses inherit it.
