@@ -6,16 +6,43 @@ import asyncio
 import dataclasses
 import logging
 import os
+import shutil
 import socket
+import tempfile
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 import pytest
+from hypothesis import settings
+from hypothesis_timeout import pytest_timeout_set_timer  # noqa: F401  # the hook: a hung property ends at its timeout
 from kinswarm.actors.config import RunConfig
 from kinswarm.actors.runfile import load_run
 from kinswarm.actors.runtime import Mailbox
 from kinswarm.protocol.keys import Keys
+
+# Hypothesis draws the same way with and without CI set: CI=true alone would load its "ci" profile, which draws fixed
+# examples (derandomize), so CI would never see what a user's run can draw. No example database either: nothing is
+# written outside tmp dirs (a failure prints its seed and blob to reproduce it). `--hypothesis-profile` still wins.
+settings.register_profile("kinswarm", derandomize=False, database=None, print_blob=True)
+settings.load_profile("kinswarm")
+
+
+_HYPOTHESIS_HOME = pytest.StashKey[str]()
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    """Hypothesis's caches (constants, unicode tables) in this session's tmp dir, not `.hypothesis/` in the checkout
+    (they are written while the tests are collected)."""
+    from hypothesis.configuration import set_hypothesis_home_dir
+
+    config.stash[_HYPOTHESIS_HOME] = home = tempfile.mkdtemp(prefix="hypothesis-")
+    set_hypothesis_home_dir(home)
+
+
+def pytest_unconfigure(config: pytest.Config) -> None:
+    shutil.rmtree(config.stash.get(_HYPOTHESIS_HOME, ""), ignore_errors=True)
+
 
 # Runs in tests draw no motion.gif and write no recording.rrd (RunConfig.record), unless a test asks: seconds a
 # run, hundreds of runs. Subprocesses inherit it.

@@ -8,7 +8,8 @@ import statistics
 from pathlib import Path
 
 import pytest
-from conftest import free_port
+import tomli_w
+from conftest import EXAMPLES, free_port
 from kinswarm.actors.cli import _resolve, build_parser
 from kinswarm.actors.launch import run_swarm
 
@@ -45,12 +46,13 @@ def test_chain4_learns_to_reach(tmp_path, chain4, seed):
 
 
 def chain4_from(start_deg: tuple[float, ...], path: Path) -> Path:
-    """The example chain with other start angles."""
-    agents = "".join(
-        f'[[agent]]\nid = "a{i + 1}"\n' + (f'parent = "a{i}"\n' if i else "") + f"initial_deg = {q}\n\n"
+    """The example chain with other start angles: examples/chain4.toml as its `base`, its agents replaced (a list
+    replaces a list)."""
+    agents = [
+        {"id": f"a{i + 1}", **({"parent": f"a{i}"} if i else {}), "initial_deg": float(q)}
         for i, q in enumerate(start_deg)
-    )
-    path.write_text(f"[robot]\nname = 'chain4'\n[defaults]\nlink_length = 3.0\n\n{agents}")
+    ]
+    path.write_text(tomli_w.dumps({"base": str(EXAMPLES / "chain4.toml"), "robot": {"agent": agents}}))
     return path
 
 

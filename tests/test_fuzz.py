@@ -1,17 +1,24 @@
 """Property tests: thousands of generated inputs against every door bad input comes through — the codec, the run-file,
 robot, scene, scenario and plan loaders, and the CLI's argument checks. Each must answer with its own one-line error
-(or accept), never an uncaught exception. The swarm itself is not started here: run_swarm and the experiments are
-replaced by stubs that only record that the command got that far."""
+(or accept), never an uncaught exception. Nothing is started here: every subcommand's work (a swarm, an experiment,
+a session with a running swarm, a router, ...) is replaced by a stub that only records that the command got that
+far."""
 
 from __future__ import annotations
 
+import argparse
+import importlib
+import multiprocessing.process
+import os
+import subprocess
 from pathlib import Path
 from typing import Any
 
 import msgpack
 import pytest
 import tomli_w
-from conftest import EXAMPLES
+import zenoh
+from conftest import EXAMPLES, ROOT, run_config
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from kinswarm.actors import cli
@@ -25,8 +32,10 @@ from kinswarm.protocol.spec import SpecError
 from kinswarm.protocol.topology import load_robot
 
 KEY = b"k" * 32
+# Example counts that keep this file well inside 5 minutes, and each test inside its 120 s timeout, on a 2-core machine
+# shared with other work (a load of 13 measured: 1500 nested message bodies took over 120 s, 600 run files 35 s).
 FAST = settings(max_examples=1500, deadline=None, suppress_health_check=[HealthCheck.too_slow])
-SOME = settings(max_examples=600, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+SOME = settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 
 scalars = st.one_of(
     st.none(),
@@ -74,7 +83,7 @@ def bodies(draw: Any) -> tuple[type, dict]:
     return cls, body
 
 
-@FAST
+@SOME
 @given(bodies())
 def test_the_codec_refuses_garbage_with_a_reason(case):
     cls, body = case
@@ -98,6 +107,7 @@ def test_the_codec_refuses_random_bytes(data, cls):
             pass
 
 
+DEPLOY = ROOT / "deploy"
 BASE = read_run_file(EXAMPLES / "chain4.toml")
 SECTIONS = ("run", "robot", "scene", "task", "learner")
 LOADER_ERRORS = (SpecError, ConfigError, ScenarioError, ValueError)
@@ -165,39 +175,130 @@ def test_scenario_files(tmp_path_factory, doc):
         pass
 
 
+# Where each subcommand starts its work, after every check of its input: replaced by Reached, so a fuzzed command
+# line exercises the checks and nothing else (a drawn `experiment all` once ran every experiment at full size, in
+# process, for hours). Each is replaced in its module and in the CLI's, whichever the CLI calls it through.
+WORK = {
+    "run": [("kinswarm.actors.launch", "run_swarm")],
+    "baseline": [("kinswarm.actors.launch", "run_swarm")],
+    "up": [("kinswarm.actors.launch", "run_swarm"), ("kinswarm.actors.deploy", "fetch_setup")],
+    "report": [("kinswarm.actors.report", "write_plots")],
+    "animate": [("kinswarm.actors.animate", "write_animation")],
+    "view": [("kinswarm.actors.recording", "open_stream"), ("kinswarm.actors.recording", "record_run")],
+    "fault": [("kinswarm.actors.control", "Client")],
+    "status": [("kinswarm.actors.control", "show_status")],
+    "experiment": [("kinswarm.experiments", "run_experiment")],
+    "down": [("kinswarm.actors.deploy", "down")],
+    "router": [("kinswarm.actors.deploy", "run_router")],
+    "certs": [("kinswarm.actors.deploy", "write_certs")],
+}
+REAL_RUN_SWARM = cli.run_swarm
+RUN_DIR = "runs/demo"  # a run directory the fixture makes (config.json, no epoch yet): report, fault ... reach it
+
+
+class Reached(BaseException):  # noqa: N818  # no Exception: no `except` of the CLI can swallow it
+    """A command got past its checks to where its work starts."""
+
+
+class Forbidden(BaseException):  # noqa: N818
+    """Something a fuzzed command line must never do: spawn a process or open a Zenoh session."""
+
+
+def subcommands() -> set[str]:
+    (action,) = [a for a in cli.build_parser()._actions if isinstance(a, argparse._SubParsersAction)]
+    return set(action.choices)
+
+
 WORDS = [
-    "run", "baseline", "report", "fault", "status", "experiment", "up", "down", "certs", "router",
-    str(EXAMPLES / "chain4.toml"), "examples/nope.toml", "--epochs", "--steps", "--seed", "--goal", "--placement",
-    "--set", "--out", "--from", "--learn", "--explore", "--scenario", "--listen", "--for", "--rate", "--law",
-    "lock", "kill", "freeze", "drop", "a1", "a9", "all", "0", "-1", "5", "1e9", "nan", "-5s", "5s", "single",
-    "process", "on", "off", "learner.gamma=2", "task.goal=[1,2]", "run.epochs=0", "garbage", "tcp/127.0.0.1:1",
-    "x=y", "--run-id", "bad/id", "--help",
+    *sorted(subcommands()), "cost", "generalisation", "--quick", "--seeds", "--jobs", "--test-set",
+    str(EXAMPLES / "chain4.toml"), "examples/nope.toml", str(DEPLOY / "local.toml"), str(DEPLOY / "two-hosts.toml"),
+    "--epochs", "--steps", "--seed", "--goal", "--placement", "--set", "--out", "--from", "--learn", "--explore",
+    "--scenario", "--listen", "--for", "--rate", "--law", "--host", "--plan", "--run-file", "--wait", "--save", "--web",
+    "--watch", "--run-dir", "--connect", "--log", "lock", "kill", "freeze", "drop", "a1", "a9", "all", "0", "-1", "5",
+    "1e9", "nan", "-5s", "5s", "single", "process", "on", "off", "learner.gamma=2", "task.goal=[1,2]", "run.epochs=0",
+    "garbage", "tcp/127.0.0.1:1", "x=y", "--run-id", "bad/id", "--help", "demo", RUN_DIR, "local", "brain", "x.rrd",
 ]  # fmt: skip
 
 
+def _refuse(what: str) -> Any:
+    def refuse(*a: object, **k: object) -> None:
+        raise Forbidden(f"a fuzzed command line tried to {what}")
+
+    return refuse
+
+
 @pytest.fixture
-def no_swarm(monkeypatch, tmp_path):
-    """Stand-ins for what would start a swarm or an experiment: the checks before them are what is fuzzed."""
-    calls = []
-    monkeypatch.setattr(cli, "run_swarm", lambda *a, **k: calls.append(a) or {"final_error": [], "steps_per_second": 0})
+def no_work(monkeypatch, tmp_path):
+    """Every subcommand's work replaced by Reached, and whatever would spawn a process or open a session made to
+    raise Forbidden (a net under the table above: a new way to start work fails the test instead of running)."""
+    reached: list[tuple[str, str]] = []
+    for module, name in {place for places in WORK.values() for place in places}:
+
+        def stub(*a: object, _at: tuple[str, str] = (module, name), **k: object) -> None:
+            reached.append(_at)
+            raise Reached(".".join(_at))
+
+        monkeypatch.setattr(importlib.import_module(module), name, stub)
+        if hasattr(cli, name):
+            monkeypatch.setattr(cli, name, stub)
+    monkeypatch.setattr(subprocess.Popen, "__init__", _refuse("start a process"))
+    for name in ("fork", "forkpty", "posix_spawn", "posix_spawnp", "system"):
+        monkeypatch.setattr(os, name, _refuse(f"start a process (os.{name})"))
+    monkeypatch.setattr(multiprocessing.process.BaseProcess, "start", _refuse("start a worker process"))
+    monkeypatch.setattr(zenoh, "open", _refuse("open a Zenoh session"))
     monkeypatch.chdir(tmp_path)
-    return calls
+    cfg = run_config(EXAMPLES / "chain4.toml", run_id="demo", out=tmp_path / RUN_DIR)
+    (tmp_path / RUN_DIR).mkdir(parents=True)
+    cfg.write(tmp_path / RUN_DIR / "config.json")
+    (tmp_path / RUN_DIR / "metrics.jsonl").write_text("")
+    return reached
 
 
-@settings(max_examples=1200, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
-@given(st.lists(st.sampled_from(WORDS), min_size=1, max_size=7))
-def test_the_cli_answers_every_command_line_with_a_code(no_swarm, capsys, argv):
-    if argv[0] in ("experiment", "up", "down", "router", "status", "fault") and len(argv) > 1:
-        argv = argv[:1] + ["--help"] if argv[0] in ("up", "router") else argv  # those would wait for peers
+def _main(argv: list[str]) -> int:
     try:
-        code = cli.main(argv)
+        return cli.main(argv)
     except SystemExit as e:  # argparse's usage errors and --help
-        code = e.code if isinstance(e.code, int) else 2
+        return e.code if isinstance(e.code, int) else 2
+    except Reached:
+        return 0
+
+
+@settings(max_examples=600, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(st.lists(st.sampled_from(WORDS), min_size=1, max_size=7))
+def test_the_cli_answers_every_command_line_with_a_code(no_work, capsys, argv):
+    code = _main(argv)
     out = capsys.readouterr()
     assert isinstance(code, int) and "Traceback" not in out.err, (argv, out.err[-500:])
 
 
-def test_the_cli_property_can_fail(no_swarm, monkeypatch):
+def test_every_subcommand_has_its_work_replaced():
+    """A new subcommand must name where its work starts (WORK), or the property above could run it for real."""
+    assert subcommands() == set(WORK)
+
+
+REACH = {  # a command line of each subcommand that passes its checks
+    "run": ["run", str(EXAMPLES / "chain4.toml")],
+    "baseline": ["baseline", str(EXAMPLES / "chain4.toml")],
+    "up": ["up", str(DEPLOY / "local.toml"), "--host", "local"],
+    "report": ["report", RUN_DIR],
+    "animate": ["animate", RUN_DIR],
+    "view": ["view", RUN_DIR, "--save", "x.rrd"],
+    "fault": ["fault", "demo", "kill", "a1", "--run-dir", RUN_DIR],
+    "status": ["status", "demo", "--run-dir", RUN_DIR],
+    "experiment": ["experiment", "all"],
+    "down": ["down", str(DEPLOY / "local.toml"), "--host", "local"],
+    "router": ["router", "--listen", "tcp/127.0.0.1:0"],
+    "certs": ["certs", str(DEPLOY / "two-hosts-tls.toml"), "--out", "certs"],
+}
+
+
+@pytest.mark.parametrize("command", sorted(WORK))
+def test_each_replacement_is_where_the_command_goes(no_work, command):
+    """The stubs sit on the path each command really takes: a good command line ends at its own."""
+    assert _main(REACH[command]) == 0 and len(no_work) == 1 and no_work[0] in WORK[command], no_work
+
+
+def test_the_cli_property_can_fail(no_work, monkeypatch):
     """An uncaught exception inside a command reaches the property above (it catches only SystemExit)."""
 
     def broken(*a: object, **k: object) -> None:
@@ -206,3 +307,22 @@ def test_the_cli_property_can_fail(no_swarm, monkeypatch):
     monkeypatch.setattr(cli, "load_run", broken)
     with pytest.raises(KeyError):
         cli.main(["run", str(EXAMPLES / "chain4.toml")])
+
+
+@pytest.mark.timeout(60)
+@pytest.mark.parametrize("placement", ["single", "process"])
+def test_the_net_under_the_table_catches_a_real_run(no_work, monkeypatch, placement):
+    """Were a command's work missing from WORK, it would fail the property, not run: a real `kinswarm run`."""
+    from kinswarm.actors import launch
+
+    monkeypatch.setattr(cli, "run_swarm", REAL_RUN_SWARM)
+    monkeypatch.setattr(launch, "run_swarm", REAL_RUN_SWARM)
+    with pytest.raises(Forbidden):
+        cli.main(["run", str(EXAMPLES / "chain4.toml"), "--placement", placement, "--epochs", "1"])
+
+
+def test_hypothesis_draws_as_a_users_run_does():
+    """CI=true would select Hypothesis's "ci" profile (fixed examples); conftest.py's profile draws afresh."""
+    from hypothesis import settings as current
+
+    assert current.default.derandomize is False and current.default.database is None

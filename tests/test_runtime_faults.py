@@ -134,12 +134,12 @@ def test_delay_delivers_late_without_blocking_the_loop_or_zenoh(sessions, side):
             t0 = time.monotonic()
             tx.send(STEP, Cmd(epoch=0, step=7, delta=0.0))
             tx.send(CTL, EpochStart(epoch=0, steps=1, goal=(0.0, 0.0)))
-            assert time.monotonic() - t0 < 0.05  # send returned at once
             got = await collect(rx, quiet=d + 0.5)
             arrival = {k: at - t0 for k, _, at in got}
-            assert [k for k, _, _ in got] == [CTL, STEP]  # the control message overtook the delayed one
-            assert arrival[CTL] < d / 2
-            assert d * 0.95 <= arrival[STEP] < d + 0.25
+            # the control message, sent second, overtook the delayed one: neither the send nor the delivery of the
+            # step blocked until its delay was over (no wall-clock bound: a loaded machine is late, not wrong)
+            assert [k for k, _, _ in got] == [CTL, STEP]
+            assert arrival[STEP] >= d * 0.95  # held for its delay (a delay is at least that long, however loaded)
             assert steps_of(rx, got) == [7]
             assert ticks >= 10  # the loop kept running all along (30 ticks if the machine were idle)
             assert faulted.link_counts["delayed"] == 1
@@ -222,10 +222,10 @@ def test_clear_removes_every_link_fault_and_their_timers(sessions):
             tx.apply_fault(fault("delay", ms=500.0))
             assert tx.apply_fault(fault("clear")) == "clear a2 (delay, drop active)"
             assert tx.link_faults == []
-            t0 = time.monotonic()
             tx.send(STEP, Cmd(epoch=0, step=1, delta=0.0))
             got = await collect(rx)
-            assert steps_of(rx, got) == [1] and got[0][2] - t0 < 0.2  # neither dropped nor delayed
+            assert steps_of(rx, got) == [1]  # not dropped
+            assert tx.link_counts["delayed"] == 0 and tx.link_counts["dropped"] == 0  # neither fault touched it
             # the cleared drop's timer must not remove a fault applied after the clear
             tx.apply_fault(fault("drop", rate=1.0))
             await asyncio.sleep(0.4)

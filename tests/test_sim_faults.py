@@ -431,10 +431,8 @@ def test_sim_in_a_zenoh_session(tmp_path, chain4, endpoint):
         task = asyncio.create_task(sim.run())
         k = ctl.node.keys
         senders = set(ctl.dof)
-        step_wall: dict[int, float] = {}
 
         def on_task(t: Task) -> None:
-            step_wall[t.step] = time.monotonic()
             if t.step == 10:
                 ctl.node.send(
                     k.ctl("fault"),
@@ -464,8 +462,8 @@ def test_sim_in_a_zenoh_session(tmp_path, chain4, endpoint):
             ctl.node.send(k.ctl("epoch"), EpochStart(epoch=0, steps=40, goal=GOAL))
             done = await ctl.wait_for(EpochDone)
             assert done.steps == 40 and len(done.errors) == 40
-            assert done.missed_cmds == 0, "a3 went down: it was not waited for, so not missed"
-            assert max(step_wall[t + 1] - step_wall[t] for t in range(20, 39)) < 2.0, "no step waited for a3"
+            # a3 went down: no step waited for it (a step that did would have ended by its deadline, a3 missed)
+            assert done.missed_cmds == 0
             q0 = sim.topo.initial_angles()
             assert done.final_angles["a3"] == pytest.approx(q0["a3"] + 20 * DEG, abs=1.5 * DEG)
             assert done.final_angles["a1"] == pytest.approx(q0["a1"] + 40 * DEG)
