@@ -7,7 +7,9 @@ far."""
 from __future__ import annotations
 
 import argparse
+import fcntl
 import importlib
+import json
 import multiprocessing.process
 import os
 import subprocess
@@ -193,7 +195,7 @@ WORK = {
     "certs": [("kinswarm.actors.deploy", "write_certs")],
 }
 REAL_RUN_SWARM = cli.run_swarm
-RUN_DIR = "runs/demo"  # a run directory the fixture makes (config.json, no epoch yet): report, fault ... reach it
+RUN_DIR = "runs/demo"  # a run directory the fixture makes (a live run, one epoch in): report, fault ... reach it
 
 
 class Reached(BaseException):  # noqa: N818  # no Exception: no `except` of the CLI can swallow it
@@ -248,10 +250,17 @@ def no_work(monkeypatch, tmp_path):
     monkeypatch.setattr(zenoh, "open", _refuse("open a Zenoh session"))
     monkeypatch.chdir(tmp_path)
     cfg = run_config(EXAMPLES / "chain4.toml", run_id="demo", out=tmp_path / RUN_DIR)
-    (tmp_path / RUN_DIR).mkdir(parents=True)
-    cfg.write(tmp_path / RUN_DIR / "config.json")
-    (tmp_path / RUN_DIR / "metrics.jsonl").write_text("")
-    return reached
+    run = tmp_path / RUN_DIR
+    run.mkdir(parents=True)
+    cfg.write(run / "config.json")
+    row = {"epoch": 0, "final_error": 1.0, "mean_error": 2.0, "steps": 2, "seconds": 0.1, "missed_cmds": 0}
+    row |= {"max_step_seconds": 0.05, "final_angles_deg": dict.fromkeys(cfg.topo().dof_agents, 0.0), "errors": [3, 1]}
+    (run / "metrics.jsonl").write_text(json.dumps(row) + "\n")
+    (run / "poses.jsonl").write_text(json.dumps({"epoch": 0, "angles_deg": [[0.0] * 4, [1.0] * 4]}) + "\n")
+    # held as a live run holds it: report, fault ... see a run in progress
+    with open(run / ".lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        yield reached
 
 
 def _main(argv: list[str]) -> int:
