@@ -15,8 +15,8 @@ hits every row alike):
                  world, no messages, no processes
   in-process     the floor: the same loop on the planar robot in closed form (sim/kinematics.ModelWorld), nothing
                  recorded — what the step costs in computation alone
-  fleets         the same run with `run.fleet = B` (B robots through one swarm, sim/fleet.py), both placements,
-                 --fleet-steps steps an epoch: robot-steps/s, and each over B = 1's in the same placement
+  fleets         the same run with `run.fleet = B` (B robots through one swarm, actors/simulator/fleet.py), both
+                 placements, --fleet-steps steps an epoch: robot-steps/s, and each over B = 1's in the same placement
 Ratios are each rate over a floor's median. Steps/s of a swarm come from the simulator's per-epoch timing with
 the first epoch dropped (warm-up); the in-process loop is timed the same way.
 """
@@ -31,7 +31,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from kinswarm.actors.runfile import load_run
+from kinswarm.actors.run.runfile import load_run
 from kinswarm.actors.supervisor.inprocess import InProcessRun
 from kinswarm.sim import kinematics
 from step_rate import ROOT, swarm_rate, wire_floor  # benchmarks/ is this script's directory, so first on sys.path

@@ -22,7 +22,7 @@ import tempfile
 from pathlib import Path
 
 from kinswarm.actors.cli import _resolve, build_parser
-from kinswarm.actors.launch import run_swarm
+from kinswarm.actors.run.launch import run_swarm
 
 ROOT = Path(__file__).resolve().parent.parent
 FLOOR = Path(__file__).resolve().parent / "wire_floor.py"

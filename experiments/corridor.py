@@ -24,7 +24,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from kinswarm.actors.scene_plot import draw_chain, draw_scene, plot_scene_epochs
+from kinswarm.actors.report.scene_plot import draw_chain, draw_scene, plot_scene_epochs
 
 from .common import Context, Report, band, mean_std, plt_module, pm, run_specs
 from .swarm import ROOT, RunOutcome, Spec, resolved

@@ -16,7 +16,7 @@ import dataclasses
 import math
 from typing import Any
 
-from kinswarm.actors.grasp_report import BALANCE, epoch_quality, write_grasp_plots
+from kinswarm.actors.report.grasp import BALANCE, epoch_quality, write_grasp_plots
 from kinswarm.actors.tasks.grasp_reward import GraspParams
 
 from .common import Context, Report, plt_module, run_specs

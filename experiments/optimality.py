@@ -13,7 +13,7 @@ import math
 from typing import Any
 
 import numpy as np
-from kinswarm.actors.report import arm_points
+from kinswarm.actors.report.arm import arm_points
 
 from .common import Context, Report, band, mean_std, plt_module, pm, run_specs, settings
 from .swarm import CHAIN4, RunOutcome, Spec, robot_and_goal

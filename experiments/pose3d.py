@@ -21,7 +21,7 @@ from __future__ import annotations
 from typing import Any
 
 from kinswarm.protocol import frames
-from kinswarm.protocol.topology import load_robot
+from kinswarm.protocol.robots import load_robot
 
 from . import reach3d as r3
 from .common import Context, Report, mean_std, plt_module

@@ -30,7 +30,8 @@ from typing import Any
 import numpy as np
 from kinswarm.actors.report import read_events
 from kinswarm.protocol import frames
-from kinswarm.protocol.topology import Topology, load_robot
+from kinswarm.protocol.robots import load_robot
+from kinswarm.protocol.topology import Topology
 
 from .common import Context, Report, mean_std, plt_module, pm, run_specs, settings
 from .swarm import DEADLINE_MS, ROOT, RunOutcome, Spec

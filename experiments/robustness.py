@@ -18,8 +18,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from kinswarm.actors.scenario import load_scenario
 from kinswarm.protocol.faults import describe
+from kinswarm.protocol.scenario import load_scenario
 
 from .common import DEFAULTS, Context, Report, frac_within, mean_std, plt_module, pm, run_specs, settings
 from .optimality import EPOCHS as OPT_EPOCHS

@@ -4,7 +4,7 @@ plus an observer of the step messages (`sim/task`, `sim/obs/*`) for the end-effe
 placement (what process faults need: an agent's process stopped or killed) runs through `kinswarm run`'s own
 launcher (launch.run_swarm), one OS process per actor.
 
-Each run is a `Spec`: a run file and overrides of its fields, resolved by the one loader (actors/runfile.py). It
+Each run is a `Spec`: a run file and overrides of its fields, resolved by the one loader (actors/run/runfile.py). It
 lives in its own directory with `spec.json`, and is reused when that directory already holds a finished run of the
 same resolved run, or of the same run with more epochs (the first epochs of a longer run are bit-identical to a
 shorter run: lockstep and seeded RNGs).
@@ -27,9 +27,9 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from kinswarm.actors.config import ConfigError, RunConfig
 from kinswarm.actors.report import read_metrics, write_summary
-from kinswarm.actors.runfile import learner_settings, read_run_file, resolve, task_of, write_resolved
+from kinswarm.actors.run.config import ConfigError, RunConfig
+from kinswarm.actors.run.runfile import learner_settings, read_run_file, resolve, task_of, write_resolved
 from kinswarm.actors.runtime import open_session, tap
 from kinswarm.actors.supervisor import RunResult, SinglePlacement, Supervisor
 from kinswarm.protocol import codec
@@ -332,7 +332,7 @@ def run_spec(spec: Spec, runs: Path) -> RunOutcome:
 def _run_in_processes(spec: Spec, out: Path) -> RunOutcome:
     """Run `spec` as `kinswarm run --placement process` does (launch.run_swarm: its records, summary and plots), on
     a free loopback port (the actors connect to it; another run may take the port first: then another)."""
-    from kinswarm.actors.launch import run_swarm
+    from kinswarm.actors.run.launch import run_swarm
 
     if spec.observe:
         raise ValueError(f"run {spec.name}: `observe` needs the single placement")

@@ -21,16 +21,14 @@ compound = false                # true: no DOF, only encapsulates children (the 
 
 Trees, not only chains: an agent may have several children, and every leaf is an end effector.
 Agents are listed parents-first in `Topology.order`; angles are stored in radians. What the robot is asked to do
-(`[task]`) and what surrounds it (`[scene]`) are other tables of the run file (actors/runfile.py, scene.py).
+(`[task]`) and what surrounds it (`[scene]`) are other tables of the run file (actors/run/runfile.py, scene.py).
 """
 
 from __future__ import annotations
 
 import math
 import re
-import tomllib
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 from .spec import SpecError, number, table, vector
@@ -132,13 +130,9 @@ _AGENT_KEYS = {"id", "parent", "link_length", "limits_deg", "initial_deg", "offs
 ROBOT_KEYS = frozenset({"name", "base", "defaults", "agent"})
 
 
-def parse_robot(robot: Any, source: str = "<memory>", where: str = "robot") -> Topology:
-    """Validate a `[robot]` table and build the Topology; errors name the source and the field."""
+def parse_planar_robot(robot: Any, source: str = "<memory>", where: str = "robot") -> Topology:
+    """Validate a planar robot's `[robot]` table and build the Topology; errors name the source and the field."""
     src = source
-    if isinstance(robot, dict) and "urdf" in robot:  # a robot from URDF: protocol/urdf_robot.py
-        from .urdf_robot import parse_urdf_robot
-
-        return parse_urdf_robot(robot, src, where)
     robot = table(src, where, robot, ROBOT_KEYS)
     name = robot.get("name", "robot")
     if not isinstance(name, str) or not name:
@@ -225,18 +219,3 @@ def parse_robot(robot: Any, source: str = "<memory>", where: str = "robot") -> T
         base=(bx, by, math.radians(bh)),
         source=src,
     )
-
-
-def load_robot(path: str | Path) -> Topology:
-    """The robot of a robot file or a run file: its [robot] table (named after the file unless it names itself)."""
-    path = Path(path)
-    try:
-        data = tomllib.loads(path.read_text())
-    except OSError as e:
-        raise SpecError(str(path), "file", f"cannot read: {e.strerror or e}") from None
-    except tomllib.TOMLDecodeError as e:
-        raise SpecError(str(path), "toml", str(e)) from None
-    robot = data.get("robot")
-    if not isinstance(robot, dict):
-        raise SpecError(str(path), "robot", "a robot file needs a [robot] table")
-    return parse_robot({"name": path.stem, **robot}, str(path))

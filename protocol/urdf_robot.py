@@ -30,6 +30,7 @@ from typing import Any
 
 from . import frames
 from .spec import SpecError, table, vector
+from .topology import ID_RE, AgentSpec, Topology
 
 URDF_KEYS = frozenset({"name", "urdf", "base", "joints", "home_deg", "tool", "tool_link"})
 MOVABLE = ("revolute", "continuous", "prismatic")
@@ -129,10 +130,8 @@ def _read(path: Path, src: str) -> tuple[str, str, list[_Joint]]:
     return root.get("name", path.stem), roots[0], joints
 
 
-def parse_urdf_robot(robot: dict[str, Any], source: str, where: str = "robot") -> Any:
+def parse_urdf_robot(robot: dict[str, Any], source: str, where: str = "robot") -> Topology:
     """The Topology of a `[robot] urdf = ...` table; errors name the source and the field."""
-    from .topology import ID_RE, AgentSpec, Topology  # topology dispatches here: import when called
-
     src = source
     table(src, where, robot, URDF_KEYS)
     if not isinstance(robot.get("urdf"), str) or not robot["urdf"]:

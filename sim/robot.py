@@ -21,9 +21,9 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Mapping
 
-from kinswarm.actors.scenario import Scenario, ScenarioEntry
 from kinswarm.protocol.faults import JOINT_FAULTS, check_fault, describe, expand_targets
 from kinswarm.protocol.messages import EpochDone, Fault, Obs, Task
+from kinswarm.protocol.scenario import Scenario, ScenarioEntry
 from kinswarm.protocol.scene import SceneSpec
 from kinswarm.protocol.topology import Topology
 from kinswarm.sim.faults import JointFaults

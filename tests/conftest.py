@@ -16,8 +16,8 @@ from typing import Any
 import pytest
 from hypothesis import settings
 from hypothesis_timeout import pytest_timeout_set_timer  # noqa: F401  # the hook: a hung property ends at its timeout
-from kinswarm.actors.config import RunConfig
-from kinswarm.actors.runfile import load_run
+from kinswarm.actors.run.config import RunConfig
+from kinswarm.actors.run.runfile import load_run
 from kinswarm.actors.runtime import Mailbox
 from kinswarm.protocol.keys import Keys
 
@@ -120,7 +120,7 @@ XARM6 = {"urdf": "xarm/xarm6_robot.urdf"}
 
 def urdf_robot(table: dict):
     """The Topology of a [robot] table from URDF (paths as from a run file in /tmp)."""
-    from kinswarm.protocol.topology import parse_robot
+    from kinswarm.protocol.robots import parse_robot
 
     return parse_robot(dict(table), "/tmp/x.toml")
 

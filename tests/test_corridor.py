@@ -16,7 +16,7 @@ from kinswarm.actors.cli import main as cli_main
 from kinswarm.actors.learning.fuzzy import FuzzyPartition
 from kinswarm.actors.learning.learner import Learner
 from kinswarm.actors.learning.settings import LearnerSettings
-from kinswarm.actors.runfile import task_of
+from kinswarm.actors.run.runfile import task_of
 from kinswarm.actors.tasks.base import StepView
 from kinswarm.actors.tasks.corridor import CorridorAgent, corridor_reward
 from kinswarm.actors.tasks.reach import next_waypoint, path_distance
@@ -24,9 +24,9 @@ from kinswarm.experiments.swarm import Spec, _supervise
 from kinswarm.protocol import codec
 from kinswarm.protocol.keys import Keys
 from kinswarm.protocol.messages import Cmd, EpochDone, Obs, Task, Up
+from kinswarm.protocol.robots import load_robot, parse_robot
 from kinswarm.protocol.scene import parse_scene
 from kinswarm.protocol.spec import SpecError
-from kinswarm.protocol.topology import load_robot, parse_robot
 from kinswarm.sim.kinematics import frames
 from kinswarm.sim.scenes.walls import SceneError, Walls
 from kinswarm.sim.world import World

@@ -20,11 +20,11 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from kinswarm.actors.config import RunConfig
-from kinswarm.actors.launch import run_swarm
-from kinswarm.actors.plan import PlanError, acl, load_plan, local_plan
+from kinswarm.actors.deploy.plan import PlanError, acl, load_plan, local_plan
+from kinswarm.actors.run.config import RunConfig
+from kinswarm.actors.run.launch import run_swarm
 from kinswarm.actors.runtime import NetSpec
-from kinswarm.protocol.topology import load_robot
+from kinswarm.protocol.robots import load_robot
 
 sys.path.insert(0, str(Path(__file__).parent))
 from conftest import LOCKSTEP_DEADLINE_MS, LOCKSTEP_LEASE_MS, run_config  # noqa: E402

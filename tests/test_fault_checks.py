@@ -9,10 +9,10 @@ from pathlib import Path
 import pytest
 from conftest import run_config
 from kinswarm.actors.cli import main as cli_main
-from kinswarm.actors.config import PLACEMENT_FAULTS
-from kinswarm.actors.scenario import ScenarioError
+from kinswarm.actors.run.config import PLACEMENT_FAULTS
 from kinswarm.actors.supervisor.placements import ProcessPlacement, SinglePlacement
 from kinswarm.protocol.faults import LINK_FAULTS, PROCESS_FAULTS
+from kinswarm.protocol.scenario import ScenarioError
 from test_faults import Run
 
 

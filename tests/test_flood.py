@@ -25,8 +25,8 @@ import pytest
 import zenoh
 from conftest import LOCKSTEP_ARGS, free_port
 from kinswarm.actors.cli import _resolve, build_parser
-from kinswarm.actors.config import RunConfig
-from kinswarm.actors.launch import run_swarm
+from kinswarm.actors.run.config import RunConfig
+from kinswarm.actors.run.launch import run_swarm
 from kinswarm.actors.runtime import open_session
 from kinswarm.actors.supervisor.epochs import EpochLoop
 from kinswarm.protocol import codec

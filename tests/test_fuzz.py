@@ -24,14 +24,14 @@ from conftest import EXAMPLES, ROOT, run_config
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from kinswarm.actors import cli
-from kinswarm.actors.config import ConfigError
-from kinswarm.actors.plan import PlanError, load_plan
-from kinswarm.actors.runfile import read_run_file, resolve
-from kinswarm.actors.scenario import ScenarioError, load_scenario
+from kinswarm.actors.deploy.plan import PlanError, load_plan
+from kinswarm.actors.run.config import ConfigError
+from kinswarm.actors.run.runfile import read_run_file, resolve
 from kinswarm.protocol import codec
 from kinswarm.protocol.messages import MESSAGE_TYPES, SCHEMA_VERSION
+from kinswarm.protocol.robots import load_robot
+from kinswarm.protocol.scenario import ScenarioError, load_scenario
 from kinswarm.protocol.spec import SpecError
-from kinswarm.protocol.topology import load_robot
 
 KEY = b"k" * 32
 # Example counts that keep this file well inside 5 minutes, and each test inside its 120 s timeout, on a 2-core machine
@@ -181,18 +181,18 @@ def test_scenario_files(tmp_path_factory, doc):
 # line exercises the checks and nothing else (a drawn `experiment all` once ran every experiment at full size, in
 # process, for hours). Each is replaced in its module and in the CLI's, whichever the CLI calls it through.
 WORK = {
-    "run": [("kinswarm.actors.launch", "run_swarm")],
-    "baseline": [("kinswarm.actors.launch", "run_swarm")],
-    "up": [("kinswarm.actors.launch", "run_swarm"), ("kinswarm.actors.deploy", "fetch_setup")],
+    "run": [("kinswarm.actors.run.launch", "run_swarm")],
+    "baseline": [("kinswarm.actors.run.launch", "run_swarm")],
+    "up": [("kinswarm.actors.run.launch", "run_swarm"), ("kinswarm.actors.deploy.hosts", "fetch_setup")],
     "report": [("kinswarm.actors.report", "write_plots")],
-    "animate": [("kinswarm.actors.animate", "write_animation")],
-    "view": [("kinswarm.actors.recording", "open_stream"), ("kinswarm.actors.recording", "record_run")],
-    "fault": [("kinswarm.actors.control", "Client")],
-    "status": [("kinswarm.actors.control", "show_status")],
+    "animate": [("kinswarm.actors.report.animate", "write_animation")],
+    "view": [("kinswarm.actors.report.recording", "open_stream"), ("kinswarm.actors.report.recording", "record_run")],
+    "fault": [("kinswarm.actors.cli.control", "Client")],
+    "status": [("kinswarm.actors.cli.control", "show_status")],
     "experiment": [("kinswarm.experiments", "run_experiment")],
-    "down": [("kinswarm.actors.deploy", "down")],
-    "router": [("kinswarm.actors.deploy", "run_router")],
-    "certs": [("kinswarm.actors.deploy", "write_certs")],
+    "down": [("kinswarm.actors.deploy.hosts", "down")],
+    "router": [("kinswarm.actors.deploy.hosts", "run_router")],
+    "certs": [("kinswarm.actors.deploy.hosts", "write_certs")],
 }
 REAL_RUN_SWARM = cli.run_swarm
 RUN_DIR = "runs/demo"  # a run directory the fixture makes (a live run, one epoch in): report, fault ... reach it
@@ -322,7 +322,7 @@ def test_the_cli_property_can_fail(no_work, monkeypatch):
 @pytest.mark.parametrize("placement", ["single", "process"])
 def test_the_net_under_the_table_catches_a_real_run(no_work, monkeypatch, placement):
     """Were a command's work missing from WORK, it would fail the property, not run: a real `kinswarm run`."""
-    from kinswarm.actors import launch
+    from kinswarm.actors.run import launch
 
     monkeypatch.setattr(cli, "run_swarm", REAL_RUN_SWARM)
     monkeypatch.setattr(launch, "run_swarm", REAL_RUN_SWARM)

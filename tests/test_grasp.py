@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 from conftest import run_config
 from kinswarm.actors.learning.state import goal_along_motion
-from kinswarm.actors.runfile import task_of
+from kinswarm.actors.run.runfile import task_of
 from kinswarm.actors.tasks.grasp_reward import (
     Contacts,
     GraspParams,
@@ -19,9 +19,9 @@ from kinswarm.actors.tasks.grasp_reward import (
     eq12,
     grip_forces,
 )
+from kinswarm.protocol.robots import parse_robot
 from kinswarm.protocol.scene import ObjectSpec, parse_scene
 from kinswarm.protocol.spec import SpecError
-from kinswarm.protocol.topology import parse_robot
 from kinswarm.sim.scenes.contact import ContactModel, ContactReading, net_wrench
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -430,7 +430,7 @@ def test_fingertips_at_their_contact_goals_balance_the_real_object(contact):
     PyBullet scene, moved to the goals the grasp agent computes, leave the object balanced."""
     import dataclasses
 
-    from kinswarm.actors.grasp_report import BALANCE
+    from kinswarm.actors.report.grasp import BALANCE
     from kinswarm.sim.scenes.contact import GraspScene
     from kinswarm.sim.world import World
 

@@ -21,7 +21,7 @@ from kinswarm.actors.learning.kinds import KINDS, JointLearner, kinds, learner_k
 from kinswarm.actors.learning.learner import Learner
 from kinswarm.actors.learning.settings import LearnerSettings
 from kinswarm.actors.learning.tabular import TabularLearner
-from kinswarm.actors.runfile import learner_settings, task_of
+from kinswarm.actors.run.runfile import learner_settings, task_of
 from test_faults import Run
 
 pytestmark = pytest.mark.timeout(240)

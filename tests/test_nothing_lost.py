@@ -18,7 +18,7 @@ from conftest import EXAMPLES, ROOT, free_port, swarm_pids
 from kinswarm.actors.cli import main as cli
 
 CHAIN4 = str(EXAMPLES / "chain4.toml")
-KINSWARM = [sys.executable, "-m", "kinswarm.actors.entry"]
+KINSWARM = [sys.executable, "-m", "kinswarm.actors.cli.entry"]
 SMALL = ["--epochs", "1", "--steps", "30", "--no-progress"]
 
 

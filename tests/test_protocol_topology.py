@@ -1,8 +1,8 @@
 import math
 
 import pytest
+from kinswarm.protocol.robots import load_robot
 from kinswarm.protocol.spec import SpecError
-from kinswarm.protocol.topology import load_robot
 
 
 def test_chain4(chain4):

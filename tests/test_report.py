@@ -71,7 +71,7 @@ def test_a_lasting_fault_is_a_span_and_close_labels_are_one():
     """A lock lasts until freed (over whole later epochs), a disturbance until it ends, a model fault until
     freed; a fault the scenario applies again every epoch continues its span; events closer than 3 % of the
     epoch share one label."""
-    from kinswarm.actors.timeline import Span, active_at_end, fault_spans, label_groups
+    from kinswarm.actors.report.timeline import Span, active_at_end, fault_spans, label_groups
 
     events = [
         ev(1, 10, "lock", "a2"),
@@ -99,8 +99,8 @@ def test_a_lasting_fault_is_a_span_and_close_labels_are_one():
 def test_animation_of_the_chosen_epochs(tmp_path, chain4, capsys):
     """`kinswarm animate`: a GIF of the first, the last and the epochs with events (a frame for the start pose and
     at most FRAMES_PER_EPOCH more per epoch); a run without poses, or a bad --epochs, is one line."""
-    from kinswarm.actors.animate import pick_epochs, read_poses
     from kinswarm.actors.cli import main as cli_main
+    from kinswarm.actors.report.animate import pick_epochs, read_poses
     from PIL import Image
 
     run = make_run(tmp_path, chain4, errors=True, events=[ev(2, 30, "lock", "a2"), ev(2, 31, "lost", "a3")])

@@ -23,7 +23,7 @@ from kinswarm.actors.cli import main as cli
 from kinswarm.actors.runtime.net import zenoh_reason
 
 CHAIN4 = str(EXAMPLES / "chain4.toml")
-KINSWARM = [sys.executable, "-m", "kinswarm.actors.entry"]
+KINSWARM = [sys.executable, "-m", "kinswarm.actors.cli.entry"]
 SMALL = ["--epochs", "1", "--steps", "30", "--no-progress", "--placement", "single"]
 START_FILES = {".lock", "config.json", "run.toml", "metrics.jsonl", "net"}
 
@@ -80,7 +80,7 @@ def test_a_failed_start_in_a_directory_that_was_there_leaves_it_as_it_was(tmp_pa
 @pytest.mark.timeout(120)
 def test_a_run_that_began_keeps_its_data_when_it_crashes(tmp_path, monkeypatch):
     """Once the supervisor runs, the directory is the run's: a crash does not take it away."""
-    from kinswarm.actors.launch import run_swarm
+    from kinswarm.actors.run.launch import run_swarm
     from kinswarm.actors.supervisor import Supervisor
 
     async def crash(self: Supervisor) -> None:

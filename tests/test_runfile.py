@@ -1,4 +1,4 @@
-"""Run files (actors/runfile.py): the one loader. Overrides, layered files, paths, the resolved file that makes the
+"""Run files (actors/run/runfile.py): the one loader. Overrides, layered files, paths, the resolved file that makes the
 run again, and one clear line for every bad input."""
 
 from __future__ import annotations
@@ -10,10 +10,10 @@ import shutil
 
 import pytest
 from conftest import EXAMPLES, ROOT, free_port, run_config
-from kinswarm.actors.checkpoint import CheckpointError
 from kinswarm.actors.cli import main as cli_main
-from kinswarm.actors.config import ConfigError
-from kinswarm.actors.runfile import load_run, parse_set, read_run_file, task_of
+from kinswarm.actors.run.checkpoint import CheckpointError
+from kinswarm.actors.run.config import ConfigError
+from kinswarm.actors.run.runfile import load_run, parse_set, read_run_file, task_of
 from kinswarm.actors.tasks import kinds
 from kinswarm.protocol.spec import SpecError
 
@@ -91,7 +91,7 @@ def test_every_field_is_checked_and_named(sets, where, what):
 
 def test_an_unknown_field_with_a_line_break_in_its_name_is_named_on_one_line():
     """Found by tests/test_fuzz.py: a table key "\n" (TOML allows it quoted) was printed as it is."""
-    from kinswarm.actors.runfile import resolve
+    from kinswarm.actors.run.runfile import resolve
 
     data = read_run_file(CHAIN4)
     data["run"] = {"\n": False}
@@ -311,8 +311,8 @@ def test_the_files_own_problem_stays_the_files(tmp_path):
 def test_the_resolved_file_holds_the_learner_settings_used(tmp_path, monkeypatch, file):
     """run.toml's [learner] was the overrides only (empty for the default run): a change of a default in the code
     changed what `kinswarm run run.toml` made. Now it holds the values used; the same settings come out of it."""
-    from kinswarm.actors.learning.settings import LearnerSettings
-    from kinswarm.actors.runfile import learner_settings, write_resolved
+    from kinswarm.actors.learning.settings import TURN_LEARNER, LearnerSettings
+    from kinswarm.actors.run.runfile import learner_settings, write_resolved
 
     cfg = load_run(EXAMPLES / file, run_id="r", out=tmp_path)
     written = read_run_file(write_resolved(cfg, tmp_path / "run.toml"))["learner"]
@@ -321,11 +321,11 @@ def test_the_resolved_file_holds_the_learner_settings_used(tmp_path, monkeypatch
     again = load_run(tmp_path / "run.toml", run_id="r")
     assert learner_settings(task_of(again), again.learner) == used
     # a default changed in the code: a run of the example follows it, one of the resolved file does not
-    for name in ("for_reach", "for_plane", "for_turn"):
-        made = getattr(LearnerSettings, name).__func__
-        monkeypatch.setattr(
-            LearnerSettings, name, classmethod(lambda c, *a, _made=made, **o: _made(c, *a, **{"lr": 0.1, **o}))
-        )
+    made = LearnerSettings.on.__func__  # every task builds its learners' settings here, over their observation
+    monkeypatch.setattr(
+        LearnerSettings, "on", classmethod(lambda c, o, _made=made, **own: _made(c, o, **{"lr": 0.1, **own}))
+    )
+    monkeypatch.setitem(TURN_LEARNER, "lr", 0.1)  # the turn state's own default (tasks/reach3d.py)
     changed = load_run(EXAMPLES / file, run_id="r")
     assert {s.lr for s in learner_settings(task_of(changed), changed.learner).values()} == {0.1}
     again = load_run(tmp_path / "run.toml", run_id="r")

@@ -17,10 +17,10 @@ import pytest
 import zenoh
 from conftest import RecordingNode, fault_message, run_config
 from kinswarm.actors.runtime import Node
+from kinswarm.actors.simulator.actor import DEADLINE, SimActor
 from kinswarm.protocol import codec
 from kinswarm.protocol.keys import Keys
 from kinswarm.protocol.messages import Cmd, EpochStart, Stop
-from kinswarm.sim.actor import DEADLINE, SimActor
 
 pytestmark = pytest.mark.timeout(60)
 

@@ -5,8 +5,8 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
-from kinswarm.actors.scenario import ScenarioError, load_scenario
-from kinswarm.protocol.topology import load_robot
+from kinswarm.protocol.robots import load_robot
+from kinswarm.protocol.scenario import ScenarioError, load_scenario
 from test_sim_kinematics import compound_tree
 
 SCENARIOS = Path(__file__).resolve().parents[1] / "scenarios"

@@ -7,7 +7,7 @@ import math
 from pathlib import Path
 
 import pytest
-from kinswarm.protocol.topology import load_robot
+from kinswarm.protocol.robots import load_robot
 from kinswarm.sim import kinematics
 from kinswarm.sim.baseline import greedy_increments, pinv_increments, rule_increments, run_baseline
 from kinswarm.sim.world import World
@@ -155,3 +155,19 @@ def test_the_turn_rule_steps_each_joint_toward_its_own_best_angle_and_reaches_a_
     assert steps is not None, "the turn rule did not reach the pose"
     with pytest.raises(ValueError, match="robot from URDF"):
         turn_increments(load_robot(EXAMPLES / "chain4.toml"), {}, (1.0, 1.0))
+
+
+def test_a_baseline_controller_says_goodbye(tmp_path) -> None:
+    """The controller answers the supervisor's Stop with its Bye, as every actor does, so the run ends without the
+    supervisor's wait for it running out (its count of rejected messages is in the summary only from a Bye)."""
+    import json
+
+    from conftest import EXAMPLES, free_port
+    from kinswarm.actors.cli import main
+
+    out = tmp_path / "b"
+    args = ["baseline", str(EXAMPLES / "chain4.toml"), "--epochs", "1", "--steps", "10", "--no-progress"]
+    args += ["--out", str(out), "--listen", f"tcp/127.0.0.1:{free_port()}", "--placement", "single"]
+    assert main(args) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    assert "pinv" in summary["rejected_by_actor"], summary["rejected_by_actor"]

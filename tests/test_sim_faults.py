@@ -13,8 +13,9 @@ from typing import Any
 
 import pytest
 from conftest import RecordingNode, fault_message, run_config
-from kinswarm.actors.config import RunConfig
+from kinswarm.actors.run.config import RunConfig
 from kinswarm.actors.runtime import Node, open_session
+from kinswarm.actors.simulator.actor import SimActor
 from kinswarm.protocol.keys import Keys
 from kinswarm.protocol.messages import (
     Bye,
@@ -27,7 +28,6 @@ from kinswarm.protocol.messages import (
     Stop,
     Task,
 )
-from kinswarm.sim.actor import SimActor
 
 DEG = math.radians(1)
 GOAL = (4.16, 6.18)

@@ -7,7 +7,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from kinswarm.protocol.topology import Topology, load_robot, parse_robot
+from kinswarm.protocol.robots import load_robot, parse_robot
+from kinswarm.protocol.topology import Topology
 from kinswarm.sim import kinematics
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"

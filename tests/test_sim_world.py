@@ -7,7 +7,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from kinswarm.protocol.topology import Topology, load_robot
+from kinswarm.protocol.robots import load_robot
+from kinswarm.protocol.topology import Topology
 from kinswarm.sim import kinematics
 from kinswarm.sim.urdf import write_urdf
 from kinswarm.sim.world import World, pb  # world imports pybullet with its banner silenced

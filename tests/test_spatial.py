@@ -11,11 +11,11 @@ import pytest
 from conftest import IIWA, PANDA, XARM6, urdf_robot
 from kinswarm.actors.agent.geometry import Spatial
 from kinswarm.actors.learning.state import goal_along_motion, plane_state
-from kinswarm.actors.runfile import load_run, task_of
+from kinswarm.actors.run.runfile import load_run, task_of
 from kinswarm.protocol import codec, frames
 from kinswarm.protocol.messages import Down, EpochStart, Up
+from kinswarm.protocol.robots import parse_robot
 from kinswarm.protocol.spec import SpecError
-from kinswarm.protocol.topology import parse_robot
 
 KEY = b"k" * 32
 

@@ -14,12 +14,13 @@ import conftest
 import numpy as np
 import pytest
 from conftest import EXAMPLES, PANDA, XARM6, run_config, urdf_robot
-from kinswarm.actors.animate import write_animation
 from kinswarm.actors.learning.state import plane_state
-from kinswarm.actors.report import arm_points, joint_points, write_plots
+from kinswarm.actors.report import write_plots
+from kinswarm.actors.report.animate import write_animation
+from kinswarm.actors.report.arm import arm_points, joint_points
 from kinswarm.protocol import frames
+from kinswarm.protocol.robots import load_robot
 from kinswarm.protocol.scene import SceneSpec
-from kinswarm.protocol.topology import load_robot
 from kinswarm.sim import kinematics
 from kinswarm.sim.baseline import greedy_increments, pinv_increments, reached, rule_increments, run_baseline
 from kinswarm.sim.scenes import Scene, build_scene

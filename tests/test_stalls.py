@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 from conftest import EXAMPLES, free_port, swarm_pids
 
-KINSWARM = [sys.executable, "-m", "kinswarm.actors.entry"]
+KINSWARM = [sys.executable, "-m", "kinswarm.actors.cli.entry"]
 STALL_S = 3.0
 
 

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from conftest import run_config
 from kinswarm.actors.agent.passes import AgentStep
-from kinswarm.actors.runfile import learner_settings, task_of
+from kinswarm.actors.run.runfile import learner_settings, task_of
 from kinswarm.protocol.messages import Down
 from kinswarm.sim import kinematics
 

@@ -18,7 +18,7 @@ import zenoh
 from conftest import EXAMPLES, LOCKSTEP_ARGS, free_port, run_config, swarm_pids
 from kinswarm.actors.cli import main as cli_main
 from kinswarm.actors.runtime import open_session
-from kinswarm.protocol.topology import load_robot
+from kinswarm.protocol.robots import load_robot
 from kinswarm.sim import kinematics
 from kinswarm.sim.baseline import greedy_increments, rule_increments
 
@@ -372,7 +372,7 @@ def test_bad_lease_is_a_clear_error(tmp_path, chain4, capsys, lease, why):
 
 
 def test_config_round_trip(tmp_path):
-    from kinswarm.actors.config import ConfigError, load_run_config
+    from kinswarm.actors.run.config import ConfigError, load_run_config
 
     cfg = run_config(EXAMPLES / "chain4.toml", run_id="x", out=str(tmp_path))
     cfg.write(tmp_path / "c.json")

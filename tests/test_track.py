@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 from conftest import EXAMPLES, ROOT, run_config
-from kinswarm.actors.runfile import task_of
+from kinswarm.actors.run.runfile import task_of
 from kinswarm.actors.tasks import kinds
 from kinswarm.actors.tasks.reach import reach_reward
 from kinswarm.actors.tasks.track import TrackAgent
@@ -27,7 +27,7 @@ def test_it_is_a_module_the_generic_actors_do_not_name():
     assert "track" in kinds()
     for generic in (
         "actors/agent/actor.py",
-        "sim/actor.py",
+        "actors/simulator/actor.py",
         "actors/supervisor/core.py",
         "actors/supervisor/epochs.py",
     ):

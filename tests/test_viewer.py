@@ -1,4 +1,4 @@
-"""The recording (actors/recording.py, the optional extra kinswarm[viewer]): a run streamed into a .rrd as it
+"""The recording (actors/report/recording.py, the optional extra kinswarm[viewer]): a run streamed into a .rrd as it
 goes (`kinswarm run … --view FILE.rrd`) and a finished run saved as one (`kinswarm view RUN --save`), read back
 by rerun's own tool; bad targets are one line before anything is spawned. No viewer is spawned here."""
 
@@ -61,7 +61,7 @@ def test_bad_view_targets_are_one_line(tmp_path, chain4, capsys):
 def test_recording_the_agents_changes_nothing_they_do(tmp_path, chain4):
     """run.record_agents only reads what the learner chose from: the same run with and without gives the same
     errors, and every agent's trace has a row per step it decided, with its E and P."""
-    from kinswarm.actors.recording import read_agent_rows
+    from kinswarm.actors.report.recording import read_agent_rows
 
     finals = []
     for record in (False, True):

@@ -5,7 +5,7 @@ No viewer is served here: a served one listens on fixed ports."""
 from __future__ import annotations
 
 import pytest
-from kinswarm.actors import recording
+from kinswarm.actors.report import recording
 
 
 class _Exit(Exception):

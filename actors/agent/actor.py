@@ -26,9 +26,9 @@ import zlib
 from dataclasses import dataclass, field
 from typing import Any
 
-from kinswarm.actors.config import RunConfig
 from kinswarm.actors.learning.kinds import JointLearner
-from kinswarm.actors.runfile import kind_of, learner_settings, task_of
+from kinswarm.actors.run.config import RunConfig
+from kinswarm.actors.run.runfile import kind_of, learner_settings, task_of
 from kinswarm.actors.runtime import Node
 from kinswarm.actors.tasks.base import StepView
 from kinswarm.protocol.messages import Bye, Checkpoint, Cmd, Down, Fault, Obs, Readings, Stop, Task, Up

@@ -1,13 +1,13 @@
 """An agent's learned state across processes: a checkpoint on the supervisor's request, a start from another run's
-checkpoints (`--from`), and a restart's resume from this run's newest good one (actors/checkpoint.py: the files)."""
+checkpoints (`--from`), and a restart's resume from this run's newest good one (actors/run/checkpoint.py: the files)."""
 
 from __future__ import annotations
 
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from kinswarm.actors.checkpoint import CheckpointError, digest, load_checkpoint, load_latest, save_checkpoint
 from kinswarm.actors.learning.kinds import DEFAULT
+from kinswarm.actors.run.checkpoint import CheckpointError, digest, load_checkpoint, load_latest, save_checkpoint
 from kinswarm.protocol.messages import Checkpoint, Event, Saved
 
 if TYPE_CHECKING:

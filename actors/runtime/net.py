@@ -19,7 +19,7 @@ HANDSHAKE_MS = 2000
 class NetSpec:
     """Everything a process needs to join a swarm's Zenoh network: the one input of the session factory.
     Written by a host's supervisor for the actors it spawns (`<run>/net/<host>.json`, owner-only: it may
-    hold a password), built from a deploy plan (actors/plan.py) or, for one host, from `--listen`."""
+    hold a password), built from a deploy plan (actors/deploy/plan.py) or, for one host, from `--listen`."""
 
     mode: str = "peer"  # peer | client (of a router) | router
     listen: tuple[str, ...] = ()

@@ -1,8 +1,11 @@
-"""The supervisor, by concern: core (the run, the epoch loop, checkpoints, the mailbox), placements (where actors
-live, their ends as events), restarts (the policy), faults (routing), hosts (heartbeats, partitions, Setup), recorder
-(events and metrics as they happen)."""
+"""The supervisor, by concern: core (the run, its mailbox, the actors' liveliness), epochs (the epoch loop and the
+checkpoints), placements (where actors live, their ends as events), restarts (the policy), faults (routing), hosts
+(heartbeats, partitions, Setup), stalls (a lockstep that stops making progress), recorder (events and metrics as they
+happen), result (what a run returns, what ends it early); and inprocess, the third placement: the run as a plain
+loop, no supervisor at all."""
 
-from .core import RunResult, Supervisor, SwarmError, actors_of
+from .core import Supervisor, actors_of
 from .placements import Placement, ProcessPlacement, SinglePlacement
+from .result import RunResult, SwarmError
 
 __all__ = ["Placement", "ProcessPlacement", "RunResult", "SinglePlacement", "Supervisor", "SwarmError", "actors_of"]

@@ -16,14 +16,13 @@ import logging
 import socket
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import zenoh
-from kinswarm.actors.config import RunConfig
-from kinswarm.actors.plan import Plan, local_plan
-from kinswarm.actors.runfile import task_of
+from kinswarm.actors.deploy.plan import Plan, local_plan
+from kinswarm.actors.run.config import RunConfig
+from kinswarm.actors.run.runfile import task_of
 from kinswarm.actors.runtime import Node
 from kinswarm.protocol.keys import Keys
 from kinswarm.protocol.messages import (
@@ -46,18 +45,11 @@ from .hosts import GRACE, SILENT, HostError, HostWatch
 from .placements import EXIT, ActorId, Placement, parse_exit
 from .recorder import Recorder
 from .restarts import RestartBudgetSpent, RestartPolicy
+from .result import NoMessage, RunResult, SwarmError
 from .stalls import SIM_SILENT, StallError, StallWatch
 
 log = logging.getLogger("kinswarm.supervisor")
 ALIVE, RESPAWN, STATUS = "__alive__", "__respawn__", "__status__"  # the supervisor's own mailbox items
-
-
-class SwarmError(RuntimeError):
-    pass
-
-
-class NoMessage(SwarmError):
-    """The awaited message did not come in time."""
 
 
 class _Down(Exception):
@@ -68,19 +60,6 @@ def actors_of(cfg: RunConfig, topo: Topology) -> list[ActorId]:
     if cfg.controller != "agents":
         return [("sim", "sim"), ("controller", cfg.controller)]
     return [("sim", "sim"), *(("agent", a) for a in topo.order)]
-
-
-@dataclass
-class RunResult:
-    epochs: list[EpochDone] = field(default_factory=list)
-    interrupted: bool = False
-    error: str = ""  # why the run failed (restart budget exhausted, the sim died, ...)
-    wall_seconds: float = 0.0
-    rejected: int = 0  # messages every actor refused (from their Bye) plus the supervisor's own
-    rejected_by: dict[str, int] = field(default_factory=dict)
-    restarts: dict[str, int] = field(default_factory=dict)
-    # liveliness tokens gone while training, by actor: a kill, a freeze, or a process starved past the lease
-    tokens_lost: dict[str, int] = field(default_factory=dict)
 
 
 class Supervisor:

@@ -11,8 +11,10 @@ from typing import TYPE_CHECKING
 
 from kinswarm.protocol.messages import Checkpoint, EpochDone, EpochStart, JointStatus, Saved
 
+from .result import NoMessage, SwarmError
+
 if TYPE_CHECKING:
-    from kinswarm.actors.config import RunConfig
+    from kinswarm.actors.run.config import RunConfig
     from kinswarm.actors.tasks.base import TaskDef
 
     from .core import Supervisor
@@ -65,8 +67,6 @@ class EpochLoop:
         return epoch_start(self.sup.cfg, self.sup.task, epoch)
 
     async def run_epoch(self, epoch: int) -> EpochDone:
-        from .core import NoMessage
-
         sup, cfg = self.sup, self.sup.cfg
         assert sup.node is not None
         sup.epoch = epoch
@@ -99,8 +99,6 @@ class EpochLoop:
                 self._sent = time.monotonic()
 
     async def checkpoint(self, epoch: int) -> None:
-        from .core import NoMessage, SwarmError
-
         sup = self.sup
         assert sup.node is not None
         directory = sup.out / "agents"

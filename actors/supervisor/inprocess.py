@@ -5,7 +5,7 @@ and decides, and the robot moves. It computes what the other placements compute,
 run gives the same `final_error` lists, metrics and records as they do for the same seed; it is the fastest way to
 run an experiment that needs no messages.
 
-What has no meaning without processes and messages is refused before the run starts (actors/runfile.py): process
+What has no meaning without processes and messages is refused before the run starts (actors/run/runfile.py): process
 and link faults (kill, freeze, drop, ...), fleets, the model-based controllers and several hosts. Joint and model
 faults from the run's scenario apply as in the simulator actor.
 """
@@ -22,18 +22,18 @@ from kinswarm.actors.agent.actor import agent_seed
 from kinswarm.actors.agent.memory import checkpoint_meta, restore_learner
 from kinswarm.actors.agent.passes import AgentStep, visible_actions
 from kinswarm.actors.agent.trace import StepTrace
-from kinswarm.actors.checkpoint import save_checkpoint
-from kinswarm.actors.config import RunConfig
 from kinswarm.actors.learning.kinds import JointLearner
-from kinswarm.actors.runfile import kind_of, learner_settings, task_of
-from kinswarm.actors.scenario import load_scenario
+from kinswarm.actors.run.checkpoint import save_checkpoint
+from kinswarm.actors.run.config import RunConfig
+from kinswarm.actors.run.runfile import kind_of, learner_settings, task_of
 from kinswarm.protocol.messages import EpochDone, Up
+from kinswarm.protocol.scenario import load_scenario
 from kinswarm.protocol.topology import Topology
 from kinswarm.sim.robot import Robot
 
-from .core import RunResult
 from .epochs import checkpoint_due, epoch_start
 from .recorder import Recorder
+from .result import RunResult
 
 log = logging.getLogger("kinswarm.inprocess")
 
@@ -86,7 +86,7 @@ class InProcessRun:
         last: dict[str, int] = {}  # each agent's action at the step before
         for t in range(cfg.steps):
             step_started = time.perf_counter()
-            joint, _ = robot.due(epoch)  # the others were refused before the run (actors/runfile.py)
+            joint, _ = robot.due(epoch)  # the others were refused before the run (actors/run/runfile.py)
             for f in joint:
                 for event in robot.apply_fault(f)[0]:
                     on_event(epoch, t, *event)

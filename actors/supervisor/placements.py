@@ -19,8 +19,8 @@ from collections.abc import Callable
 from pathlib import Path
 
 import zenoh
-from kinswarm.actors.config import RunConfig
-from kinswarm.actors.main import build_actor
+from kinswarm.actors.run.config import RunConfig
+from kinswarm.actors.run.main import build_actor
 from kinswarm.actors.runtime import Node
 from kinswarm.protocol.faults import PROCESS_FAULTS
 from kinswarm.protocol.keys import Keys
@@ -65,9 +65,9 @@ class ProcessPlacement:
             self.spawn(actor)
 
     def spawn(self, actor: ActorId, restore: bool = False) -> None:
-        """The one spawn path: a fresh interpreter running `kinswarm.actors.main` (never fork)."""
+        """The one spawn path: a fresh interpreter running `kinswarm.actors.run.main` (never fork)."""
         role, ident = actor
-        argv = [sys.executable, "-m", "kinswarm.actors.main", role, ident, str(self.config_path)]
+        argv = [sys.executable, "-m", "kinswarm.actors.run.main", role, ident, str(self.config_path)]
         argv += ["--net", str(self.nets(role, ident)), "--parent", str(os.getpid()), "--supervisor", self.supervisor]
         if restore:
             argv.append("--restore")

@@ -21,7 +21,7 @@ from kinswarm.experiments import reach3d as r
 from kinswarm.experiments.common import Context, Report, pm, run_specs, settings
 from kinswarm.experiments.research.fleet_generalise import FleetSpec
 from kinswarm.experiments.swarm import Spec
-from kinswarm.protocol.topology import load_robot
+from kinswarm.protocol.robots import load_robot
 
 SEEDS = 3
 FLEET = 16

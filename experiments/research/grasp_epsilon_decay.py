@@ -9,7 +9,7 @@ from __future__ import annotations
 import json
 from typing import Any
 
-from kinswarm.actors.grasp_report import epoch_quality
+from kinswarm.actors.report.grasp import epoch_quality
 from kinswarm.experiments.common import Context, run_specs, settings
 from kinswarm.experiments.grasp import GRASP3, _score, frozen_spec
 from kinswarm.experiments.swarm import Spec, resolved

@@ -72,7 +72,8 @@ from kinswarm.actors.tasks.reach3d import wire_goal
 from kinswarm.experiments import reach3d as r3
 from kinswarm.experiments.common import Context
 from kinswarm.protocol import frames
-from kinswarm.protocol.topology import Topology, load_robot
+from kinswarm.protocol.robots import load_robot
+from kinswarm.protocol.topology import Topology
 
 SEEDS = 1
 INC = math.radians(1)

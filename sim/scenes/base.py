@@ -27,7 +27,8 @@ Pose = tuple[float, ...]  # a tip: planar (x, y, heading), spatial a 7-float fra
 
 
 class Scene:
-    #: its robots may share one PyBullet client (a fleet: sim/fleet.py): nothing of one robot's world acts on another's
+    #: its robots may share one PyBullet client (a fleet: actors/simulator/fleet.py): nothing of one robot's world
+    #: acts on another's
     shares_world: ClassVar[bool] = True
 
     def __init__(self, world: World, spec: SceneSpec, action_rad: float) -> None:

@@ -29,7 +29,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from kinswarm.actors.config import LEASE_RANGE_MS
+from kinswarm.actors.run.config import LEASE_RANGE_MS
 from kinswarm.actors.runtime import LEASE_MS, NetSpec
 from kinswarm.protocol.keys import check_id
 from kinswarm.protocol.topology import Topology
@@ -204,7 +204,7 @@ def acl(plan: Plan, topo: Topology) -> dict[str, Any]:
     agents = list(topo.order)
     for a in agents:
         spec = topo.agents[a]
-        may = {f"a/{d}/down" for d in _descendants(topo, a)}
+        may = {f"a/{d}/down" for d in topo.subtree(a)[1:]}
         if spec.parent is not None:
             may.add(f"a/{spec.parent}/up")
         keys = [*supervisor_only, "sim/obs/**", "sim/task"]
@@ -212,15 +212,6 @@ def acl(plan: Plan, topo: Topology) -> dict[str, Any]:
         keys += [f"sim/cmd/{b}" for b in agents if b != a]
         deny(f"agent-{a}", keys)
     return {"enabled": True, "default_permission": "allow", "rules": rules, "subjects": subjects, "policies": policies}
-
-
-def _descendants(topo: Topology, agent: str) -> list[str]:
-    out, todo = [], list(topo.agents[agent].children)
-    while todo:
-        c = todo.pop()
-        out.append(c)
-        todo.extend(topo.agents[c].children)
-    return out
 
 
 # -- credentials -------------------------------------------------------------------------------------

@@ -1,5 +1,6 @@
 """A run's events as a timeline a plot can draw: how long each joint fault (or an agent's loss) lasts, and event
-labels that never sit on top of each other. Read from `events.jsonl` rows alone (actors/report.py reads them)."""
+labels that never sit on top of each other. Read from `events.jsonl` rows alone (actors/report/__init__.py reads
+them)."""
 
 from __future__ import annotations
 

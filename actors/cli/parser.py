@@ -1,6 +1,6 @@
 """The `kinswarm` command line as argparse sees it: every command, its options and their help, the run's
 shorthands (`--epochs` is `--set run.epochs=`), and the arguments joined so a negative value reaches its own check.
-actors/cli.py runs what it parses."""
+actors/cli/__init__.py runs what it parses."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import argparse
 import json
 from pathlib import Path
 
-from kinswarm.actors.config import DEFAULT_LISTEN, PLACEMENTS
+from kinswarm.actors.run.config import DEFAULT_LISTEN, PLACEMENTS
 from kinswarm.actors.runtime import LEASE_MS
 from kinswarm.protocol.faults import FAULTS
 

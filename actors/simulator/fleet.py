@@ -15,15 +15,15 @@ import asyncio
 import dataclasses
 from typing import Any
 
-from kinswarm.actors.config import RunConfig
+from kinswarm.actors.run.config import RunConfig
 from kinswarm.actors.runtime import Lane, Node
 from kinswarm.protocol.faults import JOINT_FAULTS, expand_targets
 from kinswarm.protocol.messages import Cmd, EpochDone, EpochStart, Event, Fault
 from kinswarm.protocol.topology import Topology
+from kinswarm.sim.scenes import scene_class
+from kinswarm.sim.world import World
 
 from .actor import ALIVE, SimActor
-from .scenes import scene_class
-from .world import World
 
 PER_CLIENT = 8  # robots to a PyBullet client, where the scene lets them share one (World's `beside`)
 

@@ -15,17 +15,17 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from kinswarm.actors.config import ENDPOINT, ConfigError, RunConfig
-from kinswarm.actors.plan import Plan, PlanError, local_plan
-from kinswarm.actors.rundir import Claim, claim
-from kinswarm.actors.runfile import write_resolved
+from kinswarm.actors.deploy.plan import Plan, PlanError, local_plan
+from kinswarm.actors.run.config import ENDPOINT, ConfigError, RunConfig
+from kinswarm.actors.run.rundir import Claim, claim
+from kinswarm.actors.run.runfile import write_resolved
 from kinswarm.actors.runtime import NetSpec, open_session
 from kinswarm.actors.runtime.net import zenoh_reason
 from kinswarm.protocol.messages import EpochDone
 from kinswarm.protocol.topology import Topology
 
 if TYPE_CHECKING:
-    from kinswarm.actors.supervisor.core import RunResult
+    from kinswarm.actors.supervisor.result import RunResult
 
 log = logging.getLogger("kinswarm.launch")
 
@@ -75,7 +75,7 @@ async def _supervise(
     wait_s: float = 600.0,
     view: str | None = None,
 ) -> dict:
-    from kinswarm.actors.deploy import control_net
+    from kinswarm.actors.deploy.hosts import control_net
     from kinswarm.actors.supervisor import ProcessPlacement, SinglePlacement, Supervisor
 
     out = Path(cfg.out)
@@ -133,7 +133,7 @@ def _watchers(cfg: RunConfig, progress: bool, view: str | None) -> tuple[OnEpoch
 
     live = None
     if view is not None:
-        from kinswarm.actors.recording import LiveRecording
+        from kinswarm.actors.report.recording import LiveRecording
 
         live = LiveRecording(cfg, view)
 
@@ -195,7 +195,7 @@ def _run_inprocess(cfg: RunConfig, topo: Topology, progress: bool, view: str | N
 def write_records(out: Path, progress: bool) -> None:
     """What a person watches: motion.gif always, recording.rrd when the viewer's extra is installed. Never fails
     the run: what cannot be written is one warning."""
-    from kinswarm.actors.animate import write_animation
+    from kinswarm.actors.report.animate import write_animation
 
     if progress:
         print(f"kinswarm: drawing {out / 'motion.gif'} ...", file=sys.stderr)
@@ -203,7 +203,7 @@ def write_records(out: Path, progress: bool) -> None:
         write_animation(out)
     except Exception as e:  # a record of a finished run: the run itself stands
         log.warning("motion.gif not written: %s", e)
-    from kinswarm.actors.recording import open_stream, record_run  # rerun itself only if the extra is there
+    from kinswarm.actors.report.recording import open_stream, record_run  # rerun itself only if the extra is there
 
     try:
         stream = open_stream(Path(out).name, save=out / "recording.rrd")

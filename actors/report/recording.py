@@ -21,9 +21,10 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from kinswarm.actors.config import ConfigError, RunConfig, load_run_config
-from kinswarm.actors.report import arm_points, events_by_epoch, joint_points, read_events, read_jsonl, read_metrics
-from kinswarm.actors.timeline import fault_spans, faulty_at
+from kinswarm.actors.report import events_by_epoch, read_events, read_jsonl, read_metrics
+from kinswarm.actors.report.arm import arm_points, joint_points
+from kinswarm.actors.report.timeline import fault_spans, faulty_at
+from kinswarm.actors.run.config import ConfigError, RunConfig, load_run_config
 
 log = logging.getLogger("kinswarm.view")
 APP = "kinswarm"
@@ -58,7 +59,7 @@ class Recorder:
     def __init__(self, cfg: RunConfig, stream: Any) -> None:
         self.rr = rerun_module()
         self.cfg, self.topo, self.stream = cfg, cfg.topo(), stream
-        from kinswarm.actors.runfile import task_of
+        from kinswarm.actors.run.runfile import task_of
 
         self.task = task_of(cfg)
         self.dof = self.topo.dof_agents
@@ -202,7 +203,7 @@ class Recorder:
 
 def record_run(run_dir: Path, stream: Any) -> int:
     """Log a finished run directory into `stream`; returns the epochs recorded."""
-    from kinswarm.actors.animate import read_poses
+    from kinswarm.actors.report.animate import read_poses
 
     cfg = load_run_config(run_dir / "config.json")
     poses = read_poses(run_dir)
@@ -222,7 +223,7 @@ def record_run(run_dir: Path, stream: Any) -> int:
 
 def shown_epochs(run_dir: Path) -> list[int]:
     """The epochs `record_run` shows: those with both a metrics row and their poses."""
-    from kinswarm.actors.animate import read_poses
+    from kinswarm.actors.report.animate import read_poses
 
     poses = read_poses(run_dir)
     if not poses or not (run_dir / "metrics.jsonl").exists():

@@ -1,4 +1,4 @@
-"""Actor entry point: `python -m kinswarm.actors.main ROLE ID CONFIG --net NETSPEC.json [--restore]`.
+"""Actor entry point: `python -m kinswarm.actors.run.main ROLE ID CONFIG --net NETSPEC.json [--restore]`.
 
 This is the one spawn path of the `process` placement (the supervisor starts it with spawn semantics:
 a fresh interpreter, the Zenoh session opened inside the child). `build_actor` is shared with the
@@ -33,7 +33,7 @@ import logging  # noqa: E402
 from pathlib import Path  # noqa: E402
 from typing import Any, Protocol  # noqa: E402
 
-from kinswarm.actors.config import RunConfig, load_run_config  # noqa: E402
+from kinswarm.actors.run.config import RunConfig, load_run_config  # noqa: E402
 from kinswarm.actors.runtime import NetSpec, Node, open_session, setup_logging  # noqa: E402
 from kinswarm.protocol.keys import Keys  # noqa: E402
 from kinswarm.protocol.topology import Topology  # noqa: E402
@@ -59,12 +59,12 @@ def build_actor(role: str, ident: str, cfg: RunConfig, topo: Topology, node: Nod
             agent.memory.restore(Path(cfg.from_dir) / "agents")
         return agent
     if role == "sim":  # imported lazily: agent processes never load PyBullet
-        from kinswarm.sim.actor import SimActor
-        from kinswarm.sim.fleet import FleetSim
+        from kinswarm.actors.simulator.actor import SimActor
+        from kinswarm.actors.simulator.fleet import FleetSim
 
         return FleetSim(cfg, topo, node) if cfg.fleet > 1 else SimActor(cfg, topo, node)
     if role == "controller":
-        from kinswarm.sim.controller import BaselineController
+        from kinswarm.actors.simulator.controller import BaselineController
 
         return BaselineController(cfg, topo, node)
     raise ValueError(f"unknown role {role!r}; expected one of {', '.join(ROLES)}")

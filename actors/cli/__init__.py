@@ -1,5 +1,6 @@
-"""`kinswarm`: run a learning swarm, run the model-based baseline, inject faults into a running swarm, show its
-status, rebuild a run's report."""
+"""The command line, `kinswarm`: run a learning swarm, run the model-based baseline, inject faults into a running
+swarm, show its status, rebuild a run's report. The subcommands (here), their arguments (parser.py), the console
+script (entry.py) and the fault and status client (control.py)."""
 
 from __future__ import annotations
 
@@ -15,14 +16,14 @@ from pathlib import Path
 from typing import Any
 
 import zenoh
-from kinswarm.actors.checkpoint import CheckpointError
-from kinswarm.actors.cli_parser import build_parser, joined, sets_of
-from kinswarm.actors.config import ConfigError, RunConfig
-from kinswarm.actors.launch import run_swarm
-from kinswarm.actors.plan import Plan, PlanError, load_plan
+from kinswarm.actors.cli.parser import build_parser, joined, sets_of
+from kinswarm.actors.deploy.plan import Plan, PlanError, load_plan
 from kinswarm.actors.report import error_line
-from kinswarm.actors.rundir import check_dir, failed_start, reading_note, run_state
-from kinswarm.actors.runfile import load_run
+from kinswarm.actors.run.checkpoint import CheckpointError
+from kinswarm.actors.run.config import ConfigError, RunConfig
+from kinswarm.actors.run.launch import run_swarm
+from kinswarm.actors.run.rundir import check_dir, failed_start, reading_note, run_state
+from kinswarm.actors.run.runfile import load_run
 from kinswarm.actors.runtime import setup_logging
 from kinswarm.actors.runtime.net import zenoh_reason
 from kinswarm.protocol.faults import describe
@@ -41,7 +42,7 @@ def _plan_run(plan: Plan, given: Path | None, sets: list[str | tuple[str, str]] 
 
 
 def _up(a: argparse.Namespace) -> tuple[dict, RunConfig]:
-    from kinswarm.actors.deploy import fetch_setup, follower_config
+    from kinswarm.actors.deploy.hosts import fetch_setup, follower_config
 
     plan = load_plan(a.plan)
     if a.host not in plan.hosts:
@@ -63,7 +64,7 @@ def _up(a: argparse.Namespace) -> tuple[dict, RunConfig]:
 
 
 def _deploy_tool(a: argparse.Namespace) -> int:
-    from kinswarm.actors.deploy import down, run_router, write_certs
+    from kinswarm.actors.deploy.hosts import down, run_router, write_certs
 
     if a.command == "down":
         plan = load_plan(a.plan)
@@ -93,7 +94,7 @@ def _resolve(a: argparse.Namespace, controller: str | None) -> tuple[RunConfig, 
 
 
 def _control(a: argparse.Namespace) -> int:
-    from kinswarm.actors.control import (
+    from kinswarm.actors.cli.control import (
         Client,
         ControlError,
         make_fault,
@@ -168,7 +169,7 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _view(a: argparse.Namespace) -> int:
-    from kinswarm.actors.recording import open_stream, record_run, rerun_module, shown_epochs
+    from kinswarm.actors.report.recording import open_stream, record_run, rerun_module, shown_epochs
 
     rerun_module()
     note = reading_note(a.run_dir, "recording")
@@ -185,7 +186,7 @@ def _view(a: argparse.Namespace) -> int:
         stream.disconnect()  # the file's footer
     print(f"{a.save or 'the viewer'}: {epochs} epochs of {a.run_dir}")
     if a.web and a.save is None:  # the served viewer lives as long as this process
-        from kinswarm.actors.recording import serve_until_interrupted
+        from kinswarm.actors.report.recording import serve_until_interrupted
 
         serve_until_interrupted()
     return 0
@@ -211,9 +212,9 @@ def _epoch_list(text: str | None) -> list[int] | None:
 
 
 def _main(argv: list[str] | None) -> int:
-    from kinswarm.actors.control import ControlError
-    from kinswarm.actors.deploy import DeployError
-    from kinswarm.actors.scenario import ScenarioError
+    from kinswarm.actors.cli.control import ControlError
+    from kinswarm.actors.deploy.hosts import DeployError
+    from kinswarm.protocol.scenario import ScenarioError
 
     argv = joined(list(sys.argv[1:] if argv is None else argv))
     a = build_parser().parse_args(argv)
@@ -230,7 +231,7 @@ def _main(argv: list[str] | None) -> int:
                 print(path)
             return 0
         if a.command == "animate":
-            from kinswarm.actors.animate import write_animation
+            from kinswarm.actors.report.animate import write_animation
 
             _note(reading_note(a.run_dir, "animation"))
             print(write_animation(a.run_dir, _epoch_list(a.epochs), a.out))
@@ -254,7 +255,7 @@ def _main(argv: list[str] | None) -> int:
         else:
             cfg, topo = _resolve(a, None if a.command == "run" else a.law)
             if a.view:  # the extra is there and the target makes sense, or one line before anything is spawned
-                from kinswarm.actors.recording import check_view
+                from kinswarm.actors.report.recording import check_view
 
                 check_view(a.view)
             summary = run_swarm(cfg, topo, progress=not a.no_progress and sys.stderr.isatty(), view=a.view)
@@ -293,7 +294,3 @@ def _main(argv: list[str] | None) -> int:
     if summary.get("interrupted"):
         return 130
     return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())

@@ -1,6 +1,6 @@
 """The `kinswarm` command's entry point: light on purpose. Ctrl-C during the few tenths of a second the imports take
-is a clean exit (no traceback), then the CLI's own handling takes over (actors/cli.py main). The interpreter's own
-start (~0.05 s, before any of ours runs) is Python's."""
+is a clean exit (no traceback), then the CLI's own handling takes over (actors/cli/__init__.py main). The
+interpreter's own start (~0.05 s, before any of ours runs) is Python's."""
 
 from __future__ import annotations
 

@@ -20,9 +20,8 @@ import time
 from typing import Any
 
 import zenoh
-from kinswarm.actors.config import RunConfig
+from kinswarm.actors.run.config import RunConfig
 from kinswarm.actors.runtime import Node
-from kinswarm.actors.scenario import load_scenario
 from kinswarm.protocol.faults import JOINT_FAULTS, describe
 from kinswarm.protocol.messages import (
     Bye,
@@ -35,6 +34,7 @@ from kinswarm.protocol.messages import (
     JointStatus,
     Stop,
 )
+from kinswarm.protocol.scenario import load_scenario
 from kinswarm.protocol.topology import Topology
 from kinswarm.sim.robot import Robot
 from kinswarm.sim.world import World
@@ -54,7 +54,9 @@ class SimActor:
         self.scenario = load_scenario(cfg.scenario, topo) if cfg.scenario else None
         self.body = Robot(topo, cfg.scene_spec, cfg.action_rad, cfg.seed, self.scenario, self._world(topo))
         self.world, self.scene, self.faults = self.body.world, self.body.scene, self.body.faults
-        self.robot = 0  # which robot of a fleet this is (sim/fleet.py): a joint fault for another is not its
+        self.robot = (
+            0  # which robot of a fleet this is (actors/simulator/fleet.py): a joint fault for another is not its
+        )
         self.dof = topo.dof_agents
         self.dof_set = frozenset(self.dof)
         self._obs_first = [a for a in self.dof if a == topo.root]  # the root's reading goes out with the task

@@ -18,9 +18,9 @@ import subprocess
 import time
 from pathlib import Path
 
-from kinswarm.actors.config import RunConfig, config_from_json
-from kinswarm.actors.plan import Plan, PlanError, load_credentials
-from kinswarm.actors.rundir import check_out
+from kinswarm.actors.deploy.plan import Plan, PlanError, load_credentials
+from kinswarm.actors.run.config import RunConfig, config_from_json
+from kinswarm.actors.run.rundir import check_out
 from kinswarm.actors.runtime import NetSpec, Node, open_session
 from kinswarm.protocol import codec
 from kinswarm.protocol.keys import Keys

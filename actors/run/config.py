@@ -1,6 +1,7 @@
-"""The resolved run: what every actor of a run reads. `actors/runfile.py` (the one loader) resolves a run file into a
-RunConfig; the supervisor writes it to `<out>/config.json` (owner-only: it holds the run's secret) and every actor
-process reads it back here. Plain data over protocol specs: the simulator imports this, and nothing of the agents'.
+"""The resolved run: what every actor of a run reads. `actors/run/runfile.py` (the one loader) resolves a run file
+into a RunConfig; the supervisor writes it to `<out>/config.json` (owner-only: it holds the run's secret) and every
+actor process reads it back here. Plain data over protocol specs: the simulator's actor imports this, and nothing of
+the agents'.
 
 The fields of the run file's `[run]` table are the flat fields below (`from` is `from_dir`); its `[robot]`,
 `[scene]`, `[task]` and `[learner]` tables are kept as resolved tables, parsed by their owners: the robot and the
@@ -22,8 +23,9 @@ from typing import Any
 
 from kinswarm.protocol.faults import LINK_FAULTS, PROCESS_FAULTS
 from kinswarm.protocol.keys import check_id
+from kinswarm.protocol.robots import parse_robot
 from kinswarm.protocol.scene import SceneSpec, parse_scene
-from kinswarm.protocol.topology import Topology, parse_robot
+from kinswarm.protocol.topology import Topology
 
 PLACEMENTS = ("process", "single", "inprocess")
 #: The process and link faults each placement can apply (actors/supervisor/placements.py's `supports`): a task in one
@@ -35,7 +37,7 @@ PLACEMENT_FAULTS: dict[str, tuple[str, ...]] = {
     "inprocess": (),
 }
 LEASE_RANGE_MS = (100, 60_000)  # the Zenoh leases accepted: [run] lease_ms and a plan's [zenoh] lease_ms
-#: the learning agents, or a model-based law (sim/controller.py)
+#: the learning agents, or a model-based law (actors/simulator/controller.py)
 CONTROLLERS = ("agents", "pinv", "greedy", "rule", "turn")
 DEFAULT_LISTEN = "tcp/127.0.0.1:7447"
 #: The run file's [run] keys: every field of RunConfig a user sets in a file (`from` is the field from_dir).
@@ -127,8 +129,9 @@ class RunConfig:
     # at the end: motion.gif (kinswarm animate) and, with the extra kinswarm[viewer], recording.rrd (kinswarm view).
     # Its default comes from KINSWARM_RECORD when set: the test suite sets 0 (a few seconds a run, hundreds of runs)
     record: bool = field(default_factory=lambda: os.environ.get("KINSWARM_RECORD", "1") != "0")
-    # B robots in lockstep through one swarm, each agent learning from all B (actors/agent/fleet.py, sim/fleet.py);
-    # the run's metrics, recording and motion are robot 0's, EpochDone.fleet every robot's final error
+    # B robots in lockstep through one swarm, each agent learning from all B (actors/agent/fleet.py and
+    # actors/simulator/fleet.py); the run's metrics, recording and motion are robot 0's, EpochDone.fleet every
+    # robot's final error
     fleet: int = 1
     # "same": every robot the epoch's goal; "spread": robot b of epoch e the task's goal (and start) of epoch e*B + b,
     # a goal list walked B goals an epoch (the paper's protocol is one goal an epoch: "same", or no fleet)

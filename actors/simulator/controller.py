@@ -8,9 +8,9 @@ robot's point or pose (sim/baseline.py); every law moves as the agents do (basel
 
 from __future__ import annotations
 
-from kinswarm.actors.config import RunConfig
+from kinswarm.actors.run.config import RunConfig
 from kinswarm.actors.runtime import Node
-from kinswarm.protocol.messages import Cmd, Obs, Stop, Task
+from kinswarm.protocol.messages import Bye, Cmd, Obs, Stop, Task
 from kinswarm.protocol.topology import Topology
 from kinswarm.sim.baseline import greedy_increments, move_size, pinv_increments, rule_increments, turn_increments
 
@@ -24,6 +24,7 @@ class BaselineController:
         self.law = LAWS[cfg.controller]
         self.q: dict[tuple[int, int], dict[str, float]] = {}
         self.task: dict[tuple[int, int], Task] = {}
+        self.steps = 0  # steps commanded, for its Bye
 
     def outputs(self) -> list[str]:
         return [self.keys.cmd(a) for a in self.dof]
@@ -43,7 +44,8 @@ class BaselineController:
                     self.task[(t.epoch, t.step)] = t
                     self._try((t.epoch, t.step))
             elif key == k.ctl("stop"):
-                if node.decode(key, payload, Stop) is not None:
+                if node.decode(key, payload, Stop) is not None:  # goodbye, as every actor says it: the supervisor
+                    node.send(k.rep("bye", node.ident), Bye(steps=self.steps, rejected=node.rejected))  # waits for it
                     return
             elif "/sim/obs/" in key:
                 if (o := node.decode(key, payload, Obs)) is not None:
@@ -59,3 +61,4 @@ class BaselineController:
         dq = self.law(self.topo, q, task.goal, max_step=move_size(self.topo, q, task.goal, self.cfg.action_rad))
         for a in self.dof:
             self.node.send(self.keys.cmd(a), Cmd(epoch=step[0], step=step[1], delta=dq[a]))
+        self.steps += 1

@@ -1,9 +1,13 @@
-"""What a run leaves behind: `summary.json`, `learning_curve.png`, `arm.png`, `tracking.png` — rebuilt
+"""What a run leaves behind, for a person to read (this package): its plots and summary (here), the arm's drawing
+(arm.py), fault spans (timeline.py), motion.gif (animate.py), the rerun recording (recording.py), a scene's plots
+(scene_plot.py: walls; grasp.py: the grasp).
+
+Here: `summary.json`, `learning_curve.png`, `arm.png`, `tracking.png` — rebuilt
 from the run directory alone (`kinswarm report RUN-DIR`). Runs from before faults existed (no
 `events.jsonl`, no per-step `errors` in `metrics.jsonl`) still get the plots their data allows.
 
 Plots a person reads at a glance: a linear error axis (log on request), whole epochs on the axis, legends beside
-the data rather than on it, a lasting joint fault drawn as the span it lasts (actors/timeline.py), event labels
+the data rather than on it, a lasting joint fault drawn as the span it lasts (actors/report/timeline.py), event labels
 that never overlap, and a title that says what drove the robot."""
 
 from __future__ import annotations
@@ -13,9 +17,9 @@ import math
 from pathlib import Path
 from typing import Any
 
-from kinswarm.actors.config import RunConfig, load_run_config
-from kinswarm.actors.learning.state import joint_frame, link_end
-from kinswarm.actors.timeline import Span, active_at_end, fault_spans, label_groups
+from kinswarm.actors.report.arm import arm_axes, arm_points, draw_axes, floor_shadow, joint_points
+from kinswarm.actors.report.timeline import Span, active_at_end, fault_spans, label_groups
+from kinswarm.actors.run.config import RunConfig, load_run_config
 from kinswarm.protocol import frames
 from kinswarm.protocol.topology import Topology
 
@@ -60,91 +64,6 @@ def torn_rows(run_dir: Path) -> list[str]:
         if (run_dir / name).exists():
             read_jsonl(run_dir / name, skipped)
     return skipped
-
-
-def joint_points(topo: Topology, angles: dict[str, float]) -> dict[str, tuple[float, ...]]:
-    """Where each agent's joint sits, from the agents' own frame composition: (x, y) for a planar robot, (x, y, z)
-    for a spatial one (its link frame's origin, on the joint's axis)."""
-    if topo.spatial:
-        return {a: f[:3] for a, f in frames.link_frames(topo, angles).items()}
-    return {a: f[:2] for a, f in _frames(topo, angles)[0].items()}
-
-
-def _frames(
-    topo: Topology, angles: dict[str, float]
-) -> tuple[dict[str, tuple[float, float, float]], dict[str, tuple[float, float, float]]]:
-    ends: dict[str, tuple[float, float, float]] = {}
-    starts: dict[str, tuple[float, float, float]] = {}
-    for a in topo.order:
-        spec = topo.agents[a]
-        base = topo.base if spec.parent is None else ends[spec.parent]
-        frame = joint_frame(base, spec.offset, angles.get(a, 0.0))
-        starts[a], ends[a] = frame, link_end(frame, spec.link_length)
-    return starts, ends
-
-
-def arm_points(topo: Topology, angles: dict[str, float]) -> list[list[tuple[float, ...]]]:
-    """Polylines of the robot, one per root-to-leaf path, from the agents' own frame composition: (x, y) points
-    of a planar robot's joints and link ends; (x, y, z) of a spatial one's base, joints and tool point."""
-    if topo.spatial:
-        links, tips = frames.link_frames(topo, angles), frames.tips(topo, angles)
-        return [[topo.base[:3], *(links[a][:3] for a in _path(topo, leaf)), tips[leaf][:3]] for leaf in tips]
-    starts, ends = _frames(topo, angles)
-    lines = []
-    for leaf in topo.end_effectors:
-        path, a = [], leaf
-        while a is not None:
-            path.append(a)
-            a = topo.agents[a].parent
-        pts = [(topo.base[0], topo.base[1])]
-        for b in reversed(path):
-            pts += [starts[b][:2], ends[b][:2]]
-        lines.append(pts)
-    return lines
-
-
-def _path(topo: Topology, leaf: str) -> list[str]:
-    """The agents from the root down to `leaf`."""
-    path, a = [], leaf
-    while a is not None:
-        path.append(a)
-        a = topo.agents[a].parent
-    return path[::-1]
-
-
-def arm_axes(fig: Any, where: tuple[int, ...], points: list[tuple[float, ...]]) -> Any:
-    """The axes a spatial robot is drawn in (`fig.add_subplot(*where)`): 3D, equal scales, a cube about the
-    `points` it must show (the arm's, the goal's), the view from the front-right above."""
-    ax = fig.add_subplot(*where, projection="3d")
-    lo = [min(p[i] for p in points) for i in range(3)]
-    hi = [max(p[i] for p in points) for i in range(3)]
-    half = max(0.55 * max(h - low for h, low in zip(hi, lo, strict=True)), 0.05)
-    for (low, h), set_lim in zip(zip(lo, hi, strict=True), (ax.set_xlim, ax.set_ylim, ax.set_zlim), strict=True):
-        set_lim((low + h) / 2 - half, (low + h) / 2 + half)
-    ax.set_box_aspect((1.0, 1.0, 1.0))
-    ax.view_init(elev=22, azim=-60)
-    for set_label, name in zip((ax.set_xlabel, ax.set_ylabel, ax.set_zlabel), "xyz", strict=True):
-        set_label(f"{name} (m)", fontsize=8, labelpad=-6)
-    ax.tick_params(labelsize=6, pad=-2)
-    return ax
-
-
-def floor_shadow(ax: Any, arm: list[list[tuple[float, ...]]], goal: tuple[float, ...]) -> list[Any]:
-    """Where the arm and the goal lie over the floor of a 3D axes: the arm's shadow, a drop line from the goal."""
-    z0 = ax.get_zlim()[0]
-    out = [ax.plot([p[0] for p in pts], [p[1] for p in pts], z0, color="0.75", lw=1.0)[0] for pts in arm]
-    out += ax.plot([goal[0], goal[0]], [goal[1], goal[1]], [z0, goal[2]], ":", color="r", lw=0.8)
-    out += ax.plot([goal[0]], [goal[1]], [z0], "x", color="r", ms=6)
-    return out
-
-
-def draw_axes(ax: Any, frame: tuple[float, ...], length: float, style: str = "-") -> list[Any]:
-    """A frame's x, y, z axes (red, green, blue) as lines of `length` in a 3D axes."""
-    lines = []
-    for axis, colour in zip(((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0)), ("r", "g", "b"), strict=True):
-        end = [p + length * c for p, c in zip(frame[:3], frames.rotate(frame[3:7], axis), strict=True)]
-        lines += ax.plot(*([p, e] for p, e in zip(frame[:3], end, strict=True)), style, color=colour, lw=1.2)
-    return lines
 
 
 def goal_text(goal: tuple[float, ...]) -> str:
@@ -262,7 +181,7 @@ def write_plots(run_dir: Path, log: bool = False) -> list[Path]:
         written.append(run_dir / "arm.png")
 
     if rows and scene.obstacles:  # the chain among the walls (paper Fig. 23)
-        from kinswarm.actors.scene_plot import write_scene_plot
+        from kinswarm.actors.report.scene_plot import write_scene_plot
 
         title = f"{cfg.run_id}: final configurations, {_controller(cfg)}, seed={cfg.seed}"
         write_scene_plot(run_dir / "scene.png", topo, scene.obstacles, goal, rows, title)
@@ -282,7 +201,7 @@ def write_plots(run_dir: Path, log: bool = False) -> list[Path]:
         plt.close(fig)
         written.append(run_dir / "tracking.png")
     if scene.object is not None:  # an object to grasp (paper §5.5): the fingers, forces, friction cones
-        from kinswarm.actors.grasp_report import write_grasp_plots
+        from kinswarm.actors.report.grasp import write_grasp_plots
 
         written += write_grasp_plots(run_dir, topo, scene.object, rows, plt)
     return written
@@ -376,7 +295,7 @@ def write_summary(run_dir: Path, extra: dict[str, Any]) -> dict[str, Any]:
         summary["fleet_final_error"] = [r.get("fleet_final_error", []) for r in rows]
         summary["robot_steps_per_second"] = summary["steps_per_second"] * cfg.fleet
     if scene.object is not None:  # an object to grasp: the grasp's quality per epoch
-        from kinswarm.actors.grasp_report import grasp_summary
+        from kinswarm.actors.report.grasp import grasp_summary
 
         summary["grasp"] = grasp_summary(rows, topo, scene.object)
     (run_dir / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
@@ -385,7 +304,7 @@ def write_summary(run_dir: Path, extra: dict[str, Any]) -> dict[str, Any]:
 
 def _goal(cfg: RunConfig, rows: list[dict[str, Any]]) -> tuple[float, float]:
     """The goal of the run's last epoch (the task's goal schedule)."""
-    from kinswarm.actors.runfile import task_of
+    from kinswarm.actors.run.runfile import task_of
 
     epoch = rows[-1]["epoch"] if rows else 0
     return task_of(cfg).goal(epoch, cfg.steps)[0]
@@ -393,7 +312,7 @@ def _goal(cfg: RunConfig, rows: list[dict[str, Any]]) -> tuple[float, float]:
 
 def cfg_start(cfg: RunConfig, epoch: int, topo: Topology) -> dict[str, float]:
     """The joint angles epoch `epoch` started from: the task's start pose, else the robot's home."""
-    from kinswarm.actors.runfile import task_of
+    from kinswarm.actors.run.runfile import task_of
 
     return task_of(cfg).start(epoch) or topo.initial_angles()
 

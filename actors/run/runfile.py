@@ -3,7 +3,7 @@ plan names a run file), the experiments and the Python API all resolve it here, 
 (in the dataclass that owns it).
 
 ```toml
-[run]                      # RunConfig's fields (actors/config.py); all optional
+[run]                      # RunConfig's fields (actors/run/config.py); all optional
 epochs = 60
 seed = 0
 placement = "process"      # or "single"
@@ -47,16 +47,17 @@ from typing import Any
 
 import msgspec
 import tomli_w
-from kinswarm.actors.config import CONTROLLERS, RUN_KEYS, ConfigError, RunConfig, check_endpoint, placement_problem
 from kinswarm.actors.learning.kinds import DEFAULT, LearnerKind, learner_kind
 from kinswarm.actors.learning.settings import SPATIAL_STATES, LearnerSettings
 from kinswarm.actors.learning.state import OWN_EXTRAS
+from kinswarm.actors.run.config import CONTROLLERS, RUN_KEYS, ConfigError, RunConfig, check_endpoint, placement_problem
 from kinswarm.actors.tasks import kinds, task_class
 from kinswarm.actors.tasks.base import TaskDef
 from kinswarm.protocol.keys import check_id
+from kinswarm.protocol.robots import parse_robot
 from kinswarm.protocol.scene import SceneSpec, agent_readings, parse_scene
 from kinswarm.protocol.spec import SpecError, shown, table
-from kinswarm.protocol.topology import ROBOT_KEYS, Topology, parse_robot
+from kinswarm.protocol.topology import ROBOT_KEYS, Topology
 from kinswarm.protocol.urdf_robot import URDF_KEYS
 
 SECTIONS = ("run", "robot", "scene", "task", "learner")
@@ -218,7 +219,7 @@ def resolve(
     except msgspec.ValidationError as e:
         raise _spec_error(e, source, "run", fields) from None
     if cfg.scenario is not None:  # a bad scenario is refused before anything starts, one that cannot fire too
-        from kinswarm.actors.scenario import ScenarioError, load_scenario
+        from kinswarm.protocol.scenario import ScenarioError, load_scenario
 
         for i, e in enumerate(load_scenario(cfg.scenario, topo).entries):
             if e.step >= cfg.steps:
@@ -260,13 +261,13 @@ def check_inprocess(cfg: RunConfig) -> None:
 def check_checkpoints(run_dir: Path, task: TaskDef, learner: Mapping[str, Any], source: str = "<memory>") -> None:
     """Every DOF agent's checkpoint in `run_dir` loads into the learner this run gives it (the same state variables
     and neighbours), or the one line that says whose does not and why."""
-    from kinswarm.actors.checkpoint import CheckpointError, load_checkpoint
+    from kinswarm.actors.run.checkpoint import CheckpointError, load_checkpoint
 
     topo = task.topo
     if not run_dir.is_dir():
         raise CheckpointError(f"run.from {shown(str(run_dir))}: no such run directory")
     try:  # the run's own record says at once what it was a run of
-        from kinswarm.actors.config import load_run_config
+        from kinswarm.actors.run.config import load_run_config
 
         theirs = load_run_config(run_dir / "config.json").topo()
     except (ConfigError, SpecError):

@@ -84,7 +84,7 @@ def write_grasp_plots(
     grasp_forces.png (net force and torque over the steps of some epochs, Figs. 26-27),
     grasp_cone.png (each finger's |ft| against mu fn over those epochs, Fig. 28),
     grasp_epochs.png (the last step's net force, torque and mean fn over the epochs)."""
-    from kinswarm.actors.report import arm_points
+    from kinswarm.actors.report.arm import arm_points
 
     rows = [r for r in rows if "traces" in r]
     if obj is None or not rows:

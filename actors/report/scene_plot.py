@@ -7,7 +7,7 @@ import math
 from collections.abc import Sequence
 from typing import Any
 
-from kinswarm.actors.report import arm_points
+from kinswarm.actors.report.arm import arm_points
 from kinswarm.protocol.obstacles import ObstacleSpec
 from kinswarm.protocol.topology import Topology
 

@@ -15,7 +15,7 @@ import sys
 import time
 from pathlib import Path
 
-from kinswarm.actors.config import ConfigError, RunConfig, load_run_config
+from kinswarm.actors.run.config import ConfigError, RunConfig, load_run_config
 from kinswarm.actors.runtime import NetSpec, Node, open_session
 from kinswarm.actors.runtime.net import zenoh_reason
 from kinswarm.protocol.faults import check_fault

@@ -1,0 +1,7 @@
+"""`python -m kinswarm.actors.cli`: the command line, as the `kinswarm` script runs it."""
+
+import sys
+
+from kinswarm.actors.cli import main
+
+sys.exit(main())

@@ -1,0 +1,29 @@
+"""What a run returns, and what ends it early: plain data, for every placement (the supervisor's and the inprocess
+loop's)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from kinswarm.protocol.messages import EpochDone
+
+
+class SwarmError(RuntimeError):
+    pass
+
+
+class NoMessage(SwarmError):
+    """The awaited message did not come in time."""
+
+
+@dataclass
+class RunResult:
+    epochs: list[EpochDone] = field(default_factory=list)
+    interrupted: bool = False
+    error: str = ""  # why the run failed (restart budget exhausted, the sim died, ...)
+    wall_seconds: float = 0.0
+    rejected: int = 0  # messages every actor refused (from their Bye) plus the supervisor's own
+    rejected_by: dict[str, int] = field(default_factory=dict)
+    restarts: dict[str, int] = field(default_factory=dict)
+    # liveliness tokens gone while training, by actor: a kill, a freeze, or a process starved past the lease
+    tokens_lost: dict[str, int] = field(default_factory=dict)
