@@ -47,7 +47,15 @@ from typing import Any
 
 import msgspec
 import tomli_w
-from kinswarm.actors.config import CONTROLLERS, RUN_KEYS, ConfigError, RunConfig, check_endpoint, placement_problem
+from kinswarm.actors.config import (
+    AUTO_LISTEN,
+    CONTROLLERS,
+    RUN_KEYS,
+    ConfigError,
+    RunConfig,
+    check_endpoint,
+    placement_problem,
+)
 from kinswarm.actors.learning.settings import SPATIAL_STATES, LearnerSettings
 from kinswarm.actors.learning.state import OWN_EXTRAS
 from kinswarm.actors.tasks import kinds, task_class
@@ -197,7 +205,10 @@ def resolve(
     except ValueError as e:
         raise ConfigError(f"--run-id: {e}") from None
     out_dir = Path(out) if out is not None else Path("runs") / run_id
-    extra = {"listen": check_endpoint(listen, "--listen")} if listen is not None else {}
+    # `--listen auto` (the default): a free port on 127.0.0.1, picked when the run starts (plan.local_plan)
+    extra = {}
+    if listen is not None:
+        extra["listen"] = listen if listen == AUTO_LISTEN else check_endpoint(listen, "--listen")
     try:
         cfg = msgspec.convert(
             {
