@@ -119,6 +119,7 @@ def _control(a: argparse.Namespace) -> int:
         make_fault,
         parse_duration,
         run_config,
+        run_config_at,
         show_status,
         tool_net,
     )
@@ -137,6 +138,9 @@ def _control(a: argparse.Namespace) -> int:
             degrees=a.degrees,
             robot=a.robot,
         )
+    if a.run_dir is None and "/" in a.run_id:  # a run's directory, not an id (ids have no "/"): its own id
+        a.run_dir = Path(a.run_id)
+        a.run_id = run_config_at(a.run_dir).run_id
     cfg = run_config(a.run_id, a.run_dir)
     run_dir = a.run_dir or Path("runs") / a.run_id
     state = run_state(run_dir)

@@ -9,9 +9,9 @@ dropped: it learned from an epoch that trains again), and events.jsonl says wher
 restore their learned state from there, their random generators included, so a deterministic run (`single`
 placement, a checkpoint every epoch, same seed) ends as it would have without the crash.
 
-What is not carried over: live faults injected before the crash (`kinswarm fault`; a scenario's timeline is the run's
-and replays from the resumed epoch), the simulator's disturbance draws (a fresh stream), and with `successive` the
-robot's pose (the resumed epoch starts from the task's start pose)."""
+What is not carried over: live faults injected before the crash (`kinswarm fault`) and a scenario's faults due before
+the resumed epoch (those due from it on come as scheduled), the simulator's disturbance draws (a fresh stream), and
+with `successive` the robot's pose (the resumed epoch starts from the task's start pose)."""
 
 from __future__ import annotations
 

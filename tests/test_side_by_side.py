@@ -94,6 +94,8 @@ def test_status_and_fault_reach_each_run_from_its_id(tmp_path):
             assert status.returncode == 0, status.stderr
             assert status.stdout.startswith(f"run {run_id}  epoch"), status.stdout
             assert "a2" in status.stdout and "sim" in status.stdout
+            by_dir = tool(tmp_path, "status", f"runs/{run_id}")  # its directory alone finds it too
+            assert by_dir.returncode == 0 and by_dir.stdout.startswith(f"run {run_id}  epoch"), by_dir.stderr
             fault = tool(tmp_path, "fault", run_id, "lock", "a2")
             assert fault.returncode == 0, fault.stderr
             assert fault.stdout.startswith(f"{run_id}: lock a2"), fault.stdout
