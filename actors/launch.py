@@ -288,5 +288,5 @@ def check_start(plan: Plan, topo: Topology) -> None:
             continue
         why = "port 0 lets the system pick a port the actors cannot know: give a free port"
         if plan.name == "local" and plan.source == "(local)":
-            raise ConfigError(f"--listen {h.listen}: {why}, e.g. --listen tcp/127.0.0.1:7448")
+            raise ConfigError(f"--listen {h.listen}: {why}, or leave --listen out: the run then picks one it can tell")
         raise PlanError(plan.source, f"host {name}.listen", f"{h.listen}: {why}")

@@ -175,3 +175,22 @@ def test_resume_takes_nothing_that_would_change_the_run(tmp_path, capsys, ended)
     assert cli(["run", "--resume", str(ended), "--set", "run.seed=4"]) == 2
     one_line(capsys, "--set cannot change it")
     assert snapshot(ended) == before
+
+
+@pytest.mark.timeout(180)
+def test_a_crash_between_two_agents_checkpoints_resumes_from_the_one_all_hold(tmp_path):
+    """The supervisor died while the agents saved epoch 2: a1 had saved it (epoch 1 now its .prev), the others had
+    not (their newest is epoch 1). The run goes on from epoch 1, a1 from its .prev, and ends as without the crash."""
+    out = tmp_path / "mid"
+    argv = ["run", CHAIN4, "--epochs", "3", "--steps", "60", "--seed", "5", "--placement", "single", "--run-id", "m"]
+    assert cli([*argv, "--out", str(out), "--no-progress", *LOCKSTEP_ARGS]) == 0
+    whole = json.loads((out / "summary.json").read_text())["final_error"]
+    (out / "summary.json").unlink()  # as the crash left it: epochs 0-2 recorded, no summary ...
+    agents = out / "agents"
+    for a in ("a2", "a3", "a4"):  # ... and a2-a4 still at epoch 1 (their epoch-2 save never happened)
+        os.replace(agents / f"{a}.prev.npz", agents / f"{a}.npz")
+    assert cli(["run", "--resume", str(out), "--no-progress"]) == 0
+    assert json.loads((out / "summary.json").read_text())["final_error"] == whole
+    assert [r["epoch"] for r in rows(out / "metrics.jsonl")] == [0, 1, 2]
+    (resume,) = resumes(out / "events.jsonl")
+    assert resume["epoch"] == 2 and "checkpoint of epoch 1; metrics rows dropped past it: 1" in resume["detail"]
