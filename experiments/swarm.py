@@ -27,8 +27,9 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from kinswarm.actors.deploy.plan import free_endpoint
 from kinswarm.actors.report import read_metrics, write_summary
-from kinswarm.actors.run.config import ConfigError, RunConfig
+from kinswarm.actors.run.config import AUTO_LISTEN, ConfigError, RunConfig
 from kinswarm.actors.run.runfile import learner_settings, read_run_file, resolve, task_of, write_resolved
 from kinswarm.actors.runtime import open_session, tap
 from kinswarm.actors.supervisor import RunResult, SinglePlacement, Supervisor
@@ -207,7 +208,7 @@ async def _supervise(
 ) -> tuple[RunResult, list[tuple[str, bytes]]]:
     """Run cfg in this process. `observe`: record the task and every Obs (for trace.npz); `record`: key
     expressions to record besides (tests and probes)."""
-    session = open_session(listen=[cfg.listen])
+    session = open_session(listen=[free_endpoint() if cfg.listen == AUTO_LISTEN else cfg.listen])
     captured: list[tuple[str, bytes]] = []
     subs = []
 

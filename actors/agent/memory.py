@@ -3,9 +3,11 @@ checkpoints (`--from`), and a restart's resume from this run's newest good one (
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+import numpy as np
 from kinswarm.actors.learning.kinds import DEFAULT
 from kinswarm.actors.run.checkpoint import CheckpointError, digest, load_checkpoint, load_latest, save_checkpoint
 from kinswarm.protocol.messages import Checkpoint, Event, Saved
@@ -27,11 +29,31 @@ def checkpoint_meta(agent: str, kind: str, topology: str, epochs_before: int, ep
     }
 
 
+RNG = "rng_state"  # a checkpoint's array of the learner's random generator (JSON bytes of its bit generator's state)
+
+
+def learned_state(learner: Any) -> dict[str, np.ndarray]:
+    """What a checkpoint holds of a learner: its state dict and where its random generator is, so a run resumed from
+    it draws what the run would have drawn (a restart's exploration goes on as it would have, too)."""
+    rng = json.dumps(learner.rng.bit_generator.state).encode()
+    return {**learner.state_dict(), RNG: np.frombuffer(rng, dtype=np.uint8)}
+
+
+def load_learned(learner: Any, arrays: dict[str, np.ndarray]) -> None:
+    """`learned_state` back into a learner (a checkpoint without the generator's state leaves it as it is)."""
+    learner.load_state_dict(arrays)
+    if RNG in arrays:
+        try:
+            learner.rng.bit_generator.state = json.loads(arrays[RNG].tobytes().decode())
+        except (ValueError, TypeError, KeyError) as e:  # the digest matched: written so by a kinswarm that differs
+            raise ValueError(f"rng_state: not this learner's random generator's state ({e})") from None
+
+
 def restore_learner(learner: Any, path: Path, agent: str, kind: str) -> int:
     """A previous run's checkpoint into `learner` of `kind` (`--from`): the epochs it was trained, for the lr
     schedule."""
     arrays, meta = load_checkpoint(path, agent=agent, learner=kind)
-    learner.load_state_dict(arrays)
+    learner.load_state_dict(arrays)  # another run's: its knowledge, not its random draws
     return int(meta.get("epochs_trained", 0))
 
 
@@ -67,11 +89,11 @@ class Memory:
             return
         for reason in refused:
             a.node.log.warning("checkpoint refused: %s", reason)
-        a.learner.load_state_dict(arrays)
+        load_learned(a.learner, arrays)
         self.epochs_before = int(meta.get("epochs_before", 0))
         detail = (
             f"{used.name} of epoch {meta.get('run_epoch')}: checkpoint sha256={meta['sha256']} "
-            f"restored sha256={digest(a.learner.state_dict())}"
+            f"restored sha256={digest(learned_state(a.learner))}"
         )
         if refused:
             detail += f"; refused: {'; '.join(refused)}"
@@ -87,7 +109,7 @@ class Memory:
         if a.learner is not None:
             try:
                 meta = checkpoint_meta(a.id, self.kind, a.topo.name, self.epochs_before, m.epoch, a.cfg.seed)
-                save_checkpoint(path, a.learner.state_dict(), meta)
+                save_checkpoint(path, learned_state(a.learner), meta)
             except OSError as e:
                 error = f"cannot write {path}: {e}"
                 a.node.log.error(error)

@@ -20,8 +20,8 @@ from kinswarm.actors.cli.parser import build_parser, joined, sets_of
 from kinswarm.actors.deploy.plan import Plan, PlanError, load_plan
 from kinswarm.actors.report import error_line
 from kinswarm.actors.run.checkpoint import CheckpointError
-from kinswarm.actors.run.config import ConfigError, RunConfig
-from kinswarm.actors.run.launch import run_swarm
+from kinswarm.actors.run.config import ConfigError, RunConfig, check_endpoint
+from kinswarm.actors.run.launch import resume_swarm, run_swarm
 from kinswarm.actors.run.rundir import check_dir, failed_start, reading_note, run_state
 from kinswarm.actors.run.runfile import load_run
 from kinswarm.actors.runtime import setup_logging
@@ -93,6 +93,26 @@ def _resolve(a: argparse.Namespace, controller: str | None) -> tuple[RunConfig, 
     return cfg, cfg.topo()
 
 
+#: what `run --resume` takes besides RUN-DIR: how to watch it and where it listens; nothing that changes the run
+_RESUME_TAKES = {"resume", "listen", "no_progress", "view", "log_level", "command"}
+
+
+def _resumed(a: argparse.Namespace) -> RunConfig:
+    """`kinswarm run --resume RUN-DIR`: the run as config.json resolved it, or one line naming what is wrong."""
+    from kinswarm.actors.run.resume import check_resume
+
+    if a.run_file is not None:
+        raise ConfigError(f"--resume {a.resume}: continues the run as it was resolved: give no RUN-FILE ({a.run_file})")
+    given = [k for k, v in vars(a).items() if k not in _RESUME_TAKES and v not in (None, False, [])]
+    if given:
+        flag = "--from" if given[0] == "from_dir" else "--" + given[0].replace("_", "-")
+        raise ConfigError(f"--resume {a.resume}: continues the run as it was resolved: {flag} cannot change it")
+    cfg = check_resume(a.resume)
+    if a.listen is not None:  # where it listens is not the run: a port pinned then may be taken now
+        cfg = dataclasses.replace(cfg, listen=a.listen if a.listen == "auto" else check_endpoint(a.listen, "--listen"))
+    return cfg
+
+
 def _control(a: argparse.Namespace) -> int:
     from kinswarm.actors.cli.control import (
         Client,
@@ -100,6 +120,7 @@ def _control(a: argparse.Namespace) -> int:
         make_fault,
         parse_duration,
         run_config,
+        run_config_at,
         show_status,
         tool_net,
     )
@@ -118,6 +139,9 @@ def _control(a: argparse.Namespace) -> int:
             degrees=a.degrees,
             robot=a.robot,
         )
+    if a.run_dir is None and "/" in a.run_id:  # a run's directory, not an id (ids have no "/"): its own id
+        a.run_dir = Path(a.run_id)
+        a.run_id = run_config_at(a.run_dir).run_id
     cfg = run_config(a.run_id, a.run_dir)
     run_dir = a.run_dir or Path("runs") / a.run_id
     state = run_state(run_dir)
@@ -252,7 +276,17 @@ def _main(argv: list[str] | None) -> int:
                     return 1
                 print(f"kinswarm: host {summary['host']} done ({cfg.run_id})")
                 return 130 if summary.get("interrupted") else 0
+        elif getattr(a, "resume", None) is not None:
+            cfg = _resumed(a)
+            if a.view:
+                from kinswarm.actors.report.recording import check_view
+
+                check_view(a.view)
+            progress = not a.no_progress and sys.stderr.isatty()
+            summary = resume_swarm(cfg, cfg.topo(), progress=progress, view=a.view)
         else:
+            if a.run_file is None:
+                raise ConfigError("RUN-FILE: missing: give a run file (e.g. examples/chain4.toml), or --resume RUN-DIR")
             cfg, topo = _resolve(a, None if a.command == "run" else a.law)
             if a.view:  # the extra is there and the target makes sense, or one line before anything is spawned
                 from kinswarm.actors.report.recording import check_view

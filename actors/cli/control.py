@@ -45,11 +45,16 @@ def tool_net(run_dir: Path, cfg: RunConfig, connect: str | None) -> NetSpec:
     return net.with_(connect=(connect,)) if connect else net
 
 
-def run_config(run_id: str, run_dir: Path | None) -> RunConfig:
-    path = (run_dir or Path("runs") / run_id) / "config.json"
+def run_config_at(run_dir: Path) -> RunConfig:
+    path = run_dir / "config.json"
     if not path.exists():
         raise ControlError(f"{path} not found: it holds the run's key; pass --run-dir DIR (the run's --out)")
-    cfg = load_run_config(path)
+    return load_run_config(path)
+
+
+def run_config(run_id: str, run_dir: Path | None) -> RunConfig:
+    path = (run_dir or Path("runs") / run_id) / "config.json"
+    cfg = run_config_at(path.parent)
     if cfg.run_id != run_id:
         raise ConfigError(f"{path} belongs to run {cfg.run_id!r}, not {run_id!r}")
     return cfg

@@ -68,8 +68,9 @@ def sets_of(a: argparse.Namespace) -> list[str | tuple[str, str]]:
     return out + list(getattr(a, "set", None) or [])
 
 
-def _add_common(p: argparse.ArgumentParser) -> None:
-    p.add_argument("run_file", type=Path, metavar="RUN-FILE", help="a run file (e.g. examples/chain4.toml)")
+def _add_common(p: argparse.ArgumentParser, resumable: bool = False) -> None:
+    more = {"nargs": "?", "default": None} if resumable else {}  # `run --resume DIR` takes the run's own
+    p.add_argument("run_file", type=Path, metavar="RUN-FILE", help="a run file (e.g. examples/chain4.toml)", **more)
     p.add_argument(
         "--set",
         action="append",
@@ -82,7 +83,12 @@ def _add_common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--goal", type=_goal, default=None, help="X,Y (= --set task.goal=[X,Y]); write --goal=-5,7")
     p.add_argument("--placement", choices=PLACEMENTS, default=None, help="= --set run.placement=...")
     p.add_argument("--run-id", default=None)
-    p.add_argument("--listen", default=None, help=f"the supervisor's endpoint (default {DEFAULT_LISTEN})")
+    p.add_argument(
+        "--listen",
+        default=None,
+        help=f"the supervisor's endpoint (default {DEFAULT_LISTEN}: a free port on 127.0.0.1, written to "
+        "RUN-DIR/net/cli.json, where `kinswarm status`, `fault` find it)",
+    )
     p.add_argument("--out", type=Path, default=None, help="run directory (default runs/<run-id>)")
     p.add_argument("--deadline-ms", type=int, default=None, help="per-step deadline; a missing cmd holds")
     p.add_argument(
@@ -118,7 +124,15 @@ def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="kinswarm", description="A swarm of per-joint learning agents over Zenoh.")
     sub = p.add_subparsers(dest="command", required=True)
     run = sub.add_parser("run", help="train (or evaluate) a swarm of agents: everything it needs is in a run file")
-    _add_common(run)
+    _add_common(run, resumable=True)
+    run.add_argument(
+        "--resume",
+        type=Path,
+        default=None,
+        metavar="RUN-DIR",
+        help="continue a run whose supervisor died (killed, a power cut) from its last complete checkpoint, in its "
+        "own directory, as it was resolved (no RUN-FILE, no overrides)",
+    )
     run.add_argument("--reward", default=None, help="= --set task.reward=...")
     run.add_argument("--from", dest="from_dir", type=Path, default=None, help="start from a run's checkpoints")
     run.add_argument("--learn", type=_on_off, default=None, metavar="on|off")

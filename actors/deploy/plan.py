@@ -24,12 +24,13 @@ from __future__ import annotations
 import hashlib
 import ipaddress
 import os
+import socket
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from kinswarm.actors.run.config import LEASE_RANGE_MS
+from kinswarm.actors.run.config import AUTO_LISTEN, LEASE_RANGE_MS
 from kinswarm.actors.runtime import LEASE_MS, NetSpec
 from kinswarm.protocol.keys import check_id
 from kinswarm.protocol.topology import Topology
@@ -238,8 +239,19 @@ def dictionary_file(credentials: str | Path, users: dict[str, str]) -> str:
 
 
 # -- loading -----------------------------------------------------------------------------------------
+def free_endpoint(address: str = "127.0.0.1") -> str:
+    """A port nobody listens on now: bound, read and let go. Another program may take it before the supervisor
+    binds it (a few ms later); launch.py then picks again."""
+    with socket.socket() as s:
+        s.bind((address, 0))
+        return f"tcp/{address}:{s.getsockname()[1]}"
+
+
 def local_plan(listen: str, lease_ms: int = LEASE_MS) -> Plan:
-    """The embedded default (deploy/local.toml): one host, every actor on it, peers on loopback."""
+    """The embedded default (deploy/local.toml): one host, every actor on it, peers on loopback. `listen` "auto": a
+    free port, picked here (the actors are told the endpoint the plan holds)."""
+    if listen == AUTO_LISTEN:
+        listen = free_endpoint()
     host = Host(name="local", address="127.0.0.1", listen=listen, actors=("sim", "agents"))
     return Plan(source="(local)", name="local", leader="local", hosts={"local": host}, lease_ms=lease_ms)
 

@@ -39,7 +39,15 @@ PLACEMENT_FAULTS: dict[str, tuple[str, ...]] = {
 LEASE_RANGE_MS = (100, 60_000)  # the Zenoh leases accepted: [run] lease_ms and a plan's [zenoh] lease_ms
 #: the learning agents, or a model-based law (actors/simulator/controller.py)
 CONTROLLERS = ("agents", "pinv", "greedy", "rule", "turn")
-DEFAULT_LISTEN = "tcp/127.0.0.1:7447"
+#: The supervisor's endpoint when none is given: a free port on 127.0.0.1, picked as the run starts
+#: (actors/deploy/plan.py local_plan) and recorded in `<out>/net/cli.json` for the tools; so any number of runs go
+#: side by side, unaware of each other. config.json keeps "auto": a resumed run picks a free port again (the old one
+#: may be taken by then).
+AUTO_LISTEN = "auto"
+DEFAULT_LISTEN = AUTO_LISTEN
+#: What a run directory was written by (config.json's "kinswarm"): `--resume` continues only a run of this version
+#: (its checkpoints' learned state, its rows). The run format counts changes to what a run leaves behind.
+RUN_FORMAT = 1
 #: The run file's [run] keys: every field of RunConfig a user sets in a file (`from` is the field from_dir).
 RUN_KEYS = (
     "epochs",
@@ -181,7 +189,8 @@ class RunConfig:
                 raise ConfigError(f"{name}: expected a number of seconds >= 0, got {v!r}")
         if not (isinstance(self.secret, str) and len(self.secret) >= 16):
             raise ConfigError("secret: expected a string of at least 16 characters")
-        check_endpoint(self.listen, "--listen")
+        if self.listen != AUTO_LISTEN:
+            check_endpoint(self.listen, "--listen")
         if not (isinstance(self.hosts, list) and all(isinstance(h, str) for h in self.hosts)):
             raise ConfigError(f"hosts: expected a list of host names, got {self.hosts!r}")
         if not (isinstance(self.task, dict) and isinstance(self.task.get("kind"), str)):
@@ -208,7 +217,7 @@ class RunConfig:
         return parse_scene(self.scene, self._topo, self.source)
 
     def to_json(self) -> str:
-        return json.dumps(dataclasses.asdict(self), indent=2)
+        return json.dumps({**dataclasses.asdict(self), "kinswarm": writer_version()}, indent=2)
 
     @property
     def key(self) -> bytes:
@@ -230,6 +239,7 @@ def config_from_json(text: str, source: str = "<memory>") -> RunConfig:
         raise ConfigError(f"{source}: not JSON: {e}") from None
     if not isinstance(data, dict):
         raise ConfigError(f"{source}: expected a JSON object")
+    data.pop("kinswarm", None)  # who wrote it: recorded_version
     known = {f.name for f in dataclasses.fields(RunConfig)}
     unknown = set(data) - known
     if unknown:
@@ -238,6 +248,27 @@ def config_from_json(text: str, source: str = "<memory>") -> RunConfig:
         return RunConfig(**data)
     except TypeError as e:
         raise ConfigError(f"{source}: {e}") from None
+
+
+def writer_version() -> str:
+    """This kinswarm's version and run format, as config.json records them."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        v = version("kinswarm")
+    except PackageNotFoundError:  # run from a source tree that was never installed
+        v = "0+unknown"
+    return f"{v}+run{RUN_FORMAT}"
+
+
+def recorded_version(path: Path) -> str | None:
+    """The version that wrote the run's config.json (None: written before versions were recorded, or unreadable)."""
+    try:
+        data = json.loads(Path(path).read_text())
+    except (OSError, ValueError):
+        return None
+    v = data.get("kinswarm") if isinstance(data, dict) else None
+    return v if isinstance(v, str) else None
 
 
 def load_run_config(path: str | Path) -> RunConfig:

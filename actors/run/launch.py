@@ -16,8 +16,9 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from kinswarm.actors.deploy.plan import Plan, PlanError, local_plan
-from kinswarm.actors.run.config import ENDPOINT, ConfigError, RunConfig
-from kinswarm.actors.run.rundir import Claim, claim
+from kinswarm.actors.run.config import AUTO_LISTEN, ENDPOINT, ConfigError, RunConfig
+from kinswarm.actors.run.resume import Resume, prepare_resume
+from kinswarm.actors.run.rundir import Claim, claim, reclaim
 from kinswarm.actors.run.runfile import write_resolved
 from kinswarm.actors.runtime import NetSpec, open_session
 from kinswarm.actors.runtime.net import zenoh_reason
@@ -25,6 +26,7 @@ from kinswarm.protocol.messages import EpochDone
 from kinswarm.protocol.topology import Topology
 
 if TYPE_CHECKING:
+    import zenoh
     from kinswarm.actors.supervisor.result import RunResult
 
 log = logging.getLogger("kinswarm.launch")
@@ -74,23 +76,17 @@ async def _supervise(
     claimed: Claim,
     wait_s: float = 600.0,
     view: str | None = None,
+    resume: Resume | None = None,
 ) -> dict:
     from kinswarm.actors.deploy.hosts import control_net
     from kinswarm.actors.supervisor import ProcessPlacement, SinglePlacement, Supervisor
 
     out = Path(cfg.out)
+    session, plan = _open_session(cfg, topo, plan, host)
     lead = host == plan.leader
     sup_id = "main" if lead else host
-    spec = plan.net(host, plan.identity("supervisor", "", host), supervisor=True, topo=topo)
-    try:
-        session = open_session(spec)
-    except Exception as e:
-        where = ", ".join(spec.listen) or ", ".join(spec.connect)
-        hint = "pass --listen tcp/127.0.0.1:PORT" if plan.name == "local" else "check the plan's endpoints"
-        raise ConfigError(
-            f"cannot open the supervisor's session on {where} ({zenoh_reason(e)}); is another run using it? {hint}"
-        ) from None
-    write_net(out / "net" / "cli.json", control_net(plan, host, topo))  # for `kinswarm fault/status`
+    # where the run listens, for `kinswarm fault/status` (an auto port is known only from here)
+    write_net(out / "net" / "cli.json", control_net(plan, host, topo))
 
     def nets(role: str, ident: str) -> Path:  # this run's own, fresh (a restart rewrites the same content)
         identity = plan.identity(role, ident, host)
@@ -107,6 +103,7 @@ async def _supervise(
             placement = ProcessPlacement(out / "config.json", nets, out / "logs", supervisor=sup_id)
         sup = Supervisor(cfg, topo, session, placement, on_epoch=on_epoch, plan=plan, host=host)
         sup.hosts_wait_s = wait_s
+        sup.resumed = resume
         undo.pop_all()
     claimed.begin()  # from here on the run directory is the run's, however it ends
     with _signals_stop_once():
@@ -118,6 +115,33 @@ async def _supervise(
         if not lead:
             return {"host": host, "error": result.error, "interrupted": result.interrupted, "restarts": result.restarts}
         return _finish(cfg, result, progress)
+
+
+def _open_session(cfg: RunConfig, topo: Topology, plan: Plan, host: str) -> tuple[zenoh.Session, Plan]:
+    """The supervisor's session, and the plan whose endpoint it listens on. An auto port (no --listen) another
+    program took between its pick and the bind (rare: a few ms) is picked again, a few times."""
+    auto = plan.source == "(local)" and cfg.listen == AUTO_LISTEN
+    tries = 5 if auto else 1
+    for attempt in range(tries):
+        spec = plan.net(host, plan.identity("supervisor", "", host), supervisor=True, topo=topo)
+        try:
+            return open_session(spec), plan
+        except Exception as e:
+            if attempt + 1 < tries:
+                log.info("picked port taken (%s): picking again", zenoh_reason(e))
+                plan = local_plan(AUTO_LISTEN, cfg.lease_ms)
+                continue
+            where = ", ".join(spec.listen) or ", ".join(spec.connect)
+            if plan.name != "local":
+                hint = "check the plan's endpoints"
+            elif auto:
+                hint = f"{tries} free ports were taken before they could be bound"
+            else:
+                hint = "leave --listen out to take a free port"
+            raise ConfigError(
+                f"cannot open the supervisor's session on {where} ({zenoh_reason(e)}); is another run using it? {hint}"
+            ) from None
+    raise AssertionError("unreachable")
 
 
 OnEpoch = Callable[[EpochDone], None]
@@ -242,6 +266,17 @@ def run_swarm(
         return asyncio.run(_supervise(cfg, topo, progress, plan, host, claimed, wait_s, view))
 
 
+def resume_swarm(cfg: RunConfig, topo: Topology, progress: bool = False, view: str | None = None) -> dict:
+    """Continue the run in `cfg.out` (checked by resume.check_resume) from its last complete checkpoint, in its own
+    directory, under its own lock: its rows past that checkpoint dropped, its agents restored from it."""
+    plan = local_plan(cfg.listen, cfg.lease_ms)
+    check_start(plan, topo)
+    out = Path(cfg.out)
+    with reclaim(out) as claimed:
+        resume = prepare_resume(out, cfg)
+        return asyncio.run(_supervise(cfg, topo, progress, plan, plan.leader, claimed, view=view, resume=resume))
+
+
 def check_start(plan: Plan, topo: Topology) -> None:
     """What would fail a start, said before the run directory is touched: every actor placed once, and no
     supervisor on port 0 (the system would pick a port nobody else knows: the actors and the other hosts are
@@ -253,5 +288,5 @@ def check_start(plan: Plan, topo: Topology) -> None:
             continue
         why = "port 0 lets the system pick a port the actors cannot know: give a free port"
         if plan.name == "local" and plan.source == "(local)":
-            raise ConfigError(f"--listen {h.listen}: {why}, e.g. --listen tcp/127.0.0.1:7448")
+            raise ConfigError(f"--listen {h.listen}: {why}, or leave --listen out: the run then picks one it can tell")
         raise PlanError(plan.source, f"host {name}.listen", f"{h.listen}: {why}")

@@ -143,6 +143,29 @@ def claim(out: Path) -> Iterator[Claim]:
         os.close(fd)  # the lock goes with the descriptor
 
 
+@contextlib.contextmanager
+def reclaim(out: Path) -> Iterator[Claim]:
+    """Hold a run's own directory again, to continue it (`--resume`): its lock, refused while a process holds it.
+    Nothing is cleared, however this ends: the run began long ago."""
+    try:
+        fd = os.open(out / ".lock", os.O_RDWR | os.O_CREAT, 0o600)
+    except OSError as e:
+        raise ConfigError(f"--resume {out}: cannot write it ({e.strerror or e})") from None
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            why = "the run is still running (its lock is held): nothing to resume"
+            raise ConfigError(f"--resume {out}: {why}") from None
+        os.ftruncate(fd, 0)
+        os.write(fd, f"{os.getpid()}\n".encode())
+        c = Claim()
+        c.begin()
+        yield c
+    finally:
+        os.close(fd)
+
+
 @dataclass(frozen=True)
 class RunState:
     """What a run directory says of its run, for the tools that read it."""

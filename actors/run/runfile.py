@@ -50,7 +50,15 @@ import tomli_w
 from kinswarm.actors.learning.kinds import DEFAULT, LearnerKind, learner_kind
 from kinswarm.actors.learning.settings import SPATIAL_STATES, LearnerSettings
 from kinswarm.actors.learning.state import OWN_EXTRAS
-from kinswarm.actors.run.config import CONTROLLERS, RUN_KEYS, ConfigError, RunConfig, check_endpoint, placement_problem
+from kinswarm.actors.run.config import (
+    AUTO_LISTEN,
+    CONTROLLERS,
+    RUN_KEYS,
+    ConfigError,
+    RunConfig,
+    check_endpoint,
+    placement_problem,
+)
 from kinswarm.actors.tasks import kinds, task_class
 from kinswarm.actors.tasks.base import TaskDef
 from kinswarm.protocol.keys import check_id
@@ -200,7 +208,10 @@ def resolve(
     except ValueError as e:
         raise ConfigError(f"--run-id: {e}") from None
     out_dir = Path(out) if out is not None else Path("runs") / run_id
-    extra = {"listen": check_endpoint(listen, "--listen")} if listen is not None else {}
+    # `--listen auto` (the default): a free port on 127.0.0.1, picked when the run starts (plan.local_plan)
+    extra = {}
+    if listen is not None:
+        extra["listen"] = listen if listen == AUTO_LISTEN else check_endpoint(listen, "--listen")
     try:
         cfg = msgspec.convert(
             {

@@ -197,15 +197,17 @@ class SimActor:
         if self.epoch is not None:
             self.node.log.warning("ignored EpochStart %d: epoch %d is running", e.epoch, self.epoch.epoch)
             return
-        if e.epoch != self.last_epoch + 1:
+        # The first start may be any epoch: a resumed run goes on after its checkpoint (actors/run/resume.py)
+        if e.epoch != self.last_epoch + 1 and not (self.last_epoch < 0 <= e.epoch < self.cfg.epochs):
             self.node.log.warning("ignored EpochStart %d: the next epoch is %d", e.epoch, self.last_epoch + 1)
             return
         if e.steps < 1:
             self.node.log.warning("ignored EpochStart %d: %d steps", e.epoch, e.steps)
             return
+        first = self.last_epoch < 0  # (a resumed run's first epoch has no pose of the last one to keep)
         self.epoch = e
         self.last_epoch = e.epoch
-        warning = self.body.start(e.goal, e.path, e.start, keep_pose=self.cfg.successive and e.epoch > 0)
+        warning = self.body.start(e.goal, e.path, e.start, keep_pose=self.cfg.successive and not first)
         if warning:  # a start pose this robot cannot take: its home instead, said once
             self.node.log.warning("epoch %d: %s", e.epoch, warning)
         self.missed = 0

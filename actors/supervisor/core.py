@@ -22,6 +22,7 @@ from typing import Any
 import zenoh
 from kinswarm.actors.deploy.plan import Plan, local_plan
 from kinswarm.actors.run.config import RunConfig
+from kinswarm.actors.run.resume import Resume
 from kinswarm.actors.run.runfile import task_of
 from kinswarm.actors.runtime import Node
 from kinswarm.protocol.keys import Keys
@@ -106,6 +107,7 @@ class Supervisor:
         self.why_down: dict[str, tuple[float, str]] = {}  # actor -> (since when, why): what `status` says of it
         self._timers: set[asyncio.TimerHandle] = set()
         self.hostname = {h: h for h in self.plan.hosts} if self.multi else {self.host: socket.gethostname()}
+        self.resumed: Resume | None = None  # `--resume`: where the run goes on (actors/run/resume.py)
 
     def host_of(self, actor: ActorId) -> str:
         role, ident = actor
@@ -150,12 +152,14 @@ class Supervisor:
                 stack.callback(self.hosts.serve_setup().undeclare)
             node.declare_alive()
             self.recorder.open_events()
+            if self.resumed is not None:  # before anything of the resumed run: the crash and the resume, in order
+                self.recorder.event(self.resumed.epoch, 0, "resume", "swarm", self.resumed.detail)
             self.placement.attach(node.mailbox.push_local)
             self.later(self.STATUS_EVERY, STATUS)
             if self.multi:
                 self.hosts.start()
             try:
-                await self.placement.start(self.local)
+                await self.placement.start(self.local, restore=self.resumed is not None and self.resumed.restore)
                 await self._wait_alive(self.local, timeout=60.0)
                 if self.lead:
                     await self._wait_alive(self.expected, timeout=self.hosts_wait_s, what="the other hosts' actors")

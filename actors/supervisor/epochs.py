@@ -56,7 +56,8 @@ class EpochLoop:
         sup.recorder.open_metrics()
         sup.training = True
         sup.stalls.arm()
-        for epoch in range(cfg.epochs):
+        first = sup.resumed.epoch if sup.resumed is not None else 0  # a resumed run: after its checkpoint
+        for epoch in range(first, cfg.epochs):
             done = await self.run_epoch(epoch)
             sup.result.epochs.append(done)
             sup.recorder.epoch(done)

@@ -19,7 +19,7 @@ from pathlib import Path
 from typing import Any
 
 from kinswarm.actors.agent.actor import agent_seed
-from kinswarm.actors.agent.memory import checkpoint_meta, restore_learner
+from kinswarm.actors.agent.memory import checkpoint_meta, learned_state, restore_learner
 from kinswarm.actors.agent.passes import AgentStep, visible_actions
 from kinswarm.actors.agent.trace import StepTrace
 from kinswarm.actors.learning.kinds import JointLearner
@@ -142,7 +142,7 @@ class InProcessRun:
         directory = Path(self.cfg.out) / "agents"
         for a, learner in self.learners.items():
             meta = checkpoint_meta(a, self.kind.name, self.topo.name, self.epochs_before[a], epoch, self.cfg.seed)
-            save_checkpoint(directory / f"{a}.npz", learner.state_dict(), meta)
+            save_checkpoint(directory / f"{a}.npz", learned_state(learner), meta)
 
     def run(self, recorder: Recorder, on_epoch: Callable[[EpochDone], None] | None = None) -> RunResult:
         """Every epoch of the run, recorded as the supervisor records a swarm's; Ctrl-C ends it after the rows

@@ -59,10 +59,11 @@ class ProcessPlacement:
     def attach(self, push: Push) -> None:
         self._push, self._loop = push, asyncio.get_running_loop()
 
-    async def start(self, actors: list[ActorId]) -> None:
+    async def start(self, actors: list[ActorId], restore: bool = False) -> None:
+        """`restore`: a resumed run's actors, from the run's checkpoints (as a restart's)."""
         self.logs.mkdir(parents=True, exist_ok=True)
         for actor in actors:
-            self.spawn(actor)
+            self.spawn(actor, restore=restore and actor[0] == "agent")
 
     def spawn(self, actor: ActorId, restore: bool = False) -> None:
         """The one spawn path: a fresh interpreter running `kinswarm.actors.run.main` (never fork)."""
@@ -158,9 +159,9 @@ class SinglePlacement:
     def attach(self, push: Push) -> None:
         self._push = push
 
-    async def start(self, actors: list[ActorId]) -> None:
+    async def start(self, actors: list[ActorId], restore: bool = False) -> None:
         for actor in actors:
-            self.spawn(actor)
+            self.spawn(actor, restore=restore and actor[0] == "agent")
 
     def spawn(self, actor: ActorId, restore: bool = False) -> None:
         role, ident = actor

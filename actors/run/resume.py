@@ -1,0 +1,144 @@
+"""`kinswarm run --resume RUN-DIR`: a run whose supervisor died (SIGKILL, a power cut) continues from its last complete
+checkpoint, in its own directory, as config.json resolved it.
+
+The last complete checkpoint is the newest epoch every learning agent holds a good checkpoint of (`<id>.npz` or,
+when the supervisor died between two agents' saves, `<id>.prev.npz`), and that metrics.jsonl holds whole rows up
+to. Before the run goes on, under the run's lock: the rows of metrics.jsonl, poses.jsonl and agents.jsonl past that
+epoch are dropped (the epochs train again), each agent's `<id>.npz` is made that epoch's checkpoint (a newer one is
+dropped: it learned from an epoch that trains again), and events.jsonl says where the run resumed. Its agents
+restore their learned state from there, their random generators included, so a deterministic run (`single`
+placement, a checkpoint every epoch, same seed) ends as it would have without the crash.
+
+What is not carried over: live faults injected before the crash (`kinswarm fault`) and a scenario's faults due before
+the resumed epoch (those due from it on come as scheduled), the simulator's disturbance draws (a fresh stream), and
+with `successive` the robot's pose (the resumed epoch starts from the task's start pose)."""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import json
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+from kinswarm.actors.run.checkpoint import CheckpointError, load_checkpoint, previous
+from kinswarm.actors.run.config import ConfigError, RunConfig, load_run_config, recorded_version, writer_version
+from kinswarm.actors.run.rundir import failed_start, lock_held, run_state
+
+FLAG = "--resume"
+
+
+@dataclass(frozen=True)
+class Resume:
+    epoch: int  # the first epoch the resumed run trains: the checkpoint's epoch + 1 (0: from the start)
+    restore: bool  # the agents restore this run's checkpoint (else they start as the run started)
+    detail: str  # for events.jsonl
+
+
+def check_resume(run_dir: Path) -> RunConfig:
+    """The run in `run_dir` as config.json resolved it, or one line (ConfigError) naming why it cannot be resumed.
+    Reads only: nothing in the directory changes."""
+    where = f"{FLAG} {run_dir}"
+    if not run_dir.is_dir():
+        raise ConfigError(f"{where}: no such directory")
+    config = run_dir / "config.json"
+    if not config.is_file():
+        raise ConfigError(f"{where}: holds no run (no config.json)")
+    written, mine = recorded_version(config), writer_version()
+    if written != mine:
+        made = f"kinswarm {written}" if written else "a kinswarm that recorded no version"
+        raise ConfigError(f"{where}: a run made by {made}, not this one ({mine}): resume it with that version")
+    cfg = load_run_config(config)
+    if lock_held(run_dir):
+        raise ConfigError(f"{where}: run {cfg.run_id} is still running (a process holds its lock): nothing to resume")
+    state = run_state(run_dir)
+    if state.summary is not None:
+        raise ConfigError(f"{where}: run {cfg.run_id} {state.how} at {state.when} (summary.json): nothing to resume")
+    if failed_start(run_dir):
+        raise ConfigError(f"{where}: run {cfg.run_id} never began (no epoch): start it again with `kinswarm run`")
+    if cfg.placement == "inprocess":
+        raise ConfigError(f"{where}: run {cfg.run_id} ran in the inprocess placement, which cannot be resumed")
+    if len(cfg.hosts) > 1:
+        raise ConfigError(f"{where}: run {cfg.run_id} ran on several hosts; resume runs on one (start it again)")
+    here = str(run_dir.resolve())
+    return cfg if cfg.out == here else dataclasses.replace(cfg, out=here)  # moved since: its files are here
+
+
+def _whole_epochs(path: Path) -> list[int]:
+    """The epochs 0, 1, ... whose rows metrics.jsonl holds whole and in order (up to the first torn or missing)."""
+    epochs: list[int] = []
+    with contextlib.suppress(OSError):
+        for line in path.read_text(errors="replace").splitlines():
+            try:
+                row = json.loads(line)
+            except ValueError:
+                break
+            if not isinstance(row, dict) or row.get("epoch") != len(epochs):
+                break
+            epochs.append(len(epochs))
+    return epochs
+
+
+def _checkpoints(directory: Path, agent: str) -> dict[int, Path]:
+    """An agent's good checkpoints of this run, by epoch (its newest and the one before)."""
+    found: dict[int, Path] = {}
+    for path in (directory / f"{agent}.npz", previous(directory / f"{agent}.npz")):
+        with contextlib.suppress(CheckpointError):
+            _, meta = load_checkpoint(path, agent=agent)
+            if isinstance(meta.get("run_epoch"), int):
+                found.setdefault(meta["run_epoch"], path)
+    return found
+
+
+def _keep_rows(path: Path, last: int) -> int:
+    """Rewrite a jsonl file with its rows of epochs <= `last` only (atomically); the rows dropped."""
+    if not path.exists():
+        return 0
+    kept, dropped = [], 0
+    for line in path.read_text(errors="replace").splitlines():
+        try:
+            epoch = json.loads(line).get("epoch")
+        except (ValueError, AttributeError):
+            epoch = None
+        if isinstance(epoch, int) and epoch <= last:
+            kept.append(line + "\n")
+        else:
+            dropped += 1
+    if dropped:
+        tmp = path.with_name(f".{path.name}.resume")
+        tmp.write_text("".join(kept))
+        os.replace(tmp, path)
+    return dropped
+
+
+def prepare_resume(out: Path, cfg: RunConfig) -> Resume:
+    """Make `out` the run as it was at its last complete checkpoint (the caller holds its lock)."""
+    agents = cfg.topo().dof_agents if cfg.controller == "agents" and cfg.learn else []
+    whole = _whole_epochs(out / "metrics.jsonl")
+    last_row = whole[-1] if whole else -1
+    directory = out / "agents"
+    if agents:
+        held = [_checkpoints(directory, a) for a in agents]
+        common = set.intersection(*(set(h) for h in held)) if held else set()
+        last = max((e for e in common if e <= last_row), default=-1)
+    else:  # nothing learns: every whole epoch stands
+        held, last = [], last_row
+    dropped = {name: _keep_rows(out / name, last) for name in ("metrics.jsonl", "poses.jsonl", "agents.jsonl")}
+    for agent, found in zip(agents, held, strict=True):
+        newest = directory / f"{agent}.npz"
+        for tmp in directory.glob(f".{agent}.npz.*.tmp"):  # a save the kill cut short
+            tmp.unlink(missing_ok=True)
+        if last < 0:  # no checkpoint every agent has: from the start, as the run began
+            newest.unlink(missing_ok=True)
+            previous(newest).unlink(missing_ok=True)
+        elif found[last] != newest:  # saved after the last complete checkpoint: that epoch trains again
+            os.replace(found[last], newest)
+    if last >= 0 and agents:
+        source = f"the checkpoint of epoch {last}"
+    elif agents:
+        source = "the start (no checkpoint every agent holds)"
+    else:
+        source = f"epoch {last + 1} (nothing learns: no checkpoint needed)"
+    detail = f"resumed from {source}; metrics rows dropped past it: {dropped['metrics.jsonl']}"
+    return Resume(epoch=last + 1, restore=last >= 0 and bool(agents), detail=detail)

@@ -1,0 +1,196 @@
+"""`kinswarm run --resume RUN-DIR`: a run whose whole process tree was SIGKILLed goes on from its last complete
+checkpoint, every epoch once in its records; in `single` placement with a checkpoint every epoch it ends exactly as
+the run would have without the crash. What cannot be resumed is one line, and the directory is left as it was."""
+
+from __future__ import annotations
+
+import fcntl
+import hashlib
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+from conftest import EXAMPLES, LOCKSTEP_ARGS, swarm_pids
+from kinswarm.actors.cli import main as cli
+
+CHAIN4 = str(EXAMPLES / "chain4.toml")
+KINSWARM = [sys.executable, "-m", "kinswarm.actors.cli.entry"]
+EPOCHS = 8
+
+
+def run_args(run_id: str, out: Path, placement: str, steps: int) -> list[str]:
+    return [
+        "run", CHAIN4, "--epochs", str(EPOCHS), "--steps", str(steps), "--seed", "3", "--placement", placement,
+        "--set", "run.checkpoint_every=1", "--run-id", run_id, "--out", str(out), "--no-progress", *LOCKSTEP_ARGS,
+    ]  # fmt: skip
+
+
+def rows(path: Path) -> list[dict]:
+    return [json.loads(line) for line in path.read_text().splitlines()]
+
+
+def killed_in_epoch(out: Path, argv: list[str], k: int, whole_tree: bool) -> None:
+    """Start the run in its own process group; once `k` epochs are done, SIGKILL the group (the whole tree) or the
+    supervisor alone (its actors then leave: PR_SET_PDEATHSIG)."""
+    p = subprocess.Popen([*KINSWARM, *argv], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, start_new_session=True)
+    try:
+        metrics = out / "metrics.jsonl"
+        while not (metrics.exists() and len(metrics.read_text().splitlines()) >= k):
+            assert p.poll() is None, p.communicate()[0].decode()
+            time.sleep(0.02)
+    finally:
+        if whole_tree:
+            os.killpg(p.pid, signal.SIGKILL)
+        else:
+            p.kill()
+        p.wait()
+    deadline = time.monotonic() + 30
+    while swarm_pids(str(out / "config.json")):  # the actors of a killed supervisor leave on their own
+        assert time.monotonic() < deadline, "actors of the killed supervisor still run"
+        time.sleep(0.1)
+    assert not (out / "summary.json").exists()
+    assert len(rows(out / "metrics.jsonl")) < EPOCHS, "the run ended before it was killed"
+
+
+def resumes(events: Path) -> list[dict]:
+    return [r for r in rows(events) if r["event"] == "resume"]
+
+
+@pytest.mark.timeout(600)
+def test_a_killed_single_run_resumes_to_the_uninterrupted_result(tmp_path):
+    ref, cut = tmp_path / "ref", tmp_path / "cut"
+    assert cli(run_args("ref", ref, "single", 400)) == 0
+    killed_in_epoch(cut, run_args("cut", cut, "single", 400), k=3, whole_tree=True)
+    assert cli(["run", "--resume", str(cut), "--no-progress"]) == 0
+
+    want, got = (json.loads((d / "summary.json").read_text()) for d in (ref, cut))
+    assert got["final_error"] == want["final_error"]
+    assert got["mean_error"] == want["mean_error"]
+    assert [r["epoch"] for r in rows(cut / "metrics.jsonl")] == list(range(EPOCHS))
+    assert [r["epoch"] for r in rows(cut / "poses.jsonl")] == list(range(EPOCHS))
+    assert rows(cut / "poses.jsonl") == rows(ref / "poses.jsonl")
+    (resume,) = resumes(cut / "events.jsonl")
+    assert 1 <= resume["epoch"] <= 3 and f"checkpoint of epoch {resume['epoch'] - 1}" in resume["detail"]
+    restored = [r for r in rows(cut / "events.jsonl") if r["event"] == "restored"]
+    assert sorted(r["target"] for r in restored) == ["a1", "a2", "a3", "a4"]
+    for r in restored:  # every agent from the same checkpoint, its learned state as saved
+        assert r["epoch"] == resume["epoch"] - 1
+        saved, loaded = (part.split("=")[1] for part in r["detail"].split(": ", 1)[1].split(" ") if "=" in part)
+        assert saved == loaded
+
+
+@pytest.mark.timeout(600)
+def test_a_process_run_whose_supervisor_was_killed_resumes_every_epoch_once(tmp_path):
+    out = tmp_path / "p"
+    killed_in_epoch(out, run_args("p", out, "process", 150), k=2, whole_tree=False)
+    p = subprocess.run([*KINSWARM, "run", "--resume", str(out), "--no-progress"], capture_output=True, text=True)
+    assert p.returncode == 0, p.stderr
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["epochs"] == EPOCHS and len(summary["final_error"]) == EPOCHS and not summary["error"]
+    assert [r["epoch"] for r in rows(out / "metrics.jsonl")] == list(range(EPOCHS))
+    assert len(resumes(out / "events.jsonl")) == 1
+    assert not swarm_pids(str(out / "config.json"))
+    assert cli(["run", "--resume", str(out)]) == 2  # and now it has ended: resumed once, not twice
+
+
+# -- what cannot be resumed -----------------------------------------------------------------------------------------
+
+
+def snapshot(d: Path) -> dict[str, tuple[int, str]]:
+    """Every file under `d`: its mtime and content hash (a directory left as it was has the same snapshot)."""
+    return {
+        str(p.relative_to(d)): (p.stat().st_mtime_ns, hashlib.sha256(p.read_bytes()).hexdigest())
+        for p in sorted(d.rglob("*"))
+        if p.is_file()
+    }
+
+
+@pytest.fixture(scope="module")
+def ended(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A run that finished (single placement, one short epoch)."""
+    out = tmp_path_factory.mktemp("ended") / "e"
+    argv = ["run", CHAIN4, "--epochs", "1", "--steps", "30", "--placement", "single", "--run-id", "e"]
+    assert cli([*argv, "--out", str(out), "--no-progress"]) == 0
+    return out
+
+
+def killed_copy(ended: Path, to: Path) -> Path:
+    """The finished run as a killed one leaves it: its summary gone."""
+    import shutil
+
+    shutil.copytree(ended, to)
+    (to / "summary.json").unlink()
+    return to
+
+
+def one_line(capsys: pytest.CaptureFixture, *parts: str) -> None:
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("kinswarm: error: --resume ") and "\n" not in err and "Traceback" not in err, err
+    for part in parts:
+        assert part in err, err
+
+
+@pytest.mark.timeout(120)
+def test_what_cannot_be_resumed_is_one_line_and_changes_nothing(tmp_path, capsys, ended):
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    (empty / "notes.txt").write_text("mine\n")
+    other = killed_copy(ended, tmp_path / "other")
+    config = json.loads((other / "config.json").read_text())
+    (other / "config.json").write_text(json.dumps({**config, "kinswarm": "0.0.1+run0"}))
+    running = killed_copy(ended, tmp_path / "running")
+    cases = [
+        (empty, "holds no run (no config.json)"),
+        (ended, "run e finished at", "nothing to resume"),
+        (other, "a run made by kinswarm 0.0.1+run0", "resume it with that version"),
+        (running, "run e is still running", "nothing to resume"),
+    ]
+    fd = os.open(running / ".lock", os.O_RDWR)
+    fcntl.flock(fd, fcntl.LOCK_EX)  # as a live run holds it
+    try:
+        for d, *says in cases:
+            before = snapshot(d)
+            assert cli(["run", "--resume", str(d), "--no-progress"]) == 2, d
+            one_line(capsys, *says)
+            assert snapshot(d) == before, d
+    finally:
+        os.close(fd)
+    assert cli(["run", "--resume", str(tmp_path / "nowhere")]) == 2
+    one_line(capsys, "no such directory")
+    assert not (tmp_path / "nowhere").exists()
+
+
+@pytest.mark.timeout(60)
+def test_resume_takes_nothing_that_would_change_the_run(tmp_path, capsys, ended):
+    before = snapshot(ended)
+    assert cli(["run", CHAIN4, "--resume", str(ended)]) == 2
+    one_line(capsys, "give no RUN-FILE")
+    assert cli(["run", "--resume", str(ended), "--epochs", "20"]) == 2
+    one_line(capsys, "--epochs cannot change it")
+    assert cli(["run", "--resume", str(ended), "--set", "run.seed=4"]) == 2
+    one_line(capsys, "--set cannot change it")
+    assert snapshot(ended) == before
+
+
+@pytest.mark.timeout(180)
+def test_a_crash_between_two_agents_checkpoints_resumes_from_the_one_all_hold(tmp_path):
+    """The supervisor died while the agents saved epoch 2: a1 had saved it (epoch 1 now its .prev), the others had
+    not (their newest is epoch 1). The run goes on from epoch 1, a1 from its .prev, and ends as without the crash."""
+    out = tmp_path / "mid"
+    argv = ["run", CHAIN4, "--epochs", "3", "--steps", "60", "--seed", "5", "--placement", "single", "--run-id", "m"]
+    assert cli([*argv, "--out", str(out), "--no-progress", *LOCKSTEP_ARGS]) == 0
+    whole = json.loads((out / "summary.json").read_text())["final_error"]
+    (out / "summary.json").unlink()  # as the crash left it: epochs 0-2 recorded, no summary ...
+    agents = out / "agents"
+    for a in ("a2", "a3", "a4"):  # ... and a2-a4 still at epoch 1 (their epoch-2 save never happened)
+        os.replace(agents / f"{a}.prev.npz", agents / f"{a}.npz")
+    assert cli(["run", "--resume", str(out), "--no-progress"]) == 0
+    assert json.loads((out / "summary.json").read_text())["final_error"] == whole
+    assert [r["epoch"] for r in rows(out / "metrics.jsonl")] == [0, 1, 2]
+    (resume,) = resumes(out / "events.jsonl")
+    assert resume["epoch"] == 2 and "checkpoint of epoch 1; metrics rows dropped past it: 1" in resume["detail"]
