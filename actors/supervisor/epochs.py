@@ -76,7 +76,8 @@ class EpochLoop:
             with contextlib.suppress(NoMessage):
                 await sup.expect(Saved, lambda m: False, timeout=0.2, stretch=False)
         sup.node.send(sup.keys.ctl("epoch"), self._start)
-        self._sent = sup.stalls.progress_at = time.monotonic()  # the clock of a stall starts with the epoch
+        self._sent = time.monotonic()
+        sup.stalls.epoch_started(self._sent)
         # generous: every step may run into its deadline and still finish
         timeout = 30.0 + cfg.steps * cfg.deadline_ms / 1000 * 1.5
         done = await sup.expect(EpochDone, lambda m: m.epoch == epoch, timeout)

@@ -38,6 +38,10 @@ class StallWatch:
             self._silence.cancel()
         self._silence = self.sup.later(self.bound, SIM_SILENT)
 
+    def epoch_started(self, now: float) -> None:
+        """An epoch's start went out: the clock of a stall starts again from it."""
+        self.progress_at = now
+
     def on_joints(self, j: JointStatus) -> None:
         now = time.monotonic()
         if (j.epoch, j.step) != self.step:
