@@ -12,7 +12,7 @@ import statistics
 import sys
 import threading
 import time
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Iterable, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field
 from multiprocessing import get_context
@@ -300,6 +300,3 @@ def band(ax: Any, curves: Sequence[Sequence[float]], label: str, color: str | No
     x = np.arange(n)
     (line,) = ax.plot(x, a.mean(axis=0), label=label, color=color, lw=1.4)
     ax.fill_between(x, a.min(axis=0), a.max(axis=0), color=line.get_color(), alpha=0.15, lw=0)
-
-
-Runner = Callable[[Context], dict[str, Any]]

@@ -68,7 +68,6 @@ CONFIGS: dict[str, Config] = {
         STAGE2, 60, continues="inner-200", text="its second stage: examples/corridor7-freeze260.toml, 60 epochs more"
     ),
 }
-MAIN = "freeze-260"  # the configuration the bars are checked on
 
 
 def run(ctx: Context) -> dict[str, Any]:

@@ -24,7 +24,6 @@ SCHEMA_VERSION = 10  # 2: faults, events, status, bye; payloads carry a MAC (cod
 # EpochStart.goals and .starts, each robot's; Fault.robot, a joint fault on one robot.
 
 Vec2 = tuple[float, float]
-Vec3 = tuple[float, float, float]
 #: A goal, frame or tip of the robot's kind (COORD_SIZES: the lengths the codec takes): a planar robot's goal (x, y)
 #: and frames and tips (x, y, heading); a spatial robot's (protocol/frames.py) goal point (x, y, z) or pose
 #: (x, y, z, qx, qy, qz, qw), and frames and tips (x, y, z, qx, qy, qz, qw).

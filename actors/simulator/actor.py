@@ -236,16 +236,18 @@ class SimActor:
         if not self.waiting:
             self._advance()
 
-    def _on_deadline(self, token: bytes) -> None:
+    def _on_deadline(self) -> None:
+        """The running step is past its deadline: the commands still missing count as missed, those joints hold."""
         e = self.epoch
-        if e is not None and token == f"{e.epoch}/{self.t}".encode():
-            if self.waiting:
-                missing = sorted(self.waiting)
-                self.missed += len(missing)
-                for a in missing:
-                    self.late[a] = self.late.get(a, 0) + 1
-                self.node.log.warning("step %d/%d: no cmd from %s by the deadline; they hold", e.epoch, self.t, missing)
-            self._advance()
+        if e is None:
+            return
+        if self.waiting:
+            missing = sorted(self.waiting)
+            self.missed += len(missing)
+            for a in missing:
+                self.late[a] = self.late.get(a, 0) + 1
+            self.node.log.warning("step %d/%d: no cmd from %s by the deadline; they hold", e.epoch, self.t, missing)
+        self._advance()
 
     def _on_watchdog(self) -> None:
         """The deadline's watchdog fired (on the loop): the running step is past its deadline, or it re-arms for when
@@ -256,7 +258,7 @@ class SimActor:
             return  # between epochs: the next one arms it
         due = self.cfg.deadline_ms / 1000
         if not self.held and time.perf_counter() - self.step_started >= due:
-            self._on_deadline(f"{e.epoch}/{self.t}".encode())  # the step ends: a new one, or the epoch's end
+            self._on_deadline()  # the step ends: a new one, or the epoch's end
         if self._deadline is None and self.epoch is not None:
             left = due if self.held else self.step_started + due - time.perf_counter()
             self._arm(max(left, 0.0))

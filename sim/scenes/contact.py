@@ -208,11 +208,6 @@ class GraspScene:
         pos_b, normal_b = best[6], best[7]
         return float(best[8]), (pos_b[0], pos_b[1]), (normal_b[0], normal_b[1])
 
-    def depth_of(self, leaf: str) -> float:
-        """The deepest penetration of any link of finger `leaf` (0 when none penetrates)."""
-        self.pb.performCollisionDetection(physicsClientId=self.client)
-        return max(0.0, *(-self._closest(link)[0] for link in self._links[leaf]))
-
     def too_deep(self) -> list[str]:
         """The fingers with a link deeper than max_depth in the current configuration."""
         self.pb.performCollisionDetection(physicsClientId=self.client)
