@@ -34,7 +34,7 @@ IDENTITY: Frame = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0)
 #: weighs like 4.4 cm of position. The form and the weight are what a joint stepping toward its own best angle
 #: (best_turn) needs to reach unseen poses from random starts: 87 / 80 % within 5 cm and 15° (sets A / B) with this D,
 #: 56 % with D = d + 0.3 angle. With d + W angle in the reward the swarm turned too little at W = 0.1 (35-38 %) and
-#: reached 60-65 % at 0.3 (experiments/research/reach3d_loop.py, docs/notebook/reach3d.md).
+#: reached 60-65 % at 0.3 (docs/notebook/reach3d.md).
 POSE_WEIGHT = 0.25
 #: best_turn's sweep: a revolute joint's own range looked at every degree
 SWEEP = math.radians(1.0)

@@ -143,7 +143,7 @@ class LearnerSettings:
         """Settings of a spatial joint's turn state: g_q (rad) in 9 sets over ±15°, learning at lr 0.5 / 64. Farther
         moves saturate in the end sets (only their direction matters); the fine sets near 0 decide when to stop. Nine
         rules see every step's noisy reward: at lr 0.5 the iiwa's learners reached 36 / 32 % of unseen poses (sets
-        A / B), at 0.05 35 / 27 %, at 0.5 / 64 88 / 90 %, at 0.002 91 / 83 % (experiments/research/reach3d_loop.py,
+        A / B), at 0.05 35 / 27 %, at 0.5 / 64 88 / 90 %, at 0.002 91 / 83 % (docs/notebook/reach3d.md,
         turn*; g_q's sets over ±45° instead: 85 / 82 %)."""
         kwargs: dict[str, object] = {"state": "turn", "ranges": TURN_RANGES, **TURN_LEARNER}
         kwargs.update(overrides)
