@@ -19,6 +19,8 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass
 
+from .topology import Topology
+
 PREFIX = "ks"
 _CHUNK = re.compile(r"^[A-Za-z0-9_-]{1,64}$")
 
@@ -109,3 +111,24 @@ class Keys:
 
     def last_chunk(self, key: str) -> str:
         return key.rsplit("/", 1)[-1]
+
+
+def agent_keys(topo: Topology, agent: str) -> tuple[tuple[str, ...], tuple[str, ...]]:
+    """What an agent publishes, below the run's root: (at every step: its children's `down`, its parent's `up`, its
+    joint's `cmd`; and when it stands in for lost descendants: their children's `down` too). The agent declares the
+    first (actors/agent/actor.py), a deploy plan's access control allows both and denies the rest of the step's keys
+    (actors/deploy/plan.py)."""
+    spec = topo.agents[agent]
+    step = [f"a/{c}/down" for c in spec.children]
+    if spec.parent is not None:
+        step.append(f"a/{spec.parent}/up")
+    if spec.has_dof:
+        step.append(f"sim/cmd/{agent}")
+    stand_in = tuple(f"a/{d}/down" for d in topo.subtree(agent)[1:] if d not in spec.children)
+    return tuple(step), stand_in
+
+
+def step_keys(topo: Topology) -> tuple[str, ...]:
+    """Every key of the step's messages, below the run's root (the robot's as patterns)."""
+    return (*(f"a/{b}/{way}" for b in topo.order for way in ("down", "up")), *(f"sim/cmd/{b}" for b in topo.order),
+            "sim/obs/**", "sim/task")  # fmt: skip

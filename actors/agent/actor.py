@@ -31,6 +31,7 @@ from kinswarm.actors.run.config import RunConfig
 from kinswarm.actors.run.runfile import kind_of, learner_settings, task_of
 from kinswarm.actors.runtime import Node
 from kinswarm.actors.tasks.base import StepView
+from kinswarm.protocol.keys import agent_keys
 from kinswarm.protocol.messages import Bye, Checkpoint, Cmd, Down, Fault, Obs, Readings, Stop, Task, Up
 from kinswarm.protocol.topology import Topology
 
@@ -112,11 +113,7 @@ class Agent:
     def outputs(self) -> list[str]:
         """Every key this agent publishes on during a step; all must be matched before it is alive."""
         k = self.keys
-        outs = [k.down(c) for c in self.spec.children]
-        if not self.is_root:
-            outs.append(k.up(self.spec.parent))  # type: ignore[arg-type]
-        if self.spec.has_dof:
-            outs.append(k.cmd(self.id))
+        outs = [f"{k.root}/{key}" for key in agent_keys(self.topo, self.id)[0]]
         if self.trace is not None:
             outs.append(k.metrics("agent"))
         return outs

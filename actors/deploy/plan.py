@@ -32,7 +32,7 @@ from typing import Any
 
 from kinswarm.actors.run.config import AUTO_LISTEN, LEASE_RANGE_MS
 from kinswarm.actors.runtime import LEASE_MS, NetSpec
-from kinswarm.protocol.keys import check_id
+from kinswarm.protocol.keys import agent_keys, check_id, step_keys
 from kinswarm.protocol.topology import Topology
 
 MODES = ("peer", "client")
@@ -202,16 +202,9 @@ def acl(plan: Plan, topo: Topology) -> dict[str, Any]:
 
     supervisor_only = ["ctl/**", "fault/**"]
     deny("sim", [*supervisor_only, "a/**", "sim/cmd/**"])
-    agents = list(topo.order)
-    for a in agents:
-        spec = topo.agents[a]
-        may = {f"a/{d}/down" for d in topo.subtree(a)[1:]}
-        if spec.parent is not None:
-            may.add(f"a/{spec.parent}/up")
-        keys = [*supervisor_only, "sim/obs/**", "sim/task"]
-        keys += [f"a/{b}/{way}" for b in agents for way in ("down", "up") if f"a/{b}/{way}" not in may]
-        keys += [f"sim/cmd/{b}" for b in agents if b != a]
-        deny(f"agent-{a}", keys)
+    for a in topo.order:  # every step key but those the agent publishes (protocol/keys.py: declared there once)
+        step, stand_in = agent_keys(topo, a)
+        deny(f"agent-{a}", [*supervisor_only, *(k for k in step_keys(topo) if k not in {*step, *stand_in})])
     return {"enabled": True, "default_permission": "allow", "rules": rules, "subjects": subjects, "policies": policies}
 
 
