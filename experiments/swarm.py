@@ -30,7 +30,8 @@ import numpy as np
 from kinswarm.actors.deploy.plan import free_endpoint
 from kinswarm.actors.report import read_metrics, write_summary
 from kinswarm.actors.run.config import AUTO_LISTEN, ConfigError, RunConfig
-from kinswarm.actors.run.runfile import learner_settings, read_run_file, resolve, task_of, write_resolved
+from kinswarm.actors.run.resolved import write_resolved
+from kinswarm.actors.run.runfile import learner_settings, read_run_file, resolve, task_of
 from kinswarm.actors.runtime import open_session, tap
 from kinswarm.actors.supervisor import RunResult, SinglePlacement, Supervisor
 from kinswarm.protocol import codec

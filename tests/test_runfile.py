@@ -312,7 +312,8 @@ def test_the_resolved_file_holds_the_learner_settings_used(tmp_path, monkeypatch
     """run.toml's [learner] was the overrides only (empty for the default run): a change of a default in the code
     changed what `kinswarm run run.toml` made. Now it holds the values used; the same settings come out of it."""
     from kinswarm.actors.learning.settings import TURN_LEARNER, LearnerSettings
-    from kinswarm.actors.run.runfile import learner_settings, write_resolved
+    from kinswarm.actors.run.resolved import write_resolved
+    from kinswarm.actors.run.runfile import learner_settings
 
     cfg = load_run(EXAMPLES / file, run_id="r", out=tmp_path)
     written = read_run_file(write_resolved(cfg, tmp_path / "run.toml"))["learner"]

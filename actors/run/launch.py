@@ -17,9 +17,9 @@ from typing import TYPE_CHECKING
 
 from kinswarm.actors.deploy.plan import Plan, PlanError, local_plan
 from kinswarm.actors.run.config import AUTO_LISTEN, ENDPOINT, ConfigError, RunConfig
+from kinswarm.actors.run.resolved import write_resolved
 from kinswarm.actors.run.resume import Resume, prepare_resume
 from kinswarm.actors.run.rundir import Claim, claim, reclaim
-from kinswarm.actors.run.runfile import write_resolved
 from kinswarm.actors.runtime import NetSpec, open_session
 from kinswarm.actors.runtime.net import zenoh_reason
 from kinswarm.protocol.messages import EpochDone

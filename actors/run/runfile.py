@@ -36,7 +36,6 @@ problem is one line naming where the bad value was written (the file, or the fla
 from __future__ import annotations
 
 import dataclasses
-import math
 import re
 import secrets
 import time
@@ -46,7 +45,6 @@ from pathlib import Path
 from typing import Any
 
 import msgspec
-import tomli_w
 from kinswarm.actors.learning.kinds import DEFAULT, LearnerKind, learner_kind
 from kinswarm.actors.learning.settings import SPATIAL_STATES, LearnerSettings
 from kinswarm.actors.learning.state import OWN_EXTRAS
@@ -59,6 +57,7 @@ from kinswarm.actors.run.config import (
     check_endpoint,
     placement_problem,
 )
+from kinswarm.actors.run.tables import PATH_KEYS, absolute, absolute_paths, copied, merged, plain, put, spec_error
 from kinswarm.actors.tasks import kinds, task_class
 from kinswarm.actors.tasks.base import TaskDef
 from kinswarm.protocol.keys import check_id
@@ -70,7 +69,6 @@ from kinswarm.protocol.urdf_robot import URDF_KEYS
 
 SECTIONS = ("run", "robot", "scene", "task", "learner")
 MAX_BASES = 8  # how deep `base` files may nest
-_PATH_KEYS = ("from", "scenario")  # [run] fields that name files, resolved against where they were written
 _OLD_LAYOUT = {
     "agent": "[[agent]] tables go under [robot] as [[robot.agent]]",
     "defaults": "[defaults] goes under [robot] as [robot.defaults]",
@@ -163,12 +161,12 @@ def read_run_file(path: str | Path, _seen: tuple[Path, ...] = ()) -> dict[str, A
         raise SpecError(str(_seen[-1]), "base", f"{path} is its own base, or bases nest deeper than {MAX_BASES}")
     data = read_toml(path)
     base_file = data.pop("base", None)
-    _absolute_paths(data, path.parent)
+    absolute_paths(data, path.parent)
     if base_file is None:
         return data
     if not isinstance(base_file, str):
         raise SpecError(str(path), "base", f"expected the path of a run file, got {base_file!r}")
-    return _merge(read_run_file(path.parent / base_file, (*_seen, path)), data)
+    return merged(read_run_file(path.parent / base_file, (*_seen, path)), data)
 
 
 def resolve(
@@ -181,13 +179,13 @@ def resolve(
     listen: str | None = None,
 ) -> RunConfig:
     """A run file's content (paths absolute: read_run_file) and overrides -> the RunConfig."""
-    data = _copy(data)
+    data = copied(data)
     for key in data:
         if key not in SECTIONS:
             hint = _OLD_LAYOUT.get(key, f"expected the tables {', '.join(SECTIONS)}, and base")
             raise SpecError(source, key, f"unknown table ({hint})")
     for keys, value in overrides:  # given on the command line: paths are the working directory's
-        _put(data, keys, _absolute(value, Path.cwd()) if keys[0] == "run" and keys[-1] in _PATH_KEYS else value)
+        put(data, keys, absolute(value, Path.cwd()) if keys[0] == "run" and keys[-1] in PATH_KEYS else value)
 
     for name in ("robot", "task"):  # the tables a run cannot go without, before what is wrong inside one of them
         if name not in data:
@@ -228,7 +226,7 @@ def resolve(
             RunConfig,
         )
     except msgspec.ValidationError as e:
-        raise _spec_error(e, source, "run", fields) from None
+        raise spec_error(e, source, "run", fields) from None
     if cfg.scenario is not None:  # a bad scenario is refused before anything starts, one that cannot fire too
         from kinswarm.protocol.scenario import ScenarioError, load_scenario
 
@@ -334,7 +332,7 @@ def learner_settings(task: TaskDef, learner: Mapping[str, Any], source: str = "<
     try:
         typed = msgspec.convert(dict(learner), LearnerSettings)
     except msgspec.ValidationError as e:
-        raise _spec_error(e, source, "learner", learner) from None
+        raise spec_error(e, source, "learner", learner) from None
     given = {k: getattr(typed, k) for k in learner}
     out = {}
     for agent in task.topo.dof_agents:
@@ -360,59 +358,7 @@ def _check_extras(task: TaskDef, agent: str, settings: LearnerSettings, source: 
 def task_table(task: TaskDef) -> dict[str, Any]:
     """The resolved [task] table: the kind, then every setting (defaults included); None (unset) left out."""
     values = {f.name: getattr(task.settings, f.name) for f in dataclasses.fields(task.settings)}
-    return {"kind": task.kind, **{k: _plain(v) for k, v in values.items() if v is not None}}
-
-
-def write_resolved(cfg: RunConfig, path: Path) -> Path:
-    """The resolved run as a run file: `kinswarm run` of it makes the same run again (in a new directory), with the
-    learner's settings as they were used (resolved_learner), so a change of a default in the code changes no run
-    made from it."""
-    run = {k: getattr(cfg, "from_dir" if k == "from" else k) for k in RUN_KEYS}
-    learner = resolved_learner(task_of(cfg), cfg.learner, cfg.source) if cfg.controller == "agents" else cfg.learner
-    doc = {
-        "run": {k: v for k, v in run.items() if v is not None},
-        "robot": cfg.robot,
-        "scene": cfg.scene,
-        "task": cfg.task,
-        "learner": learner,
-    }
-    header = f"# The resolved run {cfg.run_id} (from {cfg.source}): `kinswarm run` this file to make it again.\n"
-    path.write_text(header + tomli_w.dumps(_plain(doc)))
-    return path
-
-
-def resolved_learner(task: TaskDef, learner: Mapping[str, Any], source: str = "<memory>") -> dict[str, Any]:
-    """The [learner] table that gives every agent the settings `learner` gives it now, with every setting written
-    out that one value can say for all: what the code's defaults gave is then in the file, not in the code. A
-    setting the task makes per agent (ranges over each joint's own limits) or adds to (its state variables, which
-    it puts before those of [learner]) stays the task's: written out, it would change the run."""
-    used = learner_settings(task, learner, source)
-    if not used:
-        return dict(learner)
-    first = next(iter(used.values()))
-    candidates = {  # one value for every agent, and not given
-        f.name: _plain(getattr(first, f.name))
-        for f in dataclasses.fields(LearnerSettings)
-        if f.name not in learner and all(getattr(s, f.name) == getattr(first, f.name) for s in used.values())
-    }
-
-    def same(extra: Mapping[str, Any]) -> bool:
-        try:
-            return learner_settings(task, {**learner, **extra}, source) == used
-        except (SpecError, ValueError):  # the task's variables twice, say: not a setting it takes as written
-            return False
-
-    # all of them; or all but one (a task's own variables); or one by one. Settings that hang together (a spatial
-    # joint's state, its sets and their ranges) are only taken together.
-    tries = [candidates, *({k: v for k, v in candidates.items() if k != name} for name in candidates)]
-    for extra in tries:
-        if same(extra):
-            return {**learner, **extra}
-    out: dict[str, Any] = {}
-    for name, value in candidates.items():
-        if same({**out, name: value}):
-            out[name] = value
-    return {**learner, **out}
+    return {"kind": task.kind, **{k: plain(v) for k, v in values.items() if v is not None}}
 
 
 # -- the parts ----------------------------------------------------------------------------------------------------
@@ -453,7 +399,7 @@ def _task(data: Any, topo: Topology, scene: SceneSpec, source: str) -> TaskDef:
     try:
         settings = msgspec.convert(settings_table, cls.Settings)
     except msgspec.ValidationError as e:
-        raise _spec_error(e, source, "task", settings_table) from None
+        raise spec_error(e, source, "task", settings_table) from None
     if topo.spatial != cls.spatial:
         kinds_for = ", ".join(k for k in kinds() if task_class(k).spatial == topo.spatial)
         what = "a robot from URDF" if topo.spatial else "a planar robot"
@@ -465,114 +411,3 @@ def _task(data: Any, topo: Topology, scene: SceneSpec, source: str) -> TaskDef:
             raise SpecError(source, f"task.{field}", what)
         raise SpecError(source, "task", problem)
     return task
-
-
-def _spec_error(e: msgspec.ValidationError, source: str, section: str, values: Any = None) -> SpecError:
-    """msgspec's "Expected `int`, got `str` - at `$.seed`" or a __post_init__'s "field: what" (of a nested table too:
-    "radius: must be > 0 - at `$.circle`") as a SpecError naming the field, in TOML's words ("expected an integer,
-    got a string 'x'"). `values`: the section's table, where the value found wrong is looked up to be shown."""
-    text = str(e)
-    where = section
-    m = re.fullmatch(r"(.*) - at `\$\.?(.*)`", text, re.S)
-    if m:
-        text, path = m.group(1), m.group(2).replace("$", "")
-        where = f"{section}.{path}" if path else section
-        text = _toml_words(text, _value_at(values, path))
-        text = text[0].lower() + text[1:]
-    field, sep, what = text.partition(": ")
-    if sep and re.fullmatch(r"[a-z_]+", field):
-        return SpecError(source, f"{where}.{'from' if field == 'from_dir' else field}", what)
-    return SpecError(source, where, text)
-
-
-# msgspec's names of types as a TOML file has them; `null` is a field left out (TOML has no null)
-_TOML_TYPES = {
-    "int": "an integer",
-    "float": "a number",
-    "str": "a string",
-    "bool": "true or false",
-    "array": "a list",
-    "object": "a table",
-}
-_NOTHING = object()
-
-
-def _toml_words(text: str, value: Any = _NOTHING) -> str:
-    """`Expected `array | null`, got `str`` -> `Expected a list, got a string '[1,'`."""
-
-    def names(m: re.Match[str]) -> str:
-        kinds = [_TOML_TYPES.get(t.strip(), t.strip()) for t in m.group(1).split("|") if t.strip() != "null"]
-        return " or ".join(kinds) or m.group(0)
-
-    got = re.fullmatch(r"(Expected `[^`]+`), got `(\w+)`", text)
-    if got:
-        shown = f" {value!r:.60}" if isinstance(value, (str, int, float)) and not isinstance(value, bool) else ""
-        text = f"{got.group(1)}, got {_TOML_TYPES.get(got.group(2), got.group(2))}{shown}"
-    text = re.sub(r"Expected `array` of length (\d+), got (\d+)", r"Expected a list of \1 values, got \2", text)
-    text = re.sub(r"`([a-z]+(?: \| [a-z]+)*)`", names, text)
-    return re.sub(r"`(\w+)`", r"\1", text)
-
-
-def _value_at(values: Any, path: str) -> Any:
-    """The value at a msgspec path (`goal[1]`, `extra_state[0].name`) of a table, or _NOTHING."""
-    node = values
-    for name, index in re.findall(r"(\w+)|\[(\d+)\]", path):
-        try:
-            node = node[name] if name else node[int(index)]
-        except (KeyError, IndexError, TypeError):
-            return _NOTHING
-    return node if path else _NOTHING
-
-
-def _absolute_paths(data: dict[str, Any], base: Path) -> None:
-    run = data.get("run")
-    if isinstance(run, dict):
-        for key in _PATH_KEYS:
-            if key in run:
-                run[key] = _absolute(run[key], base)
-    if isinstance(data.get("robot"), str):
-        data["robot"] = _absolute(data["robot"], base)
-
-
-def _merge(under: dict[str, Any], over: Mapping[str, Any]) -> dict[str, Any]:
-    """`over`'s fields laid over `under`'s, table by table (a list or value replaces)."""
-    out = dict(under)
-    for k, v in over.items():
-        out[k] = _merge(out[k], v) if isinstance(v, Mapping) and isinstance(out.get(k), dict) else v
-    return out
-
-
-def _absolute(value: Any, base: Path) -> Any:
-    """A path as written, made absolute; a NUL left as it is, for the check of the field to name (no path has one)."""
-    return str((base / value).resolve()) if isinstance(value, str) and value and "\0" not in value else value
-
-
-def _put(data: dict[str, Any], keys: tuple[str, ...], value: Any) -> None:
-    node = data
-    for i, k in enumerate(keys[:-1]):
-        nxt = node.setdefault(k, {})
-        if not isinstance(nxt, dict):
-            raise ConfigError(f"--set {'.'.join(keys)}: {'.'.join(keys[: i + 1])} is not a table")
-        node = nxt
-    node[keys[-1]] = value
-
-
-def _copy(v: Any) -> Any:
-    if isinstance(v, Mapping):
-        return {k: _copy(x) for k, x in v.items()}
-    if isinstance(v, list | tuple):
-        return [_copy(x) for x in v]
-    return v
-
-
-def _plain(v: Any) -> Any:
-    """TOML- and JSON-friendly: tuples and dataclasses as lists and tables, None left out of tables."""
-    if dataclasses.is_dataclass(v) and not isinstance(v, type):
-        return {f.name: _plain(getattr(v, f.name)) for f in dataclasses.fields(v)}
-    if isinstance(v, Mapping):
-        return {k: _plain(x) for k, x in v.items() if x is not None}
-    if isinstance(v, list | tuple):
-        return [_plain(x) for x in v]
-    if isinstance(v, float) and not math.isfinite(v):
-        raise ConfigError(f"not a finite number: {v!r}")
-    return v
