@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 import tomli_w
-from kinswarm.actors.agent.passes import AgentStep
+from kinswarm.actors.agent.passes import AgentStep, Begun
 from kinswarm.actors.learning.kinds import JointLearner, LearnerKind
 from kinswarm.actors.learning.settings import LearnerSettings
 from kinswarm.actors.run.config import RunConfig
@@ -80,7 +80,9 @@ class Stepper:
         topo = self.topo
         self.order = list(topo.order)
         self.agents = {
-            a: AgentStep(topo, a, self.task, self.settings[a].observation if a in self.settings else None, cfg.action_rad)
+            a: AgentStep(
+                topo, a, self.task, self.settings[a].observation if a in self.settings else None, cfg.action_rad
+            )
             for a in self.order
         }
         self.dof = list(topo.dof_agents)  # the agents with a joint: the env's agents, in the robot's DOF order
@@ -93,6 +95,7 @@ class Stepper:
         self.seed = cfg.seed
         self.last: dict[str, int] = {}  # each agent's action at the step before
         self.decisions: dict[str, Decision] = {}
+        self.begun: dict[str, Begun] = {}  # every agent's top-down pass of the step (the root's: the task's head)
         self.root_reward: float | None = None
         self.events: list[Event] = []  # the robot's events (faults applied, disturbances over) of the last call
         self.goal_length = len(self.task.goal(0, cfg.steps)[0])
@@ -240,6 +243,7 @@ class Stepper:
         for a in self.deciders:
             s, reward, avoid, scale = agents[a].decide_from(begun[a], views[a])
             self.decisions[a] = Decision(s, reward, list(avoid), scale)
+        self.begun = begun
         root = begun[self.topo.root]
         self.root_reward = root.reward
         if root.reward is None and root.children:  # a compound root pays each child its own (grasp): their mean

@@ -4,16 +4,20 @@ with the targets and sizes, as `kinswarm fault reverse a2` names one. Checked wh
 from __future__ import annotations
 
 import itertools
+import warnings
 from collections.abc import Mapping, Sequence
 from typing import Any
 
 from kinswarm.protocol.messages import Fault
 
+OPTIONS = ("goal", "faults")  # what reset(options=...) takes
 PARAMS = ("seconds", "steps", "rate", "ms", "amplitude_deg", "factor", "degrees")
 _ids = itertools.count()
 
 
-def as_fault(fault: Fault | Mapping[str, Any] | str, targets: Sequence[str] = (), params: Mapping[str, Any] = {}) -> Fault:  # noqa: B006 - read only
+def as_fault(
+    fault: Fault | Mapping[str, Any] | str, targets: Sequence[str] = (), params: Mapping[str, Any] = {}
+) -> Fault:  # noqa: B006 - read only
     """A Fault from what the caller gave; one line naming what is wrong otherwise."""
     if isinstance(fault, Fault):
         if targets or params:
@@ -43,3 +47,15 @@ def as_faults(given: Any) -> list[Fault]:
     if not isinstance(given, (list, tuple)):
         raise ValueError(f"reset options faults: expected a list of faults, got {given!r}")
     return [as_fault(f) for f in given]
+
+
+def reset_options(options: Mapping[str, Any] | None) -> tuple[Any, list[Fault] | None]:
+    """reset's options: (the episode's goal or None, its faults or None: those the robot has stay). A key the env
+    does not take is warned of, not refused: PettingZoo's API test resets with one of its own."""
+    options = dict(options or {})
+    for key in options:
+        if key not in OPTIONS:
+            warnings.warn(
+                f"reset options: {key!r} is not one this env takes ({', '.join(OPTIONS)}); ignored", stacklevel=3
+            )
+    return options.get("goal"), as_faults(options["faults"]) if "faults" in options else None

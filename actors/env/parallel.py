@@ -25,7 +25,6 @@ injects one at any step, as `kinswarm fault` does in a live run.
 from __future__ import annotations
 
 import functools
-import warnings
 from collections.abc import Mapping, Sequence
 from typing import Any
 
@@ -35,10 +34,8 @@ from kinswarm.protocol.messages import Fault
 from pettingzoo import ParallelEnv
 
 from .core import N_ACTIONS, Event, Stepper, load_config
-from .faults import as_fault, as_faults
+from .faults import as_fault, reset_options
 from .render import frame
-
-OPTIONS = ("goal", "faults")
 
 
 class KinswarmParallelEnv(ParallelEnv):
@@ -77,12 +74,7 @@ class KinswarmParallelEnv(ParallelEnv):
     def reset(
         self, seed: int | None = None, options: Mapping[str, Any] | None = None
     ) -> tuple[dict[str, dict[str, np.ndarray]], dict[str, dict[str, Any]]]:
-        options = dict(options or {})
-        for key in options:
-            if key not in OPTIONS:  # PettingZoo's API test passes one it makes up: said, not fatal
-                warnings.warn(f"reset options: {key!r} is not one this env takes ({', '.join(OPTIONS)}); ignored")
-        faults = as_faults(options["faults"]) if "faults" in options else None
-        self.stepper.start(seed, options.get("goal"), faults)
+        self.stepper.start(seed, *reset_options(options))
         self.agents = list(self.possible_agents)
         return self._observations(), self._infos()
 

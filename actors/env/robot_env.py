@@ -20,7 +20,6 @@ truncation, reset(seed=, options={"goal", "faults"}), `apply_fault`. Registered 
 from __future__ import annotations
 
 import math
-import warnings
 from collections.abc import Mapping, Sequence
 from typing import Any
 
@@ -30,11 +29,10 @@ from gymnasium import spaces
 from kinswarm.protocol.messages import Fault
 
 from .core import N_ACTIONS, Event, Stepper, load_config
-from .faults import as_fault, as_faults
+from .faults import as_fault, reset_options
 from .render import frame
 
 ENV_ID = "kinswarm/Robot-v0"
-OPTIONS = ("goal", "faults")
 
 
 class RobotEnv(gymnasium.Env):
@@ -61,7 +59,10 @@ class RobotEnv(gymnasium.Env):
         lo += [b[0] for b in goal][: stepper.goal_length]
         hi += [b[1] for b in goal][: stepper.goal_length]
         self.observation_space = spaces.Box(np.array(lo, np.float32), np.array(hi, np.float32), dtype=np.float32)
-        self._lo, self._hi = self.observation_space.low.astype(np.float64), self.observation_space.high.astype(np.float64)
+        self._lo, self._hi = (
+            self.observation_space.low.astype(np.float64),
+            self.observation_space.high.astype(np.float64),
+        )
         if continuous:
             self.action_space: spaces.Space = spaces.Box(-1.0, 1.0, shape=(n,), dtype=np.float32)
         else:
@@ -76,12 +77,7 @@ class RobotEnv(gymnasium.Env):
         self, *, seed: int | None = None, options: Mapping[str, Any] | None = None
     ) -> tuple[np.ndarray, dict[str, Any]]:
         super().reset(seed=seed)
-        options = dict(options or {})
-        for key in options:
-            if key not in OPTIONS:
-                warnings.warn(f"reset options: {key!r} is not one this env takes ({', '.join(OPTIONS)}); ignored")
-        faults = as_faults(options["faults"]) if "faults" in options else None
-        self.stepper.start(seed, options.get("goal"), faults)
+        self.stepper.start(seed, *reset_options(options))
         return self._observation(), self._info()
 
     def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
