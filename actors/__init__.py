@@ -10,4 +10,5 @@ run/         defining and launching one run: the run file, the resolved run, its
 deploy/      several hosts: the deploy plan and what a host needs from the others
 report/      what a run leaves for a person: plots, summary, motion.gif, the rerun recording
 cli/         the command line
+env/         the robot and its task as Gymnasium and PettingZoo environments, importable as kinswarm.env
 """

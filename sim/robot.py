@@ -99,8 +99,9 @@ class Robot:
         return warning
 
     def goal(self) -> tuple[float, ...]:
-        """The goal of the running step: it moves along the epoch's path, if it has one."""
-        return self._path[self.t] if self._path else self._goal
+        """The goal of the running step: it moves along the epoch's path, if it has one (after the path's last step,
+        its last point: the environments measure the epoch's last move there)."""
+        return self._path[min(self.t, len(self._path) - 1)] if self._path else self._goal
 
     def due(self, epoch: int) -> tuple[list[Fault], list[Fault]]:
         """The scenario's entries due at this step of `epoch`: (joint faults, the others), each with its id. The caller

@@ -1,0 +1,251 @@
+"""The step as the environments see it: a run file's robot, task and agents' passes, stepped one joint action at a
+time by whoever chooses the actions (no learners here). Both faces (parallel.py, robot_env.py) stand on it.
+
+It calls what the inprocess placement (actors/supervisor/inprocess.py) calls, in the same order, so a policy that
+acts as the run's learners act gets the run's numbers. The one shift: in the swarm the reward r(t-1) of a move
+arrives at the start of the next step t, when the root's task measures the new pose. Here `act` moves the robot and
+then runs that next step's passes at once, so the move's reward comes back with the observation it led to; the
+passes after the episode's last move run too (the swarm skips them: its epoch is over), so the last move is paid.
+"""
+
+from __future__ import annotations
+
+import math
+import zlib
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import tomli_w
+from kinswarm.actors.agent.passes import AgentStep, Begun
+from kinswarm.actors.learning.kinds import JointLearner, LearnerKind
+from kinswarm.actors.learning.settings import LearnerSettings
+from kinswarm.actors.run.config import RunConfig
+from kinswarm.actors.run.runfile import kind_of, learner_settings, load_run, task_of
+from kinswarm.actors.supervisor.epochs import epoch_start
+from kinswarm.protocol.faults import JOINT_FAULTS, check_fault
+from kinswarm.protocol.messages import Fault, Up
+from kinswarm.protocol.scenario import load_scenario
+from kinswarm.protocol.topology import Topology
+from kinswarm.sim.robot import Robot
+
+#: the actions of one joint: decrease, keep, increase by one action size
+N_ACTIONS = 3
+_DISTURB_STREAM = b"sim-disturb"  # sim/faults.py's: a seeded reset seeds the disturbances as a run's seed does
+
+Event = tuple[int, int, str, str, str]  # (episode, step, event, target, detail)
+
+
+def load_config(run_file: str | Path, overrides: Mapping[str, Any], sets: Iterable[str] = ()) -> RunConfig:
+    """The run file resolved with the env's overrides, for the inprocess loop the env is. A keyword is a [run] field
+    (`steps=50`) or `section__field` (`task__goal=[4, 6]`, `learner__gamma=0.9`); `sets` are `--set` texts. A bad
+    one is refused in one line that names it (a ValueError)."""
+    given: list[tuple[str, str]] = [(s, f"sets {s!r}") for s in sets]
+    for name, value in overrides.items():
+        section, _, field = name.partition("__")
+        key = f"{section}.{field}" if field else f"run.{name}"
+        try:
+            text = tomli_w.dumps({"v": value}).partition("=")[2].strip()
+        except TypeError:
+            raise ValueError(f"{name}={value!r}: not a TOML value (a number, string, bool or a list of them)") from None
+        given.append((f"{key}={text}", f"{name}={value!r}"))
+    given.append(('run.placement="inprocess"', "the env (a plain loop in this process)"))
+    if not Path(run_file).is_file():
+        raise ValueError(f"{run_file}: no such run file")
+    return load_run(run_file, given)
+
+
+@dataclass
+class Decision:
+    """What an agent with a joint decides from at a step, as its learner would get it."""
+
+    state: np.ndarray  # S_i, as built (not clipped)
+    reward: float | None  # r(t-1) with the task's local terms; None at an episode's first step
+    avoid: list[int]  # the moves its task leaves out of this step's choice
+    scale: float  # the factor on its action size
+
+
+class Stepper:
+    """One robot and its agents' passes, stepped by joint actions. `episode` counts the episodes begun since the last
+    seeded start: it is the epoch index the task's goals, starts and the scenario see."""
+
+    def __init__(self, cfg: RunConfig) -> None:
+        self.cfg = cfg
+        self.topo: Topology = cfg.topo()
+        self.task = task_of(cfg)
+        self.settings: dict[str, LearnerSettings] = learner_settings(self.task, cfg.learner, cfg.source)
+        self.kind: LearnerKind = kind_of(cfg.learner, cfg.source)
+        topo = self.topo
+        self.order = list(topo.order)
+        self.agents = {
+            a: AgentStep(
+                topo, a, self.task, self.settings[a].observation if a in self.settings else None, cfg.action_rad
+            )
+            for a in self.order
+        }
+        self.dof = list(topo.dof_agents)  # the agents with a joint: the env's agents, in the robot's DOF order
+        self.deciders = [a for a in reversed(self.order) if a in self.settings]  # leaves first, as the up pass
+        scenario = load_scenario(cfg.scenario, topo) if cfg.scenario else None
+        self.robot = Robot(topo, cfg.scene_spec, cfg.action_rad, cfg.seed, scenario)
+        self.first = [a for a in self.dof if a == topo.root]  # sensed in the sim actor's order
+        self.after = [a for a in self.dof if a != topo.root]
+        self.episode = -1
+        self.seed = cfg.seed
+        self.last: dict[str, int] = {}  # each agent's action at the step before
+        self.decisions: dict[str, Decision] = {}
+        self.begun: dict[str, Begun] = {}  # every agent's top-down pass of the step (the root's: the task's head)
+        self.root_reward: float | None = None
+        self.events: list[Event] = []  # the robot's events (faults applied, disturbances over) of the last call
+        self.goal_length = len(self.task.goal(0, cfg.steps)[0])
+
+    @property
+    def steps(self) -> int:
+        return self.cfg.steps
+
+    @property
+    def t(self) -> int:
+        return self.robot.t
+
+    def close(self) -> None:
+        self.robot.close()
+
+    def learners(self) -> dict[str, JointLearner]:
+        """The run's learners for each joint, built as the inprocess placement builds them (the same seeds)."""
+        from kinswarm.actors.agent.actor import agent_seed
+
+        return {
+            a: self.kind.build(self.settings[a], len(self.agents[a].visible), agent_seed(self.cfg.seed, a))
+            for a in self.deciders
+        }
+
+    # -- an episode ----------------------------------------------------------------------------------
+    def start(
+        self,
+        seed: int | None = None,
+        goal: Sequence[float] | None = None,
+        faults: Sequence[Fault] | None = None,
+    ) -> None:
+        """An episode begins: `seed` restarts the goal schedule at epoch 0 and reseeds the robot's disturbances;
+        `goal` replaces the task's goal of this episode; `faults` (when given: the joints freed first) apply from its
+        first step, as a scenario's at step 0."""
+        if goal is not None:
+            goal = self.check_goal(goal)
+        for f in faults or ():
+            self.check(f)
+        if seed is not None:
+            self.seed = seed
+            self.episode = -1
+            self.robot.faults.rng = np.random.default_rng([seed, zlib.crc32(_DISTURB_STREAM)])
+        self.episode += 1
+        e = epoch_start(self.cfg, self.task, self.episode)
+        path = e.path
+        if goal is not None:
+            e_goal, path = tuple(goal), []
+        else:
+            e_goal = e.goal
+        keep = self.cfg.successive and self.episode > 0
+        self.events = []
+        warning = self.robot.start(e_goal, path, e.start, keep_pose=keep)
+        if warning:
+            self.events.append((self.episode, 0, "start", "robot", warning))
+        for a in self.order:
+            self.agents[a].task.start_epoch()
+        if faults is not None:
+            self.apply(Fault("env-free", "free", ["all"], None, None, None, None, None))
+            for f in faults:
+                self.apply(f)
+        self.last = {}
+        self._passes()
+
+    def check_goal(self, goal: Sequence[float]) -> tuple[float, ...]:
+        try:
+            g = tuple(float(x) for x in goal)
+        except (TypeError, ValueError):
+            raise ValueError(f"reset options goal: expected {self.goal_length} numbers, got {goal!r}") from None
+        if len(g) != self.goal_length or not all(math.isfinite(x) for x in g):
+            raise ValueError(f"reset options goal: expected {self.goal_length} finite numbers, got {goal!r}")
+        return g
+
+    def check(self, f: Fault) -> None:
+        """A joint fault this robot can take, or one line saying why not."""
+        if not isinstance(f, Fault):
+            raise ValueError(f"fault: expected a kinswarm.protocol.messages.Fault, got {f!r}")
+        if f.fault not in JOINT_FAULTS:
+            raise ValueError(f"fault {f.fault!r}: the env applies the robot's joint faults ({', '.join(JOINT_FAULTS)})")
+        if problem := check_fault(f, list(self.topo.order)):
+            raise ValueError(f"fault: {problem}")
+
+    def apply(self, f: Fault) -> list[Event]:
+        """Apply a joint fault now: it acts from the current step's moves (an encoder fault from the next reading)."""
+        self.check(f)
+        events, _ = self.robot.apply_fault(f)
+        out = [(self.episode, self.robot.t, *e) for e in events]
+        self.events.extend(out)
+        return out
+
+    def act(self, actions: Mapping[str, int | float]) -> None:
+        """The step's moves: per joint an action (0, 1, 2: one move down, none, one up; a float in [-1, 1]: that share
+        of a move), the robot moved, then the next step's passes (the move's reward)."""
+        self.events = []
+        cmds: dict[str, float] = {}
+        now: dict[str, int] = {}
+        for a in self.deciders:
+            if a not in actions:
+                continue
+            d, v = self.decisions[a], actions[a]
+            if isinstance(v, (int, np.integer)):
+                cmds[a] = self.robot.clip(self.agents[a].delta(int(v), d.scale))
+                now[a] = int(v)
+            else:  # continuous: the share of one move, clipped to it as every command is
+                cmds[a] = self.robot.clip(float(v) * self.cfg.action_rad * d.scale)
+                now[a] = 1 + int(np.sign(v))  # what its parent counts: the direction it moved
+        self.last = now
+        self.events.extend((self.episode, self.robot.t, *e) for e in self.robot.move(cmds))
+        self._passes()
+
+    @property
+    def error(self) -> float:
+        """The task's error after the last move (the distance a run's final_error reports); at the start, before it."""
+        robot = self.robot
+        return robot.errors[-1] if robot.errors else robot.scene.error(robot.tips, robot.goal())
+
+    # -- the passes ------------------------------------------------------------------------------------
+    def _passes(self) -> None:
+        """The step's scenario faults, then its top-down and bottom-up passes, as the inprocess placement runs them
+        (actors/supervisor/inprocess.py): what every joint decides from."""
+        robot, agents, epoch, t = self.robot, self.agents, self.episode, self.robot.t
+        if t < self.steps:
+            joint, _ = robot.due(epoch)  # the others were refused with the run file (placement inprocess)
+            for f in joint:
+                self.events.extend((epoch, t, *e) for e in robot.apply_fault(f)[0])
+        q = robot.readings()
+        sense = {a: robot.scene.agent_sense(a) for a in self.first}
+        head = robot.task(epoch)
+        sense.update((a, robot.scene.agent_sense(a)) for a in self.after)
+        begun = {}
+        for a in self.order:  # the top-down pass
+            st = agents[a]
+            if not st.is_root:
+                parent = begun[st.spec.parent]
+                head = agents[st.spec.parent].down(parent, a, epoch, t, parent.end)
+            begun[a] = st.begin(head, q.get(a, 0.0), sense.get(a, {}))
+        ups: dict[str, Up] = {}
+        views = {}
+        for a in reversed(self.order):  # the bottom-up pass
+            st = agents[a]
+            children = {c: ups[c] for c in st.spec.children}
+            tips, views[a] = st.finish(begun[a], epoch, t, children, self.last.get(a))
+            if not st.is_root:
+                ups[a] = st.up(views[a], tips)
+        self.decisions = {}
+        for a in self.deciders:
+            s, reward, avoid, scale = agents[a].decide_from(begun[a], views[a])
+            self.decisions[a] = Decision(s, reward, list(avoid), scale)
+        self.begun = begun
+        root = begun[self.topo.root]
+        self.root_reward = root.reward
+        if root.reward is None and root.children:  # a compound root pays each child its own (grasp): their mean
+            given = [r for _, r, _ in root.children.values() if r is not None]
+            self.root_reward = sum(given) / len(given) if given else None
