@@ -13,6 +13,8 @@ PACKAGES = ("protocol", "actors", "sim", "experiments")
 
 def _module(path: Path) -> str:
     parts = path.relative_to(ROOT).with_suffix("").parts
+    if parts[:2] == ("actors", "env"):  # installed as kinswarm.env (pyproject's package-dir)
+        parts = parts[1:]
     return ".".join(("kinswarm", *(parts[:-1] if parts[-1] == "__init__" else parts)))
 
 
