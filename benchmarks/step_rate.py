@@ -21,7 +21,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-from kinswarm.actors.cli import _resolve, build_parser
+from kinswarm.actors.cli.commands import _resolve, build_parser
 from kinswarm.actors.run.launch import run_swarm
 
 ROOT = Path(__file__).resolve().parent.parent

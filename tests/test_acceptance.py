@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 import tomli_w
 from conftest import EXAMPLES, free_port
-from kinswarm.actors.cli import _resolve, build_parser
+from kinswarm.actors.cli.commands import _resolve, build_parser
 from kinswarm.actors.run.launch import run_swarm
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(1800)]

@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from conftest import EXAMPLES, run_config
-from kinswarm.actors.cli import main as cli_main
+from kinswarm.actors.cli.commands import main as cli_main
 from kinswarm.actors.learning.fuzzy import FuzzyPartition
 from kinswarm.actors.learning.learner import Learner
 from kinswarm.actors.learning.settings import LearnerSettings

@@ -14,7 +14,7 @@ import time
 from pathlib import Path
 
 import pytest
-from kinswarm.actors.cli import main as kinswarm
+from kinswarm.actors.cli.commands import main as kinswarm
 from kinswarm.experiments import EXPERIMENTS
 from kinswarm.experiments.common import mean_std, settled_epoch
 from kinswarm.experiments.cost import CentralisedFuzzyQ, eq13, eq15, measure_centralised

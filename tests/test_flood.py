@@ -24,7 +24,7 @@ import msgpack
 import pytest
 import zenoh
 from conftest import LOCKSTEP_ARGS, free_port
-from kinswarm.actors.cli import _resolve, build_parser
+from kinswarm.actors.cli.commands import _resolve, build_parser
 from kinswarm.actors.run.config import RunConfig
 from kinswarm.actors.run.launch import run_swarm
 from kinswarm.actors.runtime import open_session

@@ -23,7 +23,7 @@ import zenoh
 from conftest import EXAMPLES, ROOT, run_config
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
-from kinswarm.actors import cli
+from kinswarm.actors.cli import commands as cli
 from kinswarm.actors.deploy.plan import PlanError, load_plan
 from kinswarm.actors.run.config import ConfigError
 from kinswarm.actors.run.runfile import read_run_file, resolve

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 from conftest import ROOT, free_port
-from kinswarm.actors.cli import main
+from kinswarm.actors.cli.commands import main
 
 GOLDEN = json.loads((ROOT / "tests" / "data" / "golden_runs.json").read_text())["runs"]
 SMALL = ["--steps", "100", "--no-progress", "--deadline-ms", "10000"]

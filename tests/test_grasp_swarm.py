@@ -7,7 +7,7 @@ import json
 
 import pytest
 from conftest import EXAMPLES, LOCKSTEP_ARGS, LOCKSTEP_LEASE_MS, free_port, swarm_pids
-from kinswarm.actors.cli import main as cli_main
+from kinswarm.actors.cli.commands import main as cli_main
 
 pytestmark = pytest.mark.timeout(240)
 

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 from conftest import ROOT, free_port
-from kinswarm.actors.cli import main
+from kinswarm.actors.cli.commands import main
 from test_golden import CASES, GOLDEN, RECIPE, SMALL
 
 LEARNING = [n for n in CASES if not n.endswith("-process") and not n.startswith("baseline")]

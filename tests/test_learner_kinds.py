@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from conftest import EXAMPLES, LOCKSTEP_ARGS, free_port, run_config, swarm_pids
 from kinswarm.actors.agent.actor import agent_seed
-from kinswarm.actors.cli import main as cli_main
+from kinswarm.actors.cli.commands import main as cli_main
 from kinswarm.actors.learning import jasm
 from kinswarm.actors.learning.fleet import EPISODE, LearnerLane
 from kinswarm.actors.learning.fuzzy import centres

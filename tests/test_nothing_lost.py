@@ -15,7 +15,7 @@ from pathlib import Path
 
 import pytest
 from conftest import EXAMPLES, ROOT, free_port, swarm_pids
-from kinswarm.actors.cli import main as cli
+from kinswarm.actors.cli.commands import main as cli
 
 CHAIN4 = str(EXAMPLES / "chain4.toml")
 KINSWARM = [sys.executable, "-m", "kinswarm.actors.cli.entry"]

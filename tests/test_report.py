@@ -99,7 +99,7 @@ def test_a_lasting_fault_is_a_span_and_close_labels_are_one():
 def test_animation_of_the_chosen_epochs(tmp_path, chain4, capsys):
     """`kinswarm animate`: a GIF of the first, the last and the epochs with events (a frame for the start pose and
     at most FRAMES_PER_EPOCH more per epoch); a run without poses, or a bad --epochs, is one line."""
-    from kinswarm.actors.cli import main as cli_main
+    from kinswarm.actors.cli.commands import main as cli_main
     from kinswarm.actors.report.animate import pick_epochs, read_poses
     from PIL import Image
 

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import pytest
 from conftest import EXAMPLES, LOCKSTEP_ARGS, swarm_pids
-from kinswarm.actors.cli import main as cli
+from kinswarm.actors.cli.commands import main as cli
 
 CHAIN4 = str(EXAMPLES / "chain4.toml")
 KINSWARM = [sys.executable, "-m", "kinswarm.actors.cli.entry"]

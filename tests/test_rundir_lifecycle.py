@@ -19,7 +19,7 @@ from pathlib import Path
 
 import pytest
 from conftest import EXAMPLES, free_port, run_config, swarm_pids
-from kinswarm.actors.cli import main as cli
+from kinswarm.actors.cli.commands import main as cli
 from kinswarm.actors.runtime.net import zenoh_reason
 
 CHAIN4 = str(EXAMPLES / "chain4.toml")

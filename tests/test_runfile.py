@@ -10,7 +10,7 @@ import shutil
 
 import pytest
 from conftest import EXAMPLES, ROOT, free_port, run_config
-from kinswarm.actors.cli import main as cli_main
+from kinswarm.actors.cli.commands import main as cli_main
 from kinswarm.actors.run.checkpoint import CheckpointError
 from kinswarm.actors.run.config import ConfigError
 from kinswarm.actors.run.runfile import load_run, parse_set, read_run_file, task_of

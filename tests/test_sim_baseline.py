@@ -163,7 +163,7 @@ def test_a_baseline_controller_says_goodbye(tmp_path) -> None:
     import json
 
     from conftest import EXAMPLES, free_port
-    from kinswarm.actors.cli import main
+    from kinswarm.actors.cli.commands import main
 
     out = tmp_path / "b"
     args = ["baseline", str(EXAMPLES / "chain4.toml"), "--epochs", "1", "--steps", "10", "--no-progress"]

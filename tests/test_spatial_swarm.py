@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 from conftest import EXAMPLES, free_port, swarm_pids
-from kinswarm.actors.cli import main
+from kinswarm.actors.cli.commands import main
 from test_faults import Run
 
 SMALL = ["--epochs", "2", "--steps", "40", "--no-progress", "--deadline-ms", "10000"]

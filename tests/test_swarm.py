@@ -16,7 +16,7 @@ from pathlib import Path
 import pytest
 import zenoh
 from conftest import EXAMPLES, LOCKSTEP_ARGS, free_port, run_config, swarm_pids
-from kinswarm.actors.cli import main as cli_main
+from kinswarm.actors.cli.commands import main as cli_main
 from kinswarm.actors.runtime import open_session
 from kinswarm.protocol.robots import load_robot
 from kinswarm.sim import kinematics

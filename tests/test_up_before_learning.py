@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from conftest import LOCKSTEP_ARGS, free_port
-from kinswarm.actors.cli import main as cli_main
+from kinswarm.actors.cli.commands import main as cli_main
 from kinswarm.actors.learning.learner import Learner
 from kinswarm.actors.learning.settings import LearnerSettings
 

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 from conftest import free_port
-from kinswarm.actors.cli import main as cli_main
+from kinswarm.actors.cli.commands import main as cli_main
 
 pytest.importorskip("rerun")
 RERUN = Path(sys.executable).parent / "rerun"

@@ -2,6 +2,6 @@
 
 import sys
 
-from kinswarm.actors.cli import main
+from kinswarm.actors.cli.commands import main
 
 sys.exit(main())

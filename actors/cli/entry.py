@@ -1,5 +1,5 @@
 """The `kinswarm` command's entry point: light on purpose. Ctrl-C during the few tenths of a second the imports take
-is a clean exit (no traceback), then the CLI's own handling takes over (actors/cli/__init__.py main). The
+is a clean exit (no traceback), then the CLI's own handling takes over (actors/cli/commands.py main). The
 interpreter's own start (~0.05 s, before any of ours runs) is Python's."""
 
 from __future__ import annotations
@@ -17,7 +17,7 @@ signal.signal(signal.SIGINT, _interrupted_while_starting)  # from the moment thi
 
 
 def main() -> int:
-    from kinswarm.actors.cli import main as cli
+    from kinswarm.actors.cli.commands import main as cli
 
     return cli()
 

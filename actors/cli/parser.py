@@ -1,6 +1,6 @@
 """The `kinswarm` command line as argparse sees it: every command, its options and their help, the run's
 shorthands (`--epochs` is `--set run.epochs=`), and the arguments joined so a negative value reaches its own check.
-actors/cli/__init__.py runs what it parses."""
+actors/cli/commands.py runs what it parses."""
 
 from __future__ import annotations
 
