@@ -8,7 +8,7 @@ The simulator actor (actor.py) drives it from its messages and its deadline; the
   due(epoch)                 the scenario's entries due at this step: the joint faults (for apply_fault) and the
                              others (kill, freeze, drop, ...: for whoever applies them)
   readings()                 what the encoders read (the true angles through the joint faults)
-  obs(a, ...) / task(...)    an agent's encoder reading with what the scene lets it sense; the root's task observation
+  observations(epoch)        the encoder readings, what each agent senses, the root's task observation
   move(cmds)                 the step's increments, clipped to the action size, through the joint faults into the
                              scene (which moves the world as it allows); the tips, the error and the pose recorded
   done(...)                  the epoch's metrics
@@ -22,7 +22,7 @@ import dataclasses
 from collections.abc import Mapping
 
 from kinswarm.protocol.faults import JOINT_FAULTS, check_fault, describe, expand_targets
-from kinswarm.protocol.messages import EpochDone, Fault, Obs, Task
+from kinswarm.protocol.messages import EpochDone, Fault, Readings, Task
 from kinswarm.protocol.scenario import Scenario, ScenarioEntry
 from kinswarm.protocol.scene import SceneSpec
 from kinswarm.protocol.topology import Topology
@@ -54,6 +54,8 @@ class Robot:
             raise
         self.dof = topo.dof_agents
         self.dof_set = frozenset(self.dof)
+        self._root_first = [a for a in self.dof if a == topo.root]
+        self._others = [a for a in self.dof if a != topo.root]
         self.max_step = action_rad * (1 + 1e-9)
         self.faults = JointFaults(list(self.dof), seed)
         self.applied: dict[str, float] = dict.fromkeys(self.dof, 0.0)  # last increment per joint
@@ -142,8 +144,15 @@ class Robot:
         """What the encoders read."""
         return self.faults.readings(self.world.joint_positions())
 
-    def obs(self, agent: str, epoch: int, q: float) -> Obs:
-        return Obs(epoch=epoch, step=self.t, q=q, sense=self.scene.agent_sense(agent))
+    def observations(self, epoch: int) -> tuple[dict[str, float], dict[str, Readings], Task]:
+        """What the step shows the agents: the encoders' readings, what the scene lets each joint's agent sense, and
+        the root's task observation, sensed in that order for the root first (its reading goes out with the task)."""
+        q = self.readings()
+        scene = self.scene
+        sense = {a: scene.agent_sense(a) for a in self._root_first}
+        task = self.task(epoch)
+        sense.update((a, scene.agent_sense(a)) for a in self._others)
+        return q, sense, task
 
     def task(self, epoch: int) -> Task:
         """The root's task observation: the goal, every end effector's pose and what the scene lets the task sense."""

@@ -6,33 +6,22 @@ import math
 import numpy as np
 import pytest
 from conftest import run_config
-from kinswarm.actors.agent.passes import AgentStep
+from kinswarm.actors.agent.passes import AgentStep, robot_passes
 from kinswarm.actors.run.runfile import learner_settings, task_of
-from kinswarm.protocol.messages import Down
+from kinswarm.protocol.messages import Task
 from kinswarm.sim import kinematics
 
 
 def passes(cfg, angles, goal):
-    """The library's passes over a robot at `angles`: down = base frames root -> leaves; up = tips leaves -> root;
-    then each agent's state S_i (its first six variables)."""
+    """The library's passes over a robot at `angles` (robot_passes: down = base frames root -> leaves; up = tips leaves
+    -> root), then each agent's state S_i (its first six variables)."""
     topo, task = cfg.topo(), task_of(cfg)
     obs = {a: s.observation for a, s in learner_settings(task, cfg.learner, cfg.source).items()}
     agents = {a: AgentStep(topo, a, task, obs.get(a), cfg.action_rad) for a in topo.order}
-    begun = {}
-    for a in topo.order:  # top-down
-        parent = topo.agents[a].parent
-        if parent is None:
-            head = Down(epoch=0, step=0, base=topo.base, goal=goal, reward=None, sense={})
-        else:
-            head = agents[parent].down(begun[parent], a, 0, 0, begun[parent].end)
-        begun[a] = agents[a].begin(head, angles.get(a, 0.0), {})
-    ups, tips, states = {}, {}, {}
-    for a in reversed(topo.order):  # bottom-up
-        children = {c: ups[c] for c in topo.agents[a].children}
-        tips[a], view = agents[a].finish(begun[a], 0, 0, children, None)
-        if topo.agents[a].parent is not None:
-            ups[a] = agents[a].up(view, tips[a])
-        states[a] = agents[a].decide_from(begun[a], view)[0][:6]
+    head = Task(epoch=0, step=0, goal=goal, tips=kinematics.tips(topo, angles), sense={})
+    begun, views = robot_passes(agents, topo.order, head, angles, {}, 0, 0, {})
+    tips = {a: views[a].tip for a in topo.order}  # the end effector below each agent, as the up pass brought it
+    states = {a: agents[a].decide_from(begun[a], views[a])[0][:6] for a in topo.order}
     return {a: b.frame for a, b in begun.items()}, tips, states
 
 
@@ -49,8 +38,10 @@ def test_passes_match_closed_form(name, chain4, tree5):
         ref_tips = kinematics.tips(topo, angles)
         for a in topo.order:
             np.testing.assert_allclose(frames[a], ref_frames[a], atol=1e-12)
-        for leaf, tip in tips[topo.root].items():
-            np.testing.assert_allclose(tip, ref_tips[leaf], atol=1e-12)
+        for a in topo.order:  # each agent's end effector: its leaf's tip, or the centroid of its subtree's
+            leaves = topo.subtree_leaves(a)
+            want = [np.mean([ref_tips[leaf][i] for leaf in leaves]) for i in range(2)]
+            np.testing.assert_allclose(tips[a][:2], want, atol=1e-12)
         for a in topo.order:
             q, theta, d, g1, g2, g3 = states[a]
             jx, jy, h = ref_frames[a]

@@ -16,7 +16,7 @@ written once:
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -145,3 +145,34 @@ def visible_actions(visible: list[str], actions: Mapping[str, int], lost: frozen
     """The visible children's actions for fictitious play's counts: a lost child's joint held, so to its parent it
     chose "keep"; one whose action is not known is -1 (the transition is then dropped)."""
     return [KEEP if c in lost else actions.get(c, -1) for c in visible]
+
+
+def robot_passes(
+    agents: Mapping[str, AgentStep],
+    order: Sequence[str],
+    head: Task,
+    q: Mapping[str, float],
+    sense: Mapping[str, Readings],
+    epoch: int,
+    step: int,
+    last: Mapping[str, int],
+) -> tuple[dict[str, Begun], dict[str, StepView]]:
+    """One step's two passes over the whole robot in one place, as the agents compute them apart (a plain loop's step:
+    the inprocess placement, the environments): top-down in the topology's `order` from the root's task observation
+    `head`, bottom-up in reverse. `q`, `sense`: each joint's reading and own readings; `last`: each agent's action at
+    the step before. Returns every agent's `Begun` and `StepView`."""
+    begun: dict[str, Begun] = {}
+    for a in order:  # the top-down pass
+        st = agents[a]
+        parent = st.spec.parent
+        if parent is not None:
+            head = agents[parent].down(begun[parent], a, epoch, step, begun[parent].end)  # type: ignore[assignment]
+        begun[a] = st.begin(head, q.get(a, 0.0), sense.get(a, {}))
+    ups: dict[str, Up] = {}
+    views: dict[str, StepView] = {}
+    for a in reversed(order):  # the bottom-up pass
+        st = agents[a]
+        tips, views[a] = st.finish(begun[a], epoch, step, {c: ups[c] for c in st.spec.children}, last.get(a))
+        if st.spec.parent is not None:
+            ups[a] = st.up(views[a], tips)
+    return begun, views

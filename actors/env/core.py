@@ -19,14 +19,14 @@ from typing import Any
 
 import numpy as np
 import tomli_w
-from kinswarm.actors.agent.passes import AgentStep, Begun
+from kinswarm.actors.agent.passes import AgentStep, Begun, robot_passes
 from kinswarm.actors.learning.kinds import JointLearner, LearnerKind
 from kinswarm.actors.learning.settings import LearnerSettings
 from kinswarm.actors.run.config import RunConfig
 from kinswarm.actors.run.runfile import kind_of, learner_settings, load_run, task_of
 from kinswarm.actors.supervisor.epochs import epoch_start
 from kinswarm.protocol.faults import JOINT_FAULTS, check_fault
-from kinswarm.protocol.messages import Fault, Up
+from kinswarm.protocol.messages import Fault
 from kinswarm.protocol.scenario import load_scenario
 from kinswarm.protocol.topology import Topology
 from kinswarm.sim.robot import Robot
@@ -89,8 +89,6 @@ class Stepper:
         self.deciders = [a for a in reversed(self.order) if a in self.settings]  # leaves first, as the up pass
         scenario = load_scenario(cfg.scenario, topo) if cfg.scenario else None
         self.robot = Robot(topo, cfg.scene_spec, cfg.action_rad, cfg.seed, scenario)
-        self.first = [a for a in self.dof if a == topo.root]  # sensed in the sim actor's order
-        self.after = [a for a in self.dof if a != topo.root]
         self.episode = -1
         self.seed = cfg.seed
         self.last: dict[str, int] = {}  # each agent's action at the step before
@@ -220,25 +218,8 @@ class Stepper:
             joint, _ = robot.due(epoch)  # the others were refused with the run file (placement inprocess)
             for f in joint:
                 self.events.extend((epoch, t, *e) for e in robot.apply_fault(f)[0])
-        q = robot.readings()
-        sense = {a: robot.scene.agent_sense(a) for a in self.first}
-        head = robot.task(epoch)
-        sense.update((a, robot.scene.agent_sense(a)) for a in self.after)
-        begun = {}
-        for a in self.order:  # the top-down pass
-            st = agents[a]
-            if not st.is_root:
-                parent = begun[st.spec.parent]
-                head = agents[st.spec.parent].down(parent, a, epoch, t, parent.end)
-            begun[a] = st.begin(head, q.get(a, 0.0), sense.get(a, {}))
-        ups: dict[str, Up] = {}
-        views = {}
-        for a in reversed(self.order):  # the bottom-up pass
-            st = agents[a]
-            children = {c: ups[c] for c in st.spec.children}
-            tips, views[a] = st.finish(begun[a], epoch, t, children, self.last.get(a))
-            if not st.is_root:
-                ups[a] = st.up(views[a], tips)
+        q, sense, head = robot.observations(epoch)
+        begun, views = robot_passes(agents, self.order, head, q, sense, epoch, t, self.last)
         self.decisions = {}
         for a in self.deciders:
             s, reward, avoid, scale = agents[a].decide_from(begun[a], views[a])

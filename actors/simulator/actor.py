@@ -32,6 +32,7 @@ from kinswarm.protocol.messages import (
     Fault,
     Heartbeat,
     JointStatus,
+    Obs,
     Stop,
 )
 from kinswarm.protocol.scenario import load_scenario
@@ -349,14 +350,15 @@ class SimActor:
         body, k, send = self.body, self.keys, self.node.send
         if self.scenario is not None:
             self._apply_due(e.epoch)
-        q = body.readings()  # what the encoders read
+        q, sense, task = body.observations(e.epoch)  # what the encoders read and the agents sense
         # The root begins once it holds both the task and its own reading: put them back to back, so they
         # reach it in one burst (one wake-up); the others' readings are needed only a hop later.
+        t = body.t
         for a in self._obs_first:
-            send(k.obs(a), body.obs(a, e.epoch, q[a]))
-        send(k.task, body.task(e.epoch))
+            send(k.obs(a), Obs(epoch=e.epoch, step=t, q=q[a], sense=sense[a]))
+        send(k.task, task)
         for a in self._obs_after:
-            send(k.obs(a), body.obs(a, e.epoch, q[a]))
+            send(k.obs(a), Obs(epoch=e.epoch, step=t, q=q[a], sense=sense[a]))
         self.cmds = {}
         self.step_started = time.perf_counter()
         # Nobody expected (every agent down): the deadline runs the step rather than the joints racing.

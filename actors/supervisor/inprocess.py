@@ -20,13 +20,13 @@ from typing import Any
 
 from kinswarm.actors.agent.actor import agent_seed
 from kinswarm.actors.agent.memory import checkpoint_meta, learned_state, restore_learner
-from kinswarm.actors.agent.passes import AgentStep, visible_actions
+from kinswarm.actors.agent.passes import AgentStep, robot_passes, visible_actions
 from kinswarm.actors.agent.trace import StepTrace
 from kinswarm.actors.learning.kinds import JointLearner
 from kinswarm.actors.run.checkpoint import save_checkpoint
 from kinswarm.actors.run.config import RunConfig
 from kinswarm.actors.run.runfile import kind_of, learner_settings, task_of
-from kinswarm.protocol.messages import EpochDone, Up
+from kinswarm.protocol.messages import EpochDone
 from kinswarm.protocol.scenario import load_scenario
 from kinswarm.protocol.topology import Topology
 from kinswarm.sim.robot import Robot
@@ -62,8 +62,6 @@ class InProcessRun:
         self.traces = {a: StepTrace(a, obs[a].names) for a in self.learners} if cfg.record_agents else {}
         scenario = load_scenario(cfg.scenario, topo) if cfg.scenario else None
         self.robot = Robot(topo, cfg.scene_spec, cfg.action_rad, cfg.seed, scenario, world)
-        self.first = [a for a in topo.dof_agents if a == topo.root]  # sensed in the sim actor's order
-        self.after = [a for a in topo.dof_agents if a != topo.root]
         self.deciders = [a for a in reversed(self.order) if a in self.learners]  # leaves first, as the up pass
 
     def close(self) -> None:
@@ -90,25 +88,8 @@ class InProcessRun:
             for f in joint:
                 for event in robot.apply_fault(f)[0]:
                     on_event(epoch, t, *event)
-            q = robot.readings()
-            sense = {a: robot.scene.agent_sense(a) for a in self.first}
-            head = robot.task(epoch)
-            sense.update((a, robot.scene.agent_sense(a)) for a in self.after)
-            begun = {}
-            for a in self.order:  # the top-down pass
-                st = agents[a]
-                if not st.is_root:
-                    parent = begun[st.spec.parent]
-                    head = agents[st.spec.parent].down(parent, a, epoch, t, parent.end)
-                begun[a] = st.begin(head, q.get(a, 0.0), sense.get(a, {}))
-            ups: dict[str, Up] = {}
-            views = {}
-            for a in reversed(self.order):  # the bottom-up pass
-                st = agents[a]
-                children = {c: ups[c] for c in st.spec.children}
-                tips, views[a] = st.finish(begun[a], epoch, t, children, last.get(a))
-                if not st.is_root:
-                    ups[a] = st.up(views[a], tips)
+            q, sense, head = robot.observations(epoch)
+            begun, views = robot_passes(agents, self.order, head, q, sense, epoch, t, last)
             cmds, now = {}, {}
             for a in self.deciders:  # each joint's learner: the children's actions of t-1, then a(t)
                 st, learner = agents[a], learners[a]
