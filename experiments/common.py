@@ -296,7 +296,7 @@ def plt_module() -> Any:
     return plt
 
 
-def band(ax: Any, curves: Sequence[Sequence[float]], label: str, color: str | None = None) -> None:
+def band(ax: Any, curves: Sequence[Sequence[float]], label: str, color: str | None = None, ls: str = "-") -> None:
     """Mean over seeds, with a band from the lowest to the highest seed (a ±std band means little on the log
     axes these errors need)."""
     import numpy as np
@@ -304,7 +304,7 @@ def band(ax: Any, curves: Sequence[Sequence[float]], label: str, color: str | No
     n = min(len(c) for c in curves)
     a = np.array([list(c)[:n] for c in curves], dtype=float)
     x = np.arange(n)
-    (line,) = ax.plot(x, a.mean(axis=0), label=label, color=color, lw=1.4)
+    (line,) = ax.plot(x, a.mean(axis=0), label=label, color=color, lw=1.4, ls=ls)
     ax.fill_between(x, a.min(axis=0), a.max(axis=0), color=line.get_color(), alpha=0.15, lw=0)
 
 

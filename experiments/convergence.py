@@ -187,19 +187,23 @@ def _controls(per: dict[str, Any], tail: int) -> list[str]:
 
 def _figure(ctx: Context, rep: Report, cfgs: list, per: dict[str, Any], rule: dict[str, float]) -> None:
     plt = plt_module()
-    # a panel per reward, and the controls on the shaped reward beside the paper's learner at the default s
+    # a panel per reward, and the controls beside the paper's learner on the shaped reward: a colour per s, a line
+    # style per learner kind
     panels = [
         ("reward = paper", lambda r, o: r == "paper"),
         ("reward = shaped", lambda r, o: r == "shaped" and "kind" not in o),
-        ("shaped: the controls", lambda r, o: r == "shaped" and ("kind" in o or o == {"s": DEFAULT_S})),
+        ("shaped: paper's learner (solid), controls", lambda r, o: r == "shaped" and set(o) <= {"s", "kind"}),
     ]
+    styles = {"independent": "--", "tabular": ":"}
+    colour = {(r, o["s"]): f"C{i % 10}" for i, (_, r, o) in enumerate(cfgs) if "kind" not in o}
     fig, axes = plt.subplots(2, len(panels), figsize=(6 * len(panels), 7), sharex=True, squeeze=False)
     for col, (title, shown) in enumerate(panels):
         for row, key in enumerate(("mean_error", "final_error")):
             ax = axes[row, col]
             for i, (label, r, over) in enumerate(cfgs):
                 if shown(r, over):
-                    band(ax, per[label][key], label, color=f"C{i % 10}")
+                    c = colour.get((r, over["s"]), f"C{i % 10}")
+                    band(ax, per[label][key], label, color=c, ls=styles.get(over.get("kind", ""), "-"))
             ax.set_yscale("log")
             ax.axhline(0.5, color="grey", ls="--", lw=0.8)
             ax.axhline(rule[key], color="k", ls=":", lw=1.0, label="rule on g_perp (no learning)")
