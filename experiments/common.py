@@ -24,10 +24,12 @@ from kinswarm.actors.learning.settings import LearnerSettings
 from .swarm import RunOutcome, Spec, json_default, learner_overrides, run_spec
 
 PLACEMENT_NOTE = (
-    "All swarm runs use `kinswarm run`'s machinery — the same supervisor, agent and simulator actors "
-    "exchanging the same messages over Zenoh — in `single` placement (every actor an asyncio task in one "
-    "process, one Zenoh session) for speed; `process` placement gives bit-identical errors for the same "
-    "seed (tests/test_swarm.py)."
+    "Every swarm run uses `kinswarm run`'s machinery. A run that needs no messages (the learning agents of one "
+    "robot, no process or link fault, no trace of the step messages) runs in the `inprocess` placement: the step "
+    "library the actors call, as one plain loop, with the same errors, metrics and checkpoints for the same seed "
+    "(tests/test_inprocess.py). The others (the model-based controllers, traced runs) run in `single` placement: the "
+    "supervisor, agent and simulator actors exchanging the same messages over Zenoh, every actor an asyncio task in "
+    "one process; `process` placement gives bit-identical errors for the same seed (tests/test_swarm.py)."
 )
 DEFAULTS = LearnerSettings()
 
@@ -246,19 +248,23 @@ class Report:
 
 
 def _placements(runs: Sequence[RunOutcome]) -> str | dict[str, int]:
-    """ "single", or how many runs went in each placement when some needed one process per actor."""
+    """The one placement every run went in, or how many runs went in each."""
     counts: dict[str, int] = {}
     for r in runs:
-        counts[r.spec.placement] = counts.get(r.spec.placement, 0) + 1
-    return "single" if set(counts) <= {"single"} else counts
+        counts[r.placement] = counts.get(r.placement, 0) + 1
+    return next(iter(counts)) if len(counts) == 1 else counts
 
 
 def _in_processes(runs: Sequence[RunOutcome]) -> str:
-    names = sorted({r.spec.name for r in runs if r.spec.placement != "single"})
-    if not names:
-        return ""
-    where = "in `process` placement (one OS process per actor, for process faults)"
-    return f" Except {len(names)} kind(s) of run {where}: {', '.join(names)}."
+    """Where this report's runs went (a run cached from a sitting before `inprocess` went in `single`)."""
+    counts = _placements(runs)
+    said = f" Here every run in `{counts}`." if isinstance(counts, str) else ""
+    if isinstance(counts, dict):
+        said = " Here: " + ", ".join(f"{n} run(s) in `{p}`" for p, n in sorted(counts.items())) + "."
+    names = sorted({r.spec.name for r in runs if r.spec.placement == "process"})
+    if names:
+        said += f" In `process` placement (one OS process per actor, for process faults): {', '.join(names)}."
+    return said if runs else ""
 
 
 def _rel(p: Path) -> str:
@@ -290,7 +296,7 @@ def plt_module() -> Any:
     return plt
 
 
-def band(ax: Any, curves: Sequence[Sequence[float]], label: str, color: str | None = None) -> None:
+def band(ax: Any, curves: Sequence[Sequence[float]], label: str, color: str | None = None, ls: str = "-") -> None:
     """Mean over seeds, with a band from the lowest to the highest seed (a ±std band means little on the log
     axes these errors need)."""
     import numpy as np
@@ -298,5 +304,5 @@ def band(ax: Any, curves: Sequence[Sequence[float]], label: str, color: str | No
     n = min(len(c) for c in curves)
     a = np.array([list(c)[:n] for c in curves], dtype=float)
     x = np.arange(n)
-    (line,) = ax.plot(x, a.mean(axis=0), label=label, color=color, lw=1.4)
+    (line,) = ax.plot(x, a.mean(axis=0), label=label, color=color, lw=1.4, ls=ls)
     ax.fill_between(x, a.min(axis=0), a.max(axis=0), color=line.get_color(), alpha=0.15, lw=0)

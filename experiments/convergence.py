@@ -23,12 +23,26 @@ PAPER_LITERAL = {"s": 0.35, "T_max": 100.0, "lr": 0.1}  # §5.1's printed values
 PAPER_SETTLED = {0.35: "≈ 20", 0.75: "≈ 3"}
 
 
+# The controls for the paper's two design choices (actors/learning/kinds.py) on the shaped-reward rows' runs: the
+# same fuzzy Q-learning without a model of the children (no JASM), and JASM over a plain Q-table on the same grid.
+CONTROLS = {"independent": "no JASM", "tabular": "no fuzzy interpolation"}
+
+
 def configs(quick: bool) -> list[tuple[str, str, dict[str, Any]]]:
     """(label, reward, learner overrides)."""
     out = [(f"{r}, s = {s}", r, {"s": s}) for r in REWARDS for s in S_VALUES]
     if not quick:
         out.append(("paper-literal (paper reward, s 0.35, T_max 100, lr 0.1)", "paper", dict(PAPER_LITERAL)))
+    out += [(f"shaped, s = {s}, {kind}", "shaped", {"s": s, "kind": kind}) for kind in CONTROLS for s in S_VALUES]
     return out
+
+
+def _name(reward: str, over: dict[str, Any]) -> str:
+    """A config's run name; the shaped rows share optimality's runs (same settings, more epochs: their first epochs
+    are these)."""
+    if reward == "shaped" and set(over) == {"s"}:
+        return f"opt-s{over['s']}"
+    return f"conv-{reward}-s{over['s']}" + (f"-{over['kind']}" if "kind" in over else "")
 
 
 def run(ctx: Context) -> dict[str, Any]:
@@ -36,8 +50,7 @@ def run(ctx: Context) -> dict[str, Any]:
     cfgs = configs(ctx.quick)
     specs = {
         (label, seed): Spec(
-            # the shaped runs share optimality's (same settings, more epochs): their first epochs are these
-            f"opt-s{over['s']}" if reward == "shaped" and set(over) == {"s"} else f"conv-{reward}-s{over['s']}",
+            _name(reward, over),
             seed=seed,
             epochs=epochs,
             steps=steps,
@@ -105,6 +118,7 @@ def run(ctx: Context) -> dict[str, Any]:
         f"{rule_result['final_error']:.3f} with a mean error of {rule_result['mean_error']:.2f} over the epoch: a "
         "swarm's curve is worth what it adds over that line.",
     )
+    rep.text("## The two controls", "", *_controls(per, tail))
     # A seed that never settles counts as never: s = 0.75 must settle in as many seeds, and earlier.
     a, b = per["paper, s = 0.35"]["settled_epoch"], per["paper, s = 0.75"]["settled_epoch"]
     n35, n75 = sum(not math.isnan(x) for x in a), sum(not math.isnan(x) for x in b)
@@ -133,21 +147,69 @@ def run(ctx: Context) -> dict[str, Any]:
     return rep.results
 
 
+def _controls(per: dict[str, Any], tail: int) -> list[str]:
+    """Each control against the paper's learner on the same runs (shaped reward, each s, the same seeds): per s the
+    settling epoch and the mean errors, then a paired count over (s, seed) of which ends the epochs closer."""
+    out = [
+        "The paper's learner against each of its two design choices taken away (`--set learner.kind=...`, "
+        "actors/learning/kinds.py): `independent`, the same fuzzy Q-learning with each agent's Q over its own actions "
+        "only (no JASM, the joint action model by fictitious play); `tabular`, JASM over a plain Q-table on the same "
+        "grid (no fuzzy interpolation). Shaped reward, the same seeds; in brackets the paper's learner.",
+        "",
+    ]
+    last = f"last{tail}_mean_error"
+    for kind, why in CONTROLS.items():
+        wins = pairs = 0
+        for s in S_VALUES:
+            ours, theirs = per[f"shaped, s = {s}"], per[f"shaped, s = {s}, {kind}"]
+            never = sum(math.isnan(x) for x in theirs["settled_epoch"])
+            out.append(
+                f"- {kind} ({why}), s = {s}: settled at epoch {pm(theirs['settled_epoch'], 1)}"
+                + (f" ({never} never)" if never else "")
+                + f" ({pm(ours['settled_epoch'], 1)}); mean error over epochs 0-4 "
+                f"{pm(theirs['first5_mean_error'], 2)} ({pm(ours['first5_mean_error'], 2)}), over the last {tail} "
+                f"{pm(theirs[last], 3)} ({pm(ours[last], 3)})."
+            )
+            wins += sum(a < b for a, b in zip(ours[last], theirs[last], strict=True))
+            pairs += len(ours[last])
+        mean_ours = mean_std(x for s in S_VALUES for x in per[f"shaped, s = {s}"][last])[0]
+        mean_theirs = mean_std(x for s in S_VALUES for x in per[f"shaped, s = {s}, {kind}"][last])[0]
+        verdict = (
+            "the paper's learner is **better**" if mean_ours < mean_theirs else "**the control does as well or better**"
+        )
+        out.append(
+            f"- {kind}, over every s and seed: mean error over the last {tail} epochs {mean_theirs:.3f} against the "
+            f"paper's learner's {mean_ours:.3f}, lower for the paper's learner in {wins} of {pairs} (s, seed) pairs: "
+            f"{verdict}."
+        )
+    return out
+
+
 def _figure(ctx: Context, rep: Report, cfgs: list, per: dict[str, Any], rule: dict[str, float]) -> None:
     plt = plt_module()
-    fig, axes = plt.subplots(2, len(REWARDS), figsize=(6 * len(REWARDS), 7), sharex=True, squeeze=False)
-    for col, reward in enumerate(REWARDS):
+    # a panel per reward, and the controls beside the paper's learner on the shaped reward: a colour per s, a line
+    # style per learner kind
+    panels = [
+        ("reward = paper", lambda r, o: r == "paper"),
+        ("reward = shaped", lambda r, o: r == "shaped" and "kind" not in o),
+        ("shaped: paper's learner (solid), controls", lambda r, o: r == "shaped" and set(o) <= {"s", "kind"}),
+    ]
+    styles = {"independent": "--", "tabular": ":"}
+    colour = {(r, o["s"]): f"C{i % 10}" for i, (_, r, o) in enumerate(cfgs) if "kind" not in o}
+    fig, axes = plt.subplots(2, len(panels), figsize=(6 * len(panels), 7), sharex=True, squeeze=False)
+    for col, (title, shown) in enumerate(panels):
         for row, key in enumerate(("mean_error", "final_error")):
             ax = axes[row, col]
-            for i, (label, r, _) in enumerate(cfgs):
-                if r == reward:
-                    band(ax, per[label][key], label, color=f"C{i}")
+            for i, (label, r, over) in enumerate(cfgs):
+                if shown(r, over):
+                    c = colour.get((r, over["s"]), f"C{i % 10}")
+                    band(ax, per[label][key], label, color=c, ls=styles.get(over.get("kind", ""), "-"))
             ax.set_yscale("log")
             ax.axhline(0.5, color="grey", ls="--", lw=0.8)
             ax.axhline(rule[key], color="k", ls=":", lw=1.0, label="rule on g_perp (no learning)")
             ax.grid(alpha=0.3)
             ax.set_ylabel(key.replace("_", " "))
-            ax.set_title(f"reward = {reward}: {key.replace('_', ' ')} per epoch", fontsize=9)
+            ax.set_title(f"{title}: {key.replace('_', ' ')} per epoch", fontsize=9)
             ax.legend(fontsize=7)
         axes[1, col].set_xlabel("epoch")
     fig.suptitle(f"Fig. 5 analogue: mean over {ctx.seeds} seed(s), band from the lowest to the highest", fontsize=10)

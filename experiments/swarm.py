@@ -1,8 +1,11 @@
-"""Runs for the experiments: `kinswarm run`'s machinery (the same Supervisor, actors and wire, `single` placement),
-plus an observer of the step messages (`sim/task`, `sim/obs/*`) for the end-effector path and the joint effort
-(optimality), subscribed on the run's session before any actor exists, so nothing is missed. A spec in `process`
-placement (what process faults need: an agent's process stopped or killed) runs through `kinswarm run`'s own
-launcher (launch.run_swarm), one OS process per actor.
+"""Runs for the experiments: `kinswarm run`'s machinery. A run that needs no messages (the learning agents, one
+robot, no process or link fault in its scenario, no trace of the step messages) runs in the `inprocess` placement:
+the same step library the actors call, in a plain loop, with the same errors, metrics and checkpoints as the other
+placements for the same seed (tests/test_inprocess.py), and several times faster. The others run in `single`
+placement (the same Supervisor, actors and wire, in one process), with an observer of the step messages (`sim/task`,
+`sim/obs/*`) for the end-effector path and the joint effort (optimality), subscribed on the run's session before any
+actor exists, so nothing is missed. A spec in `process` placement (what process faults need: an agent's process
+stopped or killed) runs through `kinswarm run`'s own launcher (launch.run_swarm), one OS process per actor.
 
 Each run is a `Spec`: a run file and overrides of its fields, resolved by the one loader (actors/run/runfile.py). It
 lives in its own directory with `spec.json`, and is reused when that directory already holds a finished run of the
@@ -28,8 +31,9 @@ from typing import Any
 
 import numpy as np
 from kinswarm.actors.deploy.plan import free_endpoint
+from kinswarm.actors.learning.kinds import DEFAULT as DEFAULT_KIND
 from kinswarm.actors.report import read_metrics, write_summary
-from kinswarm.actors.run.config import AUTO_LISTEN, ConfigError, RunConfig
+from kinswarm.actors.run.config import AUTO_LISTEN, ConfigError, RunConfig, placement_problem
 from kinswarm.actors.run.resolved import write_resolved
 from kinswarm.actors.run.runfile import learner_settings, read_run_file, resolve, task_of
 from kinswarm.actors.runtime import open_session, tap
@@ -37,6 +41,7 @@ from kinswarm.actors.supervisor import RunResult, SinglePlacement, Supervisor
 from kinswarm.protocol import codec
 from kinswarm.protocol.keys import Keys
 from kinswarm.protocol.messages import Obs, Task
+from kinswarm.protocol.scenario import load_scenario
 from kinswarm.protocol.topology import Topology
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -77,7 +82,8 @@ class Spec:
     # Not part of the identity: it changes nothing in the run.
     checkpoint: bool = False
     # "process": one OS process per actor (`kinswarm run --placement process`), for process faults (freeze, kill);
-    # no `observe`. A run without them gives the same errors in either placement (tests/test_swarm.py).
+    # no `observe`. A run without them gives the same errors in either placement (tests/test_swarm.py). "single":
+    # in this process, run in the `inprocess` placement when it needs no messages (run_spec), else in `single`.
     placement: str = "single"
 
     def overrides(self) -> list[tuple[tuple[str, ...], Any]]:
@@ -121,6 +127,10 @@ class Spec:
         # every agent's learner as the run builds it: the overrides on the task's and the state kind's defaults, so a
         # changed default (a kind's lr, a task's scale) is another run, not a cached one
         d["learner"] = {a: dataclasses.asdict(s) for a, s in learner_settings(task_of(cfg), cfg.learner).items()}
+        # the learner kind is not among its settings; the paper's is left out, so the runs made before there were
+        # other kinds keep their identity (and their cache entries)
+        if (kind := cfg.learner.get("kind", DEFAULT_KIND)) != DEFAULT_KIND:
+            d["learner_kind"] = kind
         if self.from_dir is not None:
             d["from_dir"] = Path(self.from_dir).name  # itself "<name>-<identity>": portable
         if self.scenario is not None:
@@ -190,6 +200,14 @@ class RunOutcome:
     out: Path
     summary: dict[str, Any]
     rows: list[dict[str, Any]] = field(default_factory=list)  # metrics.jsonl, the first spec.epochs rows
+
+    @property
+    def placement(self) -> str:
+        """Where the run ran, as its config.json says (a run cached from before `inprocess`: `single`)."""
+        try:
+            return str(json.loads((self.out / "config.json").read_text())["placement"])
+        except (OSError, ValueError, KeyError):
+            return self.spec.placement
 
     @property
     def final_errors(self) -> list[float]:
@@ -272,8 +290,8 @@ def find_cached(spec: Spec, runs: Path) -> Path | None:
     want = spec.identity(with_epochs=False)
     best: tuple[int, Path] | None = None
     for name, (identity, epochs) in _index(runs).items():
-        if identity != want:
-            continue
+        if identity != want or (spec.observe and not (runs / name / "trace.npz").is_file()):
+            continue  # another run, or the same one not traced (observe is not part of a run's identity)
         if epochs == spec.epochs or (epochs > spec.epochs and not spec.observe and not spec.checkpoint):
             if best is None or epochs < best[0]:
                 best = (epochs, runs / name)
@@ -310,11 +328,17 @@ def run_spec(spec: Spec, runs: Path) -> RunOutcome:
             return _run_in_processes(spec, out)
         out.mkdir(parents=True)
         cfg = spec.config(out, run_id=f"x{spec.identity()}")
+        inprocess = needs_no_messages(spec, cfg)
+        if inprocess:
+            cfg = dataclasses.replace(cfg, placement="inprocess")
         topo = cfg.topo()
         cfg.write(out / "config.json")
         write_resolved(cfg, out / "run.toml")
         (out / "metrics.jsonl").write_text("")
-        result, captured = asyncio.run(_supervise(cfg, topo, spec.observe))
+        if inprocess:
+            result, captured = _run_inprocess(cfg, topo), []
+        else:
+            result, captured = asyncio.run(_supervise(cfg, topo, spec.observe))
         summary = write_summary(
             out,
             {"wall_seconds": result.wall_seconds, "interrupted": result.interrupted, "error": result.error},
@@ -329,6 +353,27 @@ def run_spec(spec: Spec, runs: Path) -> RunOutcome:
     summary = json.loads((cached / "summary.json").read_text())
     rows = read_metrics(cached)[: spec.epochs]
     return RunOutcome(spec, cached, summary, rows)
+
+
+def needs_no_messages(spec: Spec, cfg: RunConfig) -> bool:
+    """Whether a `single` spec can run in the `inprocess` placement: the learning agents of one robot, no trace of
+    the step messages (`observe` taps them) and no fault in its scenario that only processes or links can suffer
+    (those `single` applies, and `inprocess` refuses)."""
+    if spec.observe or cfg.controller != "agents" or cfg.fleet > 1:
+        return False
+    if cfg.scenario is None:
+        return True
+    entries = load_scenario(cfg.scenario, cfg.topo()).entries
+    return not any(placement_problem(e.fault.fault, "inprocess") for e in entries)
+
+
+def _run_inprocess(cfg: RunConfig, topo: Topology) -> RunResult:
+    """Run cfg in the `inprocess` placement (actors/supervisor/inprocess.py): its metrics, events and checkpoints in
+    cfg.out, as a swarm's."""
+    from kinswarm.actors.supervisor.inprocess import InProcessRun
+    from kinswarm.actors.supervisor.recorder import Recorder
+
+    return InProcessRun(cfg, topo).run(Recorder(Path(cfg.out)))
 
 
 def _run_in_processes(spec: Spec, out: Path) -> RunOutcome:

@@ -3,6 +3,7 @@ the goal sets, the run cache, the cost formulas; the full versions are `-m slow`
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import os
@@ -13,6 +14,7 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 from kinswarm.actors.cli.commands import main as kinswarm
 from kinswarm.experiments import EXPERIMENTS
@@ -68,6 +70,19 @@ def test_quick_experiment(quick_all, name):
             for block in ("test_set_0",) if name == successive else ("test_set_0", "test_set_1"):
                 assert len(refs[name][block]["errors"]) == len(results["test_sets"][block.rsplit("_", 1)[-1]])
         assert set(refs[successive]) == {"test_set_0"}  # as the swarm's successive row: test set K only
+        for kind in ("independent", "tabular"):  # the controls: the same training, tested on both sets
+            (label,) = [k for k, v in results["levels"].items() if v["kind"] == kind]
+            assert results["levels"][label]["learner"] == results["levels"]["Level-1"]["learner"]
+            assert set(results["per_level"][label]) == {"test_set_0", "test_set_1"}
+        # the learning runs need no messages; the model-based controllers' runs go in `single`
+        placed = results["placement"]
+        assert placed["single"] == sum(len(v) for v in refs.values()) and placed["inprocess"] > 0
+    if name == "convergence":
+        configs = results["configs"]
+        for kind in ("independent", "tabular"):  # on the shaped rows' runs, each s
+            rows = [v for v in configs.values() if v["learner"].get("kind") == kind]
+            assert [r["learner"]["s"] for r in rows] == [c["learner"]["s"] for c in configs.values()][3:6]
+            assert all(r["reward"] == "shaped" for r in rows)
     if name == "robustness":
         assert set(results["per_scenario"]) == {"paper-recovery", "paper-fail-disturb-fail", "paper-locked"}
         assert set(results["per_scenario"]["paper-locked"]) == {"frozen", "learning", "scratch", "baseline", "rule"}
@@ -198,6 +213,30 @@ def test_run_cache_reuses_a_longer_run(tmp_path, monkeypatch):
     assert own.out != long.out and own.final_errors == short.final_errors  # bit-identical, as promised
     assert json.loads((long.out / "config.json").read_text())["task"]["goals"] == [list(g) for g in goals]
     assert long.rows[1]["final_error"] != long.rows[0]["final_error"]  # a different goal per epoch
+
+
+@pytest.mark.timeout(120)
+def test_runs_that_need_no_messages_go_inprocess(tmp_path):
+    """A spec with no process fault and no trace runs in the `inprocess` placement, with the errors and checkpoint it
+    has in `single` (a traced spec, which taps the step messages, runs there); the learner kind is part of a run's
+    identity, and the paper's, said or not, keeps the identity runs had before there were kinds."""
+    goals = ((4.0, 4.0), (-4.0, 4.0))
+    plain = Spec("c", epochs=2, steps=40, goals=goals, checkpoint=True)
+    fast = run_spec(plain, tmp_path / "a")
+    traced = run_spec(dataclasses.replace(plain, observe=True), tmp_path / "b")
+    assert (fast.placement, traced.placement) == ("inprocess", "single")
+    assert fast.final_errors == traced.final_errors and fast.mean_errors == traced.mean_errors
+    for agent in ("a1", "a4"):
+        with np.load(fast.out / "agents" / f"{agent}.npz") as x, np.load(traced.out / "agents" / f"{agent}.npz") as y:
+            assert set(x.files) == set(y.files) and all(np.array_equal(x[k], y[k]) for k in x.files)
+    assert find_cached(dataclasses.replace(plain, observe=True), tmp_path / "a") is None  # untraced: not served
+    said = dataclasses.replace(plain, learner=(("kind", "fuzzy"),))
+    assert said.identity() == plain.identity()
+    others = {dataclasses.replace(plain, learner=(("kind", k),)).identity() for k in ("independent", "tabular")}
+    assert len(others) == 2 and plain.identity() not in others
+    control = run_spec(dataclasses.replace(plain, learner=(("kind", "independent"),)), tmp_path / "a")
+    assert control.out != fast.out and control.placement == "inprocess"
+    assert json.loads((control.out / "config.json").read_text())["learner"] == {"kind": "independent"}
 
 
 @pytest.mark.timeout(90)

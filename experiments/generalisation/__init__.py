@@ -6,7 +6,9 @@ epoch, every goal REPS times in a seeded order (Level-4: once each), then evalua
 sequence in bases 2 and 3 (`--test-set K`; Levels 3 and 4 are also tested on block K+1, a second unseen set).
 Level-3 carries the paper's number and the issue's bar: its rows run on at least L3_SEEDS seeds.
 Higher levels also train for more epochs; a control trains Level-1's 4 goals for Level-2's epoch budget,
-which separates the number of goals from the amount of training. Also reported, labelled as what it is:
+which separates the number of goals from the amount of training. Two controls take the paper's design choices
+away one at a time on Level-3's training (CONTROLS): independent learners (no JASM) and a plain Q-table (no fuzzy
+interpolation). Also reported, labelled as what it is:
 an untrained swarm *learning* within one episode per test goal (not a generalisation test).
 """
 
@@ -17,6 +19,7 @@ from typing import Any
 from ..common import Context
 from .protocol import (
     COARSE_TEXT,
+    CONTROLS,
     DEFAULT_LEARNER,
     EVAL_STEPS,
     G_PERP_TEXT,
@@ -32,6 +35,7 @@ from .protocol import (
     SIGNED_G3,
     UNSIGNED_TEXT,
     Training,
+    controls,
     reps_for,
     run_suffix,
     train_and_test,
@@ -41,6 +45,7 @@ from .report import cdf, report, table
 
 __all__ = [
     "COARSE_TEXT",
+    "CONTROLS",
     "DEFAULT_LEARNER",
     "EVAL_STEPS",
     "G_PERP_TEXT",
@@ -56,6 +61,7 @@ __all__ = [
     "UNSIGNED_TEXT",
     "Training",
     "cdf",
+    "controls",
     "run",
     "run_suffix",
     "table",
@@ -72,10 +78,12 @@ def run(ctx: Context) -> dict[str, Any]:
         Training(f"Level-{L}", L, reps_for(L) * 4**L, LEARNER, min_seeds=L3_SEEDS if L == 3 else 0) for L in levels
     ]
     if q:
-        trainings = [Training("Level-1", 1, 4, LEARNER)]
+        trainings = [Training("Level-1", 1, 4, LEARNER), *controls(1, 4)]
     else:
         trainings.append(Training(f"Level-1, {control_epochs} epochs (control)", 1, control_epochs, LEARNER, False))
         # §5.2 "successive on-line requests": the Level-3 swarm, each test goal from where the last one ended
         trainings.append(Training("Level-3, successive test goals", 3, REPS * 4**3, LEARNER, False, True))
+        # what JASM and the fuzzy sets buy: the Level-3 row with each taken away
+        trainings += controls(3, REPS * 4**3, L3_SEEDS)
     t = train_and_test(ctx, trainings, second_level=1 if q else 3, with_scratch=True)
     return report(ctx, t, levels)

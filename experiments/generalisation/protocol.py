@@ -11,11 +11,12 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from kinswarm.actors.learning.kinds import DEFAULT as DEFAULT_KIND
 from kinswarm.actors.learning.settings import LearnerSettings, StateVariable
 
 from ..common import Context, frac_within, mean_std, run_specs, settings
 from ..goals import TEST_SIZE, halton, quadtree, training_order
-from ..swarm import RunOutcome, Spec
+from ..swarm import RunOutcome, Spec, learner_overrides
 
 PAPER = {1: (0.3814, 0.5596), 3: (0.2366, 0.2036)}  # §5.2: Level-1 and Level-3 mean / STD
 REPS = 2  # epochs per training goal (Level-4: 1, its 256 goals are already 256 epochs)
@@ -91,6 +92,11 @@ REWARD = "graded"
 # no learning, no model; what learning adds is measured against it, under both protocols.
 REFERENCES = {"pseudo-inverse": "pinv", "greedy per joint": "greedy", "rule on g_perp": "rule"}
 SUCCESSIVE_REFERENCES = {"rule on g_perp, successive test goals": "rule"}  # on test set K, as the swarm's row
+# The controls for the paper's two central design choices (actors/learning/kinds.py), each the recipe with one taken
+# away: "independent" learns Q over its own actions only (no joint action model, no fictitious play: what JASM
+# buys), "tabular" a Q-table over the same grid, the state's nearest cell (no fuzzy interpolation: what the fuzzy
+# sets buy). Same settings, goals, seeds, training and frozen tests as the recipe's Level-3 row.
+CONTROLS = {"independent": "no JASM", "tabular": "no fuzzy interpolation"}
 
 
 @dataclass(frozen=True)
@@ -106,10 +112,23 @@ class Training:
     )
     min_seeds: int = 0  # at least this many seeds (the full run only)
     reward: str = REWARD
+    # the learner kind (actors/learning/kinds.py): the paper's, or a control on the same settings that takes one of
+    # its two design choices away; a control is tested on both test sets, as the sweep's rows
+    kind: str = DEFAULT_KIND
 
     @property
     def suffix(self) -> str:
-        return run_suffix(self.learner, self.reward)
+        return run_suffix(self.learner, self.reward) + ("" if self.kind == DEFAULT_KIND else f"-{self.kind}")
+
+    @property
+    def control(self) -> bool:
+        return self.kind != DEFAULT_KIND
+
+    @property
+    def overrides(self) -> tuple:
+        """The [learner] overrides its runs get: the settings, and the kind unless the paper's (which keeps the
+        runs made before there were kinds)."""
+        return learner_overrides(**dict(self.learner), kind=self.kind) if self.control else self.learner
 
 
 def run_suffix(learner: tuple, reward: str) -> str:
@@ -129,7 +148,7 @@ def training_spec(t: Training, seed: int, steps: int) -> Spec:
         epochs=t.epochs,
         steps=steps,
         goals=goals,
-        learner=t.learner,
+        learner=t.overrides,
         reward=t.reward,
         successive=t.train_successive,
         checkpoint=True,
@@ -202,7 +221,7 @@ def train_and_test(ctx: Context, trainings: list[Training], second_level: int, w
     eval_specs: dict[tuple[str, int, int], Spec] = {}
     for t in trainings:
         label, level = t.label, t.level
-        sets = [k, k + 1] if level >= second_level and t.main else [k]
+        sets = [k, k + 1] if level >= second_level and (t.main or t.control) else [k]
         for block in sets:
             for seed in seeds_of(t):
                 eval_specs[(label, block, seed)] = Spec(
@@ -211,7 +230,7 @@ def train_and_test(ctx: Context, trainings: list[Training], second_level: int, w
                     epochs=len(test_sets[block]),
                     steps=eval_steps,
                     goals=tuple(test_sets[block]),
-                    learner=t.learner,
+                    learner=t.overrides,
                     reward=t.reward,  # not used with learning off, but the run says what it was trained with
                     from_dir=str(trained[(label, seed)].out),
                     learn=False,
@@ -286,3 +305,11 @@ def train_and_test(ctx: Context, trainings: list[Training], second_level: int, w
         train_err=train_err,
         runs=[*{r.out: r for r in trained.values()}.values(), *done],  # a shared training once
     )
+
+
+def controls(level: int, epochs: int, min_seeds: int = 0) -> list[Training]:
+    """The recipe's row at `level` with each control's learner kind (CONTROLS), the same training."""
+    return [
+        Training(f"Level-{level}, {kind} ({why})", level, epochs, LEARNER, False, min_seeds=min_seeds, kind=kind)
+        for kind, why in CONTROLS.items()
+    ]

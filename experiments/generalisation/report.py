@@ -10,7 +10,7 @@ import numpy as np
 from ..common import Context, Report, frac_within, plt_module, pm
 from ..goals import HALF, quadtree
 from ..swarm import RunOutcome
-from .protocol import L3_SEEDS, LEARNER_NAMES, LEARNER_TEXT, PAPER, REPS, REWARD, Tested, stats
+from .protocol import CONTROLS, L3_SEEDS, LEARNER_NAMES, LEARNER_TEXT, PAPER, REPS, REWARD, Tested, stats
 
 
 def report(ctx: Context, tested: Tested, levels: tuple[int, ...]) -> dict[str, Any]:
@@ -27,6 +27,7 @@ def report(ctx: Context, tested: Tested, levels: tuple[int, ...]) -> dict[str, A
                     "level": t.level,
                     "training_epochs": t.epochs,
                     "learner": dict(t.learner),
+                    "kind": t.kind,
                     "reward": t.reward,
                     "sweep": t.main,
                     "seeds": seeds_of(t),
@@ -66,6 +67,14 @@ def report(ctx: Context, tested: Tested, levels: tuple[int, ...]) -> dict[str, A
         'paper\'s way (§5.2: "successive on-line requests"): each test goal from where the last one ended, not '
         "from the start configuration."
     )
+    if any(t.control for t in trainings):
+        rep.text(
+            "Controls for the paper's two design choices (`--set learner.kind=...`, actors/learning/kinds.py), each "
+            "on the same settings, goals, seeds, training and frozen tests as the recipe's row: `independent` is the "
+            "same fuzzy Q-learning with each agent's Q over its own three actions only, no model of its children "
+            "(the paper's design without JASM, the joint action model by fictitious play); `tabular` keeps JASM over "
+            "a plain Q-table on the same grid, each state in its nearest cell (no fuzzy interpolation)."
+        )
     rep.text(
         f"Learning on, from scratch (**not** a generalisation test): an untrained swarm given one "
         f"{train_steps}-step learning episode per test goal ({len(scratch_err) // max(ctx.seeds, 1)} goals × "
@@ -112,11 +121,12 @@ def table(rep: Report, tested: Tested) -> None:
     rows = []
     for t in tested.trainings:
         for block, entry in sorted(per[t.label].items()):
-            paper = PAPER.get(t.level) if "control" not in t.label and block == f"test_set_{k}" else None
+            ours = "control" not in t.label and not t.control  # a row the paper has a number for
+            paper = PAPER.get(t.level) if ours and block == f"test_set_{k}" else None
             rows.append(
                 [
                     t.label,
-                    LEARNER_NAMES.get(t.learner, t.label),
+                    LEARNER_NAMES.get(t.learner, t.label) + (f", {t.kind}" if t.control else ""),
                     t.reward,
                     t.epochs,
                     len(seeds_of(t)),
@@ -179,7 +189,7 @@ def _verdict(rep: Report, per: dict, trainings: list, k: int, quick: bool, refer
     lines = ["## Paper | kinswarm", ""]
     for t in trainings:
         label, level = t.label, t.level
-        if level not in PAPER or "control" in label:
+        if level not in PAPER or "control" in label or t.control:
             continue
         e = per[label][f"test_set_{k}"]
         pm_, ps_ = PAPER[level]
@@ -207,6 +217,7 @@ def _verdict(rep: Report, per: dict, trainings: list, k: int, quick: bool, refer
         f"the paper's Level-3 mean is {PAPER[3][0]}."
     )
     lines += _against_the_rule(per, references, k)
+    lines += _controls(per, trainings, k)
     ctl = [t for t in trainings if "control" in t.label]
     if ctl:
         c = per[ctl[0].label][f"test_set_{k}"]
@@ -244,6 +255,32 @@ def _against_the_rule(per: dict, references: dict, k: int) -> list[str]:
             f"({100 * swarm['frac_within_0_5']:.0f} % within 0.5), the rule {r['mean']:.3f} "
             f"({100 * r['frac_within_0_5']:.0f} %): {verdict}."
         )
+    return out
+
+
+def _controls(per: dict, trainings: list, k: int) -> list[str]:
+    """What each of the paper's design choices buys: the recipe's row against the same row with it taken away (the
+    same seeds, so a paired count too), on both test sets, said plainly either way."""
+    out = []
+    for c in (t for t in trainings if t.control):
+        base = f"Level-{c.level}"
+        for block in (f"test_set_{k}", f"test_set_{k + 1}"):
+            ours, theirs = per.get(base, {}).get(block), per.get(c.label, {}).get(block)
+            if ours is None or theirs is None:
+                continue
+            n = min(len(ours["per_seed"]), len(theirs["per_seed"]))
+            wins = sum(a["mean"] < b["mean"] for a, b in zip(ours["per_seed"][:n], theirs["per_seed"][:n], strict=True))
+            verdict = (
+                f"the paper's learner is **better** (lower mean in {wins} of {n} seeds)"
+                if ours["mean"] < theirs["mean"]
+                else f"**the control does as well or better** (the paper's learner lower in {wins} of {n} seeds)"
+            )
+            out.append(
+                f"- Control, {c.kind} ({CONTROLS[c.kind]}), test set {block.rsplit('_', 1)[-1]}: {theirs['mean']:.3f} "
+                f"± {theirs['mean_std_over_seeds']:.3f} ({100 * theirs['frac_within_0_5']:.0f} % within 0.5) against "
+                f"{base}'s {ours['mean']:.3f} ± {ours['mean_std_over_seeds']:.3f} "
+                f"({100 * ours['frac_within_0_5']:.0f} %): {verdict}."
+            )
     return out
 
 
