@@ -105,3 +105,16 @@ def test_a_baseline_law_is_refused_in_process(tmp_path, monkeypatch, capsys) -> 
     code = main(["baseline", "examples/chain4.toml", "--placement", "inprocess", "--out", str(tmp_path / "b"), *SMALL])
     err = capsys.readouterr().err.strip().splitlines()
     assert code != 0 and len(err) == 1 and "the pinv law runs in the process placement" in err[0], err
+
+
+@pytest.mark.parametrize("kind", ["independent", "tabular"])
+def test_the_learner_kinds_come_out_the_same_in_process(kind: str, tmp_path: Path, monkeypatch) -> None:
+    """The controls run in every placement alike: the same final errors as single, checkpoints of their kind."""
+    from kinswarm.actors.run.checkpoint import load_checkpoint
+
+    monkeypatch.chdir(ROOT)
+    args = ["run", "examples/chain4.toml", "--epochs", "2", "--set", f"learner.kind={kind}"]
+    runs = {p: _run(args, tmp_path / p, p) for p in ("single", "inprocess")}
+    assert runs["single"]["final_error"] == runs["inprocess"]["final_error"]
+    _, meta = load_checkpoint(tmp_path / "inprocess" / "agents" / "a2.npz", agent="a2", learner=kind)
+    assert meta["learner"] == kind
