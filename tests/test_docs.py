@@ -133,7 +133,7 @@ def test_every_relative_link_in_the_docs_points_at_a_file_that_exists() -> None:
     [
         "The twin of `../shared/DESIGN.md`: what the code does",
         "at fixed points of the lockstep step (DESIGN §3):",
-        "a script in /work/main/benchmarks",
+        "a script in /srv/ks/benchmarks",
         "(`/tmp` script around it)",
         "see /home/me/notes.md",
     ],
