@@ -31,6 +31,8 @@ from kinswarm.protocol.scenario import load_scenario
 from kinswarm.protocol.topology import Topology
 from kinswarm.sim.robot import Robot
 
+from .render import frame
+
 #: the actions of one joint: decrease, keep, increase by one action size
 N_ACTIONS = 3
 _DISTURB_STREAM = b"sim-disturb"  # sim/faults.py's: a seeded reset seeds the disturbances as a run's seed does
@@ -105,6 +107,11 @@ class Stepper:
     @property
     def t(self) -> int:
         return self.robot.t
+
+    def frame(self) -> np.ndarray:
+        """An RGB picture of the robot now: its pose, its goal, the episode and step (both faces' `render`)."""
+        angles = self.robot.world.joint_positions()
+        return frame(self.topo, angles, self.robot.goal(), f"{self.topo.name}  episode {self.episode}  step {self.t}")
 
     def close(self) -> None:
         self.robot.close()

@@ -30,7 +30,6 @@ from kinswarm.protocol.messages import Fault
 
 from .core import N_ACTIONS, Event, Stepper, load_config
 from .faults import as_fault, reset_options
-from .render import frame
 
 ENV_ID = "kinswarm/Robot-v0"
 
@@ -104,9 +103,7 @@ class RobotEnv(gymnasium.Env):
         return self.stepper.apply(as_fault(fault, targets, params))
 
     def render(self) -> np.ndarray:
-        st = self.stepper
-        angles = st.robot.world.joint_positions()
-        return frame(st.topo, angles, st.robot.goal(), f"{st.topo.name}  episode {st.episode}  step {st.t}")
+        return self.stepper.frame()
 
     def close(self) -> None:
         self.stepper.close()
