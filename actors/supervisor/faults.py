@@ -48,6 +48,9 @@ class FaultRouter:
             error = f"{f.fault}: robot {f.robot}: this run's fleet has {sup.cfg.fleet} (robots 0..{sup.cfg.fleet - 1})"
         if not error and f.fault in PROCESS_FAULTS and f.fault not in sup.placement.supports:
             error = placement_problem(f.fault, sup.cfg.placement) or f"{f.fault}: not in this run's placement"
+        if not error and f.fault in PROCESS_FAULTS and f.fault != "thaw" and not sup.training:
+            # an actor that ends while the swarm starts fails the run (nothing to restart from yet)
+            error = f"{f.fault}: the swarm is not training (its actors are starting, or it is ending); try again"
         if not error and f.fault in JOINT_FAULTS:
             compound = [t for t in f.targets if t != ALL and not sup.topo.agents[t].has_dof]
             if compound:
