@@ -79,7 +79,7 @@ def test_a_killed_single_run_resumes_to_the_uninterrupted_result(tmp_path):
     restored = [r for r in rows(cut / "events.jsonl") if r["event"] == "restored"]
     assert sorted(r["target"] for r in restored) == ["a1", "a2", "a3", "a4"]
     for r in restored:  # every agent from the same checkpoint, its learned state as saved
-        assert r["epoch"] == resume["epoch"] - 1
+        assert r["checkpoint_epoch"] == resume["epoch"] - 1 and r["epoch"] == resume["epoch"]
         saved, loaded = (part.split("=")[1] for part in r["detail"].split(": ", 1)[1].split(" ") if "=" in part)
         assert saved == loaded
 

@@ -18,7 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from kinswarm.actors.report.arm import arm_axes, arm_points, draw_axes, floor_shadow, joint_points
-from kinswarm.actors.report.timeline import Span, active_at_end, fault_spans, label_groups
+from kinswarm.actors.report.timeline import Span, active_at_end, fault_spans, label_groups, one_per_command
 from kinswarm.actors.run.config import RunConfig, load_run_config
 from kinswarm.protocol import frames
 from kinswarm.protocol.topology import Topology
@@ -234,6 +234,7 @@ def _tracking(ax: Any, row: dict[str, Any], events: list[dict[str, Any]], spans:
     ax.plot(range(n), errors, lw=1.0, color="C0", label="error")
     ax.axhline(line, color="grey", ls="--", lw=0.8)
     ax.set_ylim(bottom=0, top=max(max(errors, default=1.0) * 1.45, 1.2 * line))  # room above the curve for the labels
+    events = one_per_command(events)
     for ev in events:
         ax.axvline(ev["step"], color="C3", lw=0.7, alpha=0.6)
     for step, label in label_groups(events, n):

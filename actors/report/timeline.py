@@ -80,6 +80,31 @@ def active_at_end(events: Sequence[dict[str, Any]]) -> dict[str, list[str]]:
     return out
 
 
+def one_per_command(events: Sequence[dict[str, Any]], near: int = 25) -> list[dict[str, Any]]:
+    """The events with each command once: a `fault` the supervisor recorded as it passed the request on is left out
+    when what carried it out recorded it too (the sim's `lock a2`, a scenario's `scenario ... requested`, in the
+    same epoch within `near` steps), so a plot draws one command as one line, at the step it took effect."""
+    done: dict[tuple[int, str], list[tuple[int, str, str]]] = {}
+    for ev in events:
+        if ev.get("event") != "fault" and _placed(ev):
+            done.setdefault((ev["epoch"], str(ev.get("event"))), []).append(
+                (ev["step"], str(ev.get("target", "")), str(ev.get("detail", "")))
+            )
+    out = []
+    for ev in events:
+        if ev.get("event") == "fault" and _placed(ev):
+            detail = str(ev.get("detail", ""))
+            kind, targets = detail.split(" ")[0], set(str(ev.get("target", "")).split(","))
+            applied = [t for s, t, _ in done.get((ev["epoch"], kind), []) if abs(s - ev["step"]) <= near]
+            asked = [d for s, _, d in done.get((ev["epoch"], "scenario"), []) if abs(s - ev["step"]) <= near]
+            if any("all" in targets or t in targets for t in applied) or any(
+                detail.startswith(d.removesuffix(" requested")) for d in asked
+            ):
+                continue
+        out.append(ev)
+    return out
+
+
 def label_groups(events: Sequence[dict[str, Any]], steps: int, share: float = 0.03) -> list[tuple[int, str]]:
     """One label per group of events less than `share` of the epoch's steps apart: (the first step, "lost a2 ·
     adopt a2"), so no two labels on an axis overlap. Same-kind events at a step are one: "lock a2,a3"."""

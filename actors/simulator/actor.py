@@ -22,6 +22,7 @@ from typing import Any
 import zenoh
 from kinswarm.actors.run.config import RunConfig
 from kinswarm.actors.runtime import Node
+from kinswarm.protocol.clock import ClockWriter, clock_path
 from kinswarm.protocol.faults import JOINT_FAULTS, describe
 from kinswarm.protocol.messages import (
     Bye,
@@ -88,6 +89,8 @@ class SimActor:
         self._host_prefix = self.keys.host("")
         self._status: asyncio.TimerHandle | None = None
         self._cmd_prefix = self.keys.cmd_all[:-1]
+        # (epoch, step) for the supervisor's events on this host (protocol/clock.py); the actor that runs has one
+        self.clock: ClockWriter | None = None
         if self.scenario is not None:
             late = [s for s in self.body.due_steps if s >= cfg.steps]
             if late:
@@ -112,6 +115,7 @@ class SimActor:
         node.listen(k.cmd_all, inline=self._on_cmd_sample)
         push = node.mailbox.push
         self._loop = asyncio.get_running_loop()
+        self.clock = ClockWriter(clock_path(self.cfg.out))
 
         def on_alive(sample: Any) -> None:  # zenoh thread
             parsed = k.parse_alive(str(sample.key_expr))
@@ -137,6 +141,7 @@ class SimActor:
                     timer.cancel()
             watch.undeclare()
             self.body.close()
+            self.clock.close()
 
     def handle(self, key: str, payload: bytes) -> bool:
         """Dispatch one mailbox item; True means stop."""
@@ -354,6 +359,8 @@ class SimActor:
         # The root begins once it holds both the task and its own reading: put them back to back, so they
         # reach it in one burst (one wake-up); the others' readings are needed only a hop later.
         t = body.t
+        if self.clock is not None:
+            self.clock.set(e.epoch, t)
         for a in self._obs_first:
             send(k.obs(a), Obs(epoch=e.epoch, step=t, q=q[a], sense=sense[a]))
         send(k.task, task)
@@ -380,6 +387,8 @@ class SimActor:
             self._publish_step()
             return
         seconds = time.perf_counter() - self.started
+        if self.clock is not None:
+            self.clock.set(e.epoch, self.body.t)
         self._done(self.body.done(e.epoch, e.steps, self.missed, seconds, self.longest_step))
         self.epoch = None
 

@@ -25,6 +25,7 @@ from kinswarm.actors.run.config import RunConfig
 from kinswarm.actors.run.resume import Resume
 from kinswarm.actors.run.runfile import task_of
 from kinswarm.actors.runtime import Node
+from kinswarm.protocol.clock import ClockReader, clock_path
 from kinswarm.protocol.keys import Keys
 from kinswarm.protocol.messages import (
     AgentTrace,
@@ -95,6 +96,7 @@ class Supervisor:
         self.node: Node | None = None
         self.result = RunResult()
         self.recorder = Recorder(self.out)
+        self.clock = ClockReader(clock_path(self.out))  # the sim's step, when the sim runs on this host
         self.restarts = RestartPolicy(self.agents, cfg.max_restarts, cfg.restart_window_s)
         self.faults = FaultRouter(self)
         self.hosts = HostWatch(self)
@@ -104,6 +106,7 @@ class Supervisor:
         self.epoch = -1
         self.joints: JointStatus | None = None
         self.byes: dict[str, Bye] = {}
+        self.saved: dict[str, int] = {}  # agent -> the epoch of the newest checkpoint it said it saved
         self.why_down: dict[str, tuple[float, str]] = {}  # actor -> (since when, why): what `status` says of it
         self._timers: set[asyncio.TimerHandle] = set()
         self.hostname = {h: h for h in self.plan.hosts} if self.multi else {self.host: socket.gethostname()}
@@ -204,6 +207,7 @@ class Supervisor:
         self.result.restarts = self.restarts.totals
         self.node.close()
         self.recorder.close()
+        self.clock.close()
 
     async def _serve(self) -> None:
         """Another host's share: keep it alive (restarts, forwarded faults, heartbeats) until the leader's Stop."""
@@ -283,7 +287,11 @@ class Supervisor:
             return node.decode(key, payload, Stop)
         if kind == "metrics/event":
             if (e := node.decode(key, payload, Event)) is not None:
-                self.recorder.event(e.epoch, e.step, e.event, e.target, e.detail)
+                if e.event == "restored":  # when it happened; which checkpoint's epoch, in a field of its own
+                    newest = self.saved.get(e.target, -1)  # a restart must restore this one (or a newer one)
+                    self.event(e.event, e.target, e.detail, checkpoint_epoch=e.epoch, newest_saved=newest)
+                else:
+                    self.recorder.event(e.epoch, e.step, e.event, e.target, e.detail)
         elif kind == "metrics/agent":
             if (tr := node.decode(key, payload, AgentTrace)) is not None:
                 self.recorder.agent(tr)
@@ -360,10 +368,19 @@ class Supervisor:
         self.later(delay, RESPAWN, ident.encode())
 
     # -- records ---------------------------------------------------------------------------------
-    def event(self, event: str, target: str, detail: str) -> None:
-        j = self.joints
-        step = j.step if j is not None and j.epoch == self.epoch else -1
-        self.recorder.event(self.epoch, step, event, target, detail)
+    def now(self) -> tuple[int, int]:
+        """(epoch, step) of the sim at this moment: read from its clock on this host (exact), else its latest status
+        (another host's sim), else the epoch about to run at its step 0. Never -1, never another epoch's step."""
+        at = self.clock.read()
+        if at is None and self.joints is not None:
+            at = (self.joints.epoch, self.joints.step)
+        if at is None or at[0] < 0:  # the sim has run no step yet (of this run, or of this resumed run)
+            first = self.resumed.epoch if self.resumed is not None else 0
+            return max(self.epoch, first), 0
+        return at
+
+    def event(self, event: str, target: str, detail: str, **extra: object) -> None:
+        self.recorder.event(*self.now(), event, target, detail, **extra)
 
     def _publish_status(self, now: float) -> None:
         assert self.node is not None

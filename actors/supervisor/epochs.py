@@ -138,3 +138,4 @@ class EpochLoop:
                 if m.error:
                     raise SwarmError(f"agent {Path(m.path).stem} could not checkpoint: {m.error}")
                 waiting.discard(Path(m.path).stem)
+                sup.saved[Path(m.path).stem] = m.epoch

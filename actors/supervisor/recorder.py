@@ -33,8 +33,8 @@ class Recorder:
         self._metrics = open(self.out / "metrics.jsonl", "a")  # noqa: SIM115 -- closed in close()
         self._poses = open(self.out / "poses.jsonl", "a")  # noqa: SIM115 -- closed in close()
 
-    def event(self, epoch: int, step: int | None, event: str, target: str, detail: str) -> None:
-        row = {
+    def event(self, epoch: int, step: int | None, event: str, target: str, detail: str, **extra: object) -> None:
+        row: dict[str, Any] = {
             "t": round(time.monotonic() - self.t0, 4),
             "wall": round(time.time(), 4),
             "epoch": epoch,
@@ -42,6 +42,7 @@ class Recorder:
             "event": event,
             "target": target,
             "detail": detail,
+            **extra,
         }
         log.info("event %s", row)
         if self._events is not None and not self._events.closed:
