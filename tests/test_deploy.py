@@ -20,6 +20,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+import zenoh
 from kinswarm.actors.deploy.plan import PlanError, acl, load_plan, local_plan
 from kinswarm.actors.run.config import RunConfig
 from kinswarm.actors.run.launch import run_swarm
@@ -111,6 +112,11 @@ def test_acl_lets_each_identity_publish_only_its_own_keys(tmp_path: Path) -> Non
         assert other in a2
     assert "ks/*/sim/cmd/**" in rules["deny-sim"]
     assert not any(r.startswith("deny-sup") for r in rules)
+    # a scenario's kill, freeze or drop: the sim asks on fault/request (agents may not)
+    request = zenoh.KeyExpr("ks/run/fault/request")
+    assert not any(zenoh.KeyExpr(k).intersects(request) for k in rules["deny-sim"]), rules["deny-sim"]
+    assert any(zenoh.KeyExpr(k).intersects(request) for k in a2)
+    assert any(zenoh.KeyExpr(k).intersects(zenoh.KeyExpr("ks/run/ctl/stop")) for k in rules["deny-sim"])
 
 
 def test_certs_writes_a_ca_and_one_certificate_per_identity(tmp_path: Path) -> None:

@@ -201,7 +201,8 @@ def acl(plan: Plan, topo: Topology) -> dict[str, Any]:
         policies.append({"id": f"policy-{who}", "rules": [rid], "subjects": [who]})
 
     supervisor_only = ["ctl/**", "fault/**"]
-    deny("sim", [*supervisor_only, "a/**", "sim/cmd/**"])
+    # the sim asks for a scenario's process and message faults on fault/request, as a user's `kinswarm fault` does
+    deny("sim", ["ctl/**", "a/**", "sim/cmd/**"])
     for a in topo.order:  # every step key but those the agent publishes (protocol/keys.py: declared there once)
         step, stand_in = agent_keys(topo, a)
         deny(f"agent-{a}", [*supervisor_only, *(k for k in step_keys(topo) if k not in {*step, *stand_in})])
