@@ -64,8 +64,9 @@ class ClockReader:
     def _open(self) -> bool:
         try:  # a restarted sim (a resumed run) writes a new file: follow it
             st = os.stat(self.path)
-        except OSError:
-            return self._map is not None
+        except OSError:  # gone (a run starting again removes its crashed sim's): no clock until a sim writes one
+            self.close()
+            return False
         if self._map is None or st.st_ino != self._ino:
             if st.st_size < _WORD.size:
                 return self._map is not None

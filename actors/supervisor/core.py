@@ -157,6 +157,8 @@ class Supervisor:
             self.recorder.open_events()
             if self.resumed is not None:  # before anything of the resumed run: the crash and the resume, in order
                 self.recorder.event(self.resumed.epoch, 0, "resume", "swarm", self.resumed.detail)
+            # a crashed run's clock still reads where its sim died: not this run's until its own sim writes one
+            self.clock.path.unlink(missing_ok=True)
             self.placement.attach(node.mailbox.push_local)
             self.later(self.STATUS_EVERY, STATUS)
             if self.multi:
