@@ -1,15 +1,29 @@
-"""Every fault at once, and what it found: the supervisor's own events at the sim's exact step
+"""Every fault at once (benchmarks/chaos.py), and what it found: the supervisor's own events at the sim's exact step
 (its clock, protocol/clock.py), a restore naming its checkpoint's epoch in a field of its own, one command drawn as
 one line, and a process fault refused while the swarm is not training."""
 
 from __future__ import annotations
 
+import importlib.util
+import sys
 import time
+from pathlib import Path
 
 import pytest
 from kinswarm.actors.report.timeline import one_per_command
 from kinswarm.protocol.clock import ClockReader, ClockWriter, clock_path
 from test_faults import Run
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def _chaos():  # benchmarks/ is not a package: the tool, loaded as the file it is
+    spec = importlib.util.spec_from_file_location("chaos", ROOT / "benchmarks" / "chaos.py")
+    assert spec is not None and spec.loader is not None
+    mod = importlib.util.module_from_spec(spec)
+    sys.modules["chaos"] = mod
+    spec.loader.exec_module(mod)
+    return mod
 
 
 def test_the_clock_reads_what_the_sim_wrote_and_follows_a_new_sim(tmp_path):
@@ -26,6 +40,8 @@ def test_the_clock_reads_what_the_sim_wrote_and_follows_a_new_sim(tmp_path):
     assert reader.read() == (7, 3)
     first.set(50, 1)  # the old sim's map is no longer the run's clock
     assert reader.read() == (7, 3)
+    clock_path(tmp_path).unlink()  # a resumed run's supervisor removes its crashed sim's clock
+    assert reader.read() is None
     for c in (first, second, reader):
         c.close()
 
@@ -53,27 +69,56 @@ def test_one_command_is_one_line():
     ]
 
 
+def test_the_invariants_catch_what_they_are_for():
+    chaos = _chaos()
+    inj = chaos.Injected("lock", "a2", {}, "lock a2", 1.0, False)
+    ok, detail = chaos.check_faults_at_steps([_ev("fault", "a2", 3, -1, "lock a2")], [inj], 150)
+    assert not ok and "unplaced" in detail  # the old supervisor's step -1
+    stale = [_ev("fault", "a2", 3, 262, "lock a2"), _ev("lock", "a2", 3, 373, "")]  # the old stale step
+    ok, detail = chaos.check_faults_at_steps(stale, [inj], 500)
+    assert not ok and "not at its step" in detail
+    back = [_ev("restored", "a1", 5, 10), _ev("restored", "a2", 4, 0)]  # a restore carrying its checkpoint's epoch
+    assert not chaos.check_faults_at_steps(back, [], 500)[0]
+    thawed = [
+        _ev("fault", "a2", 3, 10, "freeze a2 seconds=2 (freeze: a2)", t=1.0),
+        _ev("lost", "a2", 3, 90, t=2.0),
+        _ev("adopt", "a2", 3, 91, "a1 stands in for a2 (a3)", t=2.01),  # right: a2 is frozen
+        _ev("thaw", "a2", 3, 200, t=3.0),
+        _ev("alive", "a2", 3, 201, t=3.01),
+        _ev("adopt", "a3", 3, 205, "a2 stands in for a3 (a4)", t=3.05),  # wrong: a3 never left
+    ]
+    ok, detail = chaos.check_standins(thawed)
+    assert not ok and "a2 stands in for a3" in detail
+    assert chaos.check_standins(thawed[:3])[0]
+    restored = _ev("restored", "a3", 6, 4, "a3.npz of epoch 4: checkpoint sha256=ab restored sha256=ab")
+    assert not chaos.check_restores([{**restored, "checkpoint_epoch": 4, "newest_saved": 5}])[0]  # not the newest
+    assert chaos.check_restores([{**restored, "checkpoint_epoch": 5, "newest_saved": 5}])[0]
+    assert not chaos.check_epochs([{"epoch": e} for e in (0, 1, 1, 3)], 4)[0]
+
+
 @pytest.mark.timeout(240)
 def test_the_supervisors_events_are_at_the_sims_step(tmp_path, chain4):
     """A joint fault's request and its effect at the same step (they were 100-200 steps apart, or at step -1); a
     restore at the moment it happened, its checkpoint's epoch in its own field; a kill refused before training."""
     run = Run(tmp_path, chain4, "--epochs", "5000", "--steps", "200", "--seed", "3")
-    while True:  # as soon as the supervisor answers: most likely still starting, so refused, not the run's end
-        assert run.proc.poll() is None
-        r = run.fault("kill", "a3")
-        if r.returncode == 0 or "not training" in r.stdout + r.stderr:
-            break
-        time.sleep(0.05)  # no config.json yet, or nobody answering on its endpoint yet
-    if r.returncode == 2:
-        assert "not training" in r.stdout + r.stderr
-    run.wait_epochs(2)
-    for joint in ("a2", "a4"):
-        assert run.fault("lock", joint).returncode == 0
-        run.wait_event("lock", joint)
-    assert run.fault("kill", "a3").returncode == 0
-    restored = run.wait_event("restored", "a3", timeout=120)
-    run.proc.send_signal(2)
-    code, text = run.finish()
+    try:
+        while True:  # as soon as the supervisor answers: most likely still starting, so refused, not the run's end
+            assert run.proc.poll() is None
+            r = run.fault("kill", "a3")
+            if r.returncode == 0 or "not training" in r.stdout + r.stderr:
+                break
+            time.sleep(0.05)  # no config.json yet, or nobody answering on its endpoint yet
+        if r.returncode == 2:
+            assert "not training" in r.stdout + r.stderr
+        run.wait_epochs(2)
+        for joint in ("a2", "a4"):
+            assert run.fault("lock", joint).returncode == 0
+            run.wait_event("lock", joint)
+        assert run.fault("kill", "a3").returncode == 0
+        restored = run.wait_event("restored", "a3", timeout=120)
+    finally:  # a failed check above must not leave the run going
+        run.proc.send_signal(2)
+        code, text = run.finish()
     assert code == 130, text
     ev = run.events()
     for joint in ("a2", "a4"):
@@ -85,3 +130,14 @@ def test_the_supervisors_events_are_at_the_sims_step(tmp_path, chain4):
     assert (restored["epoch"], restored["step"]) >= (restart["epoch"], restart["step"])
     assert 0 <= restored["checkpoint_epoch"] < restored["epoch"]
     assert restored["checkpoint_epoch"] >= restored["newest_saved"] >= 0
+
+
+@pytest.mark.timeout(300)
+def test_quick_chaos_holds_every_invariant(tmp_path, capsys):
+    """About a minute of every fault kind at once (a fault every ~1.5 s, each kind at least once, a crash resumed),
+    after a fault-free run of the same seed: every invariant of the table holds."""
+    code = _chaos().main(["--quick", "--out", str(tmp_path)])
+    out = capsys.readouterr().out
+    assert "| invariant | holds |" in out, out
+    assert "| NO |" not in out, out
+    assert code == 0, out

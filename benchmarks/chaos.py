@@ -1,0 +1,512 @@
+"""The chaos soak: a process-placement swarm learning for a given time while a seeded schedule breaks it in every way
+at once, then the invariants a user counts on, checked from what the run left behind.
+
+    python benchmarks/chaos.py --minutes 60                 # the hour (a line a minute says it is alive)
+    python benchmarks/chaos.py --quick                      # about a minute: every kind at least once
+    python benchmarks/chaos.py --minutes 10 --every 3 --kinds kill,freeze --seed 1
+
+Both runs (fault-free, then chaos, same seed and settings) are `kinswarm run` child processes. Faults go in as a user
+sends them: the first of each kind through `kinswarm fault RUN ...` itself, the others through the same client
+(kinswarm.actors.cli.control.Client: one request, one reply, as `kinswarm fault` does). At random times (exponential,
+mean --every seconds) and overlapping, on random agents and joints:
+
+- process: kill, freeze (0.3-3 s), restart;
+- the robot's model: lock, reverse, scale, deadzone, offset, lag, disturb (each freed again after 1-8 s);
+- messages: drop, delay, duplicate, corrupt on an agent's links (or all), for 1-6 s;
+- crash: the whole run dies at once (SIGKILL to the supervisor, the simulator and every agent: a power cut), and
+  goes on with `kinswarm run --resume`. (A simulator killed alone ends its run by design, docs/faults.md.)
+
+The last --tail epochs get no new fault (everything is freed and cleared as they start): the swarm's recovery is what
+they measure. Exit code 1 when an invariant fails; the table says which.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import contextlib
+import json
+import math
+import os
+import random
+import re
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from collections import Counter
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+ROOT = Path(__file__).resolve().parent.parent
+CLI = [sys.executable, "-m", "kinswarm.actors.cli"]
+AGENTS = ("a1", "a2", "a3", "a4")
+PROCESS = ("kill", "freeze", "restart")
+MODEL = ("lock", "reverse", "scale", "deadzone", "offset", "lag", "disturb")
+LINK = ("drop", "delay", "duplicate", "corrupt")
+KINDS = (*PROCESS, *MODEL, *LINK, "crash")
+EPOCH_S_PER_STEP = 0.006  # process placement, chain4, on the 2-core machine under chaos: to size --minutes
+# events the supervisor records itself (at the sim's clock): in file order they never go back, but at a resume
+SUPERVISOR = {"fault", "refused", "exited", "restart", "lost", "alive", "thaw", "restored", "stall", "stall_end"}
+
+
+@dataclass
+class Injected:
+    kind: str
+    target: str
+    params: dict[str, float]
+    describe: str
+    t: float  # seconds since the chaos run started
+    via_cli: bool
+
+
+@dataclass
+class Chaos:
+    a: argparse.Namespace
+    out: Path
+    rng: random.Random
+    log: Path
+    proc: subprocess.Popen | None = None
+    injected: list[Injected] = field(default_factory=list)
+    refused: list[str] = field(default_factory=list)
+    undelivered: Counter = field(default_factory=Counter)
+    pids: set[int] = field(default_factory=set)
+    crashes: int = 0
+    resumes: int = 0
+    exit_codes: list[int] = field(default_factory=list)
+    order: list[str] = field(default_factory=list)
+
+    # -- the run -------------------------------------------------------------------------------------------
+    def argv(self, run_id: str, out: Path) -> list[str]:
+        a = self.a
+        argv = [*CLI, "run", str(ROOT / "examples" / "chain4.toml"), "--epochs", str(a.epochs), "--steps", str(a.steps)]
+        argv += ["--seed", str(a.seed), "--placement", "process", "--run-id", run_id, "--out", str(out)]
+        return argv + ["--deadline-ms", str(a.deadline_ms), "--no-progress"]
+
+    def start(self, argv: list[str]) -> None:
+        with open(self.log, "a") as f:
+            self.proc = subprocess.Popen(argv, stdout=f, stderr=subprocess.STDOUT, start_new_session=True)
+        self.pids.add(self.proc.pid)
+
+    def epochs_done(self) -> int:
+        path = self.out / "metrics.jsonl"
+        return len(path.read_text().splitlines()) if path.exists() else 0
+
+    # -- faults ------------------------------------------------------------------------------------------
+    def next_kind(self) -> str:
+        if not self.order:  # every kind once, in a shuffled order, then again: none is left out for long
+            self.order = list(self.a.kinds)
+            self.rng.shuffle(self.order)
+        return self.order.pop()
+
+    def draw(self, kind: str) -> tuple[str, dict[str, float], float]:
+        """(target, parameters, seconds until it is undone by us: 0 for none)."""
+        r = self.rng
+        target = r.choice(AGENTS)
+        if kind == "freeze":
+            return target, {"seconds": round(r.uniform(0.3, 3.0), 2)}, 0.0
+        if kind in PROCESS:
+            return target, {}, 0.0
+        if kind in MODEL:
+            params = {
+                "scale": {"factor": round(r.uniform(0.3, 3.0), 2)},
+                "deadzone": {"degrees": round(r.uniform(0.1, 1.0), 2)},
+                "offset": {"degrees": round(r.uniform(-8.0, 8.0), 2)},
+                "lag": {"steps": float(r.randint(1, 8))},
+                "disturb": {"steps": float(r.randint(20, 300))},
+            }.get(kind, {})
+            return target, params, (0.0 if kind == "disturb" else round(r.uniform(1.0, 8.0), 2))
+        if r.random() < 0.2:
+            target = "all"
+        seconds = round(r.uniform(1.0, 6.0), 2)
+        if kind == "delay":
+            return target, {"ms": float(r.randint(5, 60)), "seconds": seconds}, 0.0
+        return target, {"rate": round(r.uniform(0.02, 0.2), 3), "seconds": seconds}, 0.0
+
+    def send(self, kind: str, target: str, params: dict[str, float], via_cli: bool) -> tuple[bool, str]:
+        """(delivered, the supervisor's error or ''); a run between its crash and its resume is not reached."""
+        from kinswarm.actors.cli.control import Client, ControlError, make_fault, run_config_at, tool_net
+
+        if via_cli:
+            args = [*CLI, "fault", self.a.run_id, kind, target, "--run-dir", str(self.out)]
+            for name, value in params.items():
+                flag = {"seconds": "--for"}.get(name, "--" + name)
+                args += [flag, f"{value:g}s" if name == "seconds" else f"{value:g}"]
+            r = subprocess.run(args, capture_output=True, text=True, timeout=60)
+            if r.returncode == 0:
+                return True, ""
+            said = (r.stdout + r.stderr).strip().splitlines()
+            line = said[-1] if said else f"exit {r.returncode}"
+            return ("cannot reach" not in line and "did not answer" not in line and "no supervisor" not in line), line
+
+        async def one() -> tuple[bool, str]:
+            cfg = run_config_at(self.out)
+            fault = make_fault(kind, [target], **{k: (int(v) if k == "steps" else v) for k, v in params.items()})
+            try:
+                async with Client(cfg, tool_net(self.out, cfg, None)) as c:
+                    reply = await c.fault(fault, timeout=5.0)
+            except ControlError as e:
+                return False, str(e)
+            return True, reply.error
+
+        return asyncio.run(one())
+
+    def status_pids(self) -> dict[str, int]:
+        from kinswarm.actors.cli.control import Client, ControlError, run_config_at, tool_net
+
+        async def one() -> dict[str, int]:
+            cfg = run_config_at(self.out)
+            try:
+                async with Client(cfg, tool_net(self.out, cfg, None)) as c:
+                    async for status, _ in c.statuses(timeout=3.0):
+                        return dict(status.pid)
+            except ControlError:
+                pass
+            return {}
+
+        return asyncio.run(one())
+
+    def crash(self) -> bool:
+        """A power cut: the supervisor, the simulator and every agent SIGKILLed at once; then `--resume`."""
+        assert self.proc is not None
+        pids = {p for p in self.status_pids().values() if p > 0}
+        if not pids:
+            return False
+        self.pids |= pids
+        with contextlib.suppress(ProcessLookupError):  # its process group: the run and what it spawned
+            os.killpg(self.proc.pid, signal.SIGKILL)
+        for pid in pids:
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(pid, signal.SIGKILL)
+        self.exit_codes.append(self.proc.wait())
+        for pid in pids:  # gone before the resume takes the run's lock
+            while _alive(pid):
+                time.sleep(0.01)
+        self.crashes += 1
+        self.start([*CLI, "run", "--resume", str(self.out), "--no-progress"])
+        self.resumes += 1
+        return True
+
+    def inject(self, now: float, undo: list[tuple[float, str, str]]) -> None:
+        kind = self.next_kind()
+        if kind == "crash":
+            if not self.crash():
+                self.order.append(kind)  # not up yet: later
+                self.undelivered[kind] += 1
+            else:
+                self.injected.append(Injected(kind, "swarm", {}, "crash", now, False))
+            return
+        target, params, undo_after = self.draw(kind)
+        first = len(self.injected) % 20 == 0  # the first, and one in twenty, as typed: `kinswarm fault ...`
+        ok, error = self.send(kind, target, params, via_cli=first)
+        if not ok or "not training" in error:  # not reached, or not up yet (a resume under way): it comes again
+            self.order.append(kind)
+            self.undelivered[kind] += 1
+            return
+        if error:
+            self.refused.append(f"{kind} {target}: {error}")
+            return
+        from kinswarm.actors.cli.control import make_fault
+        from kinswarm.protocol.faults import describe
+
+        f = make_fault(kind, [target], **{k: (int(v) if k == "steps" else v) for k, v in params.items()})
+        self.injected.append(Injected(kind, target, params, describe(f), now, first))
+        if undo_after:
+            undo.append((now + undo_after, "free", target))
+
+    def soak(self) -> float:
+        """The chaos run, faults injected until its tail; returns its wall seconds."""
+        a = self.a
+        t0 = time.monotonic()
+        self.start(self.argv(a.run_id, self.out))
+        undo: list[tuple[float, str, str]] = []
+        next_at, next_line, quiet = t0 + a.warmup, t0 + 60.0, False
+        while True:
+            assert self.proc is not None
+            if self.proc.poll() is not None:
+                self.exit_codes.append(self.proc.returncode)
+                break
+            now = time.monotonic()
+            if now >= next_line:
+                done = Counter(i.kind for i in self.injected)
+                print(
+                    f"chaos: {(now - t0) / 60:.0f} min, epoch {self.epochs_done()}/{a.epochs}, "
+                    f"{len(self.injected)} faults ({', '.join(f'{k} {n}' for k, n in sorted(done.items()))}), "
+                    f"{self.crashes} crashes",
+                    flush=True,
+                )
+                next_line += 60.0
+            for due, what, target in [u for u in undo if u[0] <= now]:
+                undo.remove((due, what, target))
+                self.send(what, target, {}, via_cli=False)
+            if not quiet and self.epochs_done() >= a.epochs - a.tail:
+                quiet = True  # the tail: the swarm left to recover
+                for what in ("free", "clear"):
+                    self.send(what, "all", {}, via_cli=False)
+                undo.clear()
+            if not quiet and now >= next_at and self.epochs_done() >= 1:
+                if len(self.injected) % 5 == 0:  # the actors' PIDs, for "nothing left running"
+                    self.pids |= {p for p in self.status_pids().values() if p > 0}
+                self.inject(now - t0, undo)
+                next_at = max(next_at + self.rng.expovariate(1.0 / a.every), time.monotonic() - a.every)
+            time.sleep(0.05)
+        return time.monotonic() - t0
+
+
+def _alive(pid: int) -> bool:
+    try:
+        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except OSError:
+        return False
+    return state != "Z"
+
+
+def _rows(path: Path) -> list[dict[str, Any]]:
+    return [json.loads(line) for line in path.read_text().splitlines() if line.strip()] if path.exists() else []
+
+
+def share(metrics: list[dict[str, Any]], tail: int) -> float:
+    last = [r["final_error"] for r in metrics[-tail:]]
+    return sum(e <= 0.5 for e in last) / len(last) if last else 0.0
+
+
+# -- the invariants ---------------------------------------------------------------------------------------------
+def segments(events: list[dict[str, Any]]) -> list[list[dict[str, Any]]]:
+    """The events of each supervisor's life (a resume starts a new one; its clock `t` starts again)."""
+    out: list[list[dict[str, Any]]] = [[]]
+    for e in events:
+        if e["event"] == "resume":
+            out.append([])
+        out[-1].append(e)
+    return out
+
+
+def check_faults_at_steps(events: list[dict[str, Any]], injected: list[Injected], steps: int) -> tuple[bool, str]:
+    """Every fault sent is a `fault` event at a real (epoch, step); a joint fault's effect (the sim's own event,
+    exact) within 2 steps of it; the supervisor's own events never go back in (epoch, step) but at a resume."""
+    from kinswarm.actors.report.timeline import one_per_command
+
+    unplaced = [e for e in events if not (e["epoch"] >= 0 and 0 <= e["step"] <= steps)]
+    wanted = [i for i in injected if i.kind != "crash"]
+    faults = [e for e in events if e["event"] == "fault"]
+    missing, far = [], []
+    for i in wanted:
+        match = next((e for e in faults if e["detail"].startswith(i.describe)), None)
+        if match is None:
+            missing.append(i.describe)
+            continue
+        faults.remove(match)
+        if i.kind in MODEL:
+            targets = AGENTS if i.target == "all" else (i.target,)
+            applied = [
+                e
+                for e in events
+                if e["event"] == i.kind and e["target"] in targets and e["epoch"] == match["epoch"]
+                and abs(e["step"] - match["step"]) <= 2
+            ]  # fmt: skip
+            if not applied:
+                far.append(f"{i.describe} at {match['epoch']}/{match['step']}")
+    backwards = []
+    for seg in segments(events):
+        last = (-1, -1)
+        for e in seg:
+            if e["event"] in SUPERVISOR:
+                at = (e["epoch"], e["step"])
+                if at < last:
+                    backwards.append(f"{e['event']} {e['target']} at {at} after {last}")
+                last = max(last, at)
+    lines = len(one_per_command(events))
+    ok = not (unplaced or missing or far or backwards)
+    detail = f"{len(wanted)} faults, {len(events)} events ({lines} plotted)"
+    for name, bad in (("unplaced", unplaced), ("missing", missing), ("effect not at its step", far),
+                      ("going back", backwards)):  # fmt: skip
+        if bad:
+            detail += f"; {name}: {len(bad)} ({bad[0]})"
+    return ok, detail
+
+
+def check_restores(events: list[dict[str, Any]]) -> tuple[bool, str]:
+    """Every restart restored from a checkpoint at least as new as the newest its agent said it saved, the weights
+    hashing as the checkpoint did."""
+    restored = [e for e in events if e["event"] == "restored"]
+    restarts = [e for e in events if e["event"] == "restart"]
+    bad = []
+    for e in restored:
+        m = re.search(r"checkpoint sha256=(\w+) restored sha256=(\w+)", e["detail"])
+        if e.get("checkpoint_epoch", -1) < 0 and e.get("newest_saved", -1) < 0:
+            continue  # before the first checkpoint: nothing to restore
+        if not (m and m.group(1) == m.group(2)) or e.get("checkpoint_epoch", -1) < e.get("newest_saved", -1):
+            bad.append(f"{e['target']} at {e['epoch']}/{e['step']}: {e['detail'][:80]}")
+    short = len(restored) < len(restarts)
+    detail = f"{len(restarts)} restarts, {len(restored)} restored"
+    if short:
+        detail += f"; {len(restarts) - len(restored)} restarts never said what they restored"
+    if bad:
+        detail += f"; wrong: {len(bad)} ({bad[0]})"
+    return not (bad or short), detail
+
+
+def check_standins(events: list[dict[str, Any]]) -> tuple[bool, str]:
+    """An `adopt X` only while X was down: from its loss (or the fault that caused it, or its exit) to its token's
+    return, give or take a second for the two observers hearing it at different moments."""
+    wrong, adopts = [], 0
+    for seg in segments(events):
+        for e in (e for e in seg if e["event"] == "adopt"):
+            adopts += 1
+            x, t = e["target"], e["t"]
+            starts = [
+                d["t"]
+                for d in seg
+                if d["target"] == x
+                and d["event"] in ("lost", "exited")
+                or d["event"] == "fault"
+                and x in d["target"].split(",")
+                and d["detail"].split(" ")[0] in PROCESS
+            ]
+            ok = False
+            for s in starts:
+                back = [b["t"] for b in seg if b["event"] == "alive" and b["target"] == x and b["t"] >= s]
+                if s - 1.0 <= t <= (min(back) if back else math.inf) + 0.25:
+                    ok = True
+                    break
+            if not ok:
+                wrong.append(f"{e['detail']} at {e['epoch']}/{e['step']}")
+    detail = f"{adopts} stand-ins"
+    return not wrong, detail + (f"; for a live child: {len(wrong)} ({wrong[0]})" if wrong else "")
+
+
+def check_epochs(metrics: list[dict[str, Any]], epochs: int) -> tuple[bool, str]:
+    got = [r["epoch"] for r in metrics]
+    c = Counter(got)
+    doubled = sorted(e for e, n in c.items() if n > 1)
+    missing = sorted(set(range(epochs)) - set(got))
+    ok = got == list(range(epochs))
+    return ok, f"{len(got)} rows" + (f"; missing {missing[:5]}" if missing else "") + (
+        f"; doubled {doubled[:5]}" if doubled else ""
+    )
+
+
+def check_finished(out: Path, codes: list[int], crashes: int) -> tuple[bool, str]:
+    s = json.loads((out / "summary.json").read_text()) if (out / "summary.json").exists() else {"error": "no summary"}
+    final = codes[-1] if codes else None
+    ok = final == 0 and not s.get("error") and len(codes) == crashes + 1
+    return ok, f"exit codes {codes} ({crashes} crashes, each SIGKILLed)" + (f"; {s['error']}" if s.get("error") else "")
+
+
+def check_nothing_left(pids: set[int], out: Path) -> tuple[bool, str]:
+    deadline = time.monotonic() + 10.0
+    while (left := sorted(p for p in pids if _alive(p))) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    marker = str(out)
+    for d in os.listdir("/proc"):  # anything else that still names the run's directory
+        if d.isdigit() and int(d) != os.getpid() and _alive(int(d)):
+            try:
+                if marker.encode() in Path(f"/proc/{d}/cmdline").read_bytes():
+                    left.append(int(d))
+            except OSError:
+                pass
+    return not left, f"{len(pids)} processes seen" + (f"; still running: {sorted(set(left))}" if left else "")
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--minutes", type=float, default=60.0, help="how long the chaos run learns (sizes --epochs)")
+    p.add_argument("--quick", action="store_true", help="about a minute, a fault every 1.5 s, every kind once")
+    p.add_argument("--every", type=float, default=None, help="mean seconds between faults (default 5; quick 1.5)")
+    p.add_argument("--epochs", type=int, default=None, help="default: what --minutes holds")
+    p.add_argument("--steps", type=int, default=None, help="steps per epoch (default 500; quick 150)")
+    p.add_argument("--tail", type=int, default=None, help="last epochs with no new fault, measured (default 20)")
+    p.add_argument("--kinds", default=",".join(KINDS), help=f"comma-separated, of: {','.join(KINDS)}")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--deadline-ms", type=int, default=100)
+    p.add_argument("--beside", action="store_true", help="the fault-free run beside the chaos run, not before it")
+    p.add_argument("--out", type=Path, default=None, help="keep both runs here (default: a temporary directory)")
+    a = p.parse_args(argv)
+    a.kinds = [k.strip() for k in a.kinds.split(",") if k.strip()]
+    if bad := [k for k in a.kinds if k not in KINDS]:
+        p.error(f"--kinds: unknown {', '.join(bad)}; expected some of {', '.join(KINDS)}")
+    if a.quick:  # about 40 s of chaos on the 2-core machine, after a fault-free run of about 30 s
+        a.minutes = min(a.minutes, 1.0)
+        a.epochs = a.epochs or 40
+    a.every = a.every if a.every is not None else (1.5 if a.quick else 5.0)
+    a.steps = a.steps if a.steps is not None else (150 if a.quick else 500)
+    a.tail = a.tail if a.tail is not None else (4 if a.quick else 20)
+    if a.epochs is None:
+        a.epochs = max(a.tail + 4, round(a.minutes * 60 / (a.steps * EPOCH_S_PER_STEP)))
+    if a.every <= 0 or a.epochs <= a.tail or a.steps < 1:
+        p.error("--every must be > 0, --epochs more than --tail, --steps at least 1")
+    a.warmup = 1.0
+    a.run_id = "chaos"
+    with tempfile.TemporaryDirectory() as tmp:
+        base = Path(a.out or tmp)
+        base.mkdir(parents=True, exist_ok=True)
+        free_out, out = base / "fault-free", base / "chaos"
+        for d in (free_out, out):
+            if d.exists():
+                p.error(f"--out {base}: {d} exists already (a run of its own): give an empty directory")
+        c = Chaos(a, out, random.Random(a.seed), base / "runs.log")
+        t0 = time.monotonic()
+        c.start(c.argv("chaos-free", free_out))
+        assert c.proc is not None
+        free = c.proc
+        if not a.beside:
+            while free.poll() is None:  # a line a minute: alive
+                with contextlib.suppress(subprocess.TimeoutExpired):
+                    free.wait(timeout=60.0)
+                if free.poll() is None:
+                    done = len(_rows(free_out / "metrics.jsonl"))
+                    print(f"chaos: the fault-free run first: {(time.monotonic() - t0) / 60:.0f} min, "
+                          f"epoch {done}/{a.epochs}", flush=True)  # fmt: skip
+            print(
+                f"chaos: the fault-free run took {time.monotonic() - t0:.0f} s (exit {free.returncode}); now the chaos"
+            )
+        wall = c.soak()
+        free_code = free.wait()
+        summary = free_out / "summary.json"
+        free_s = json.loads(summary.read_text()).get("wall_seconds", 0.0) if summary.exists() else 0.0
+        events, metrics = _rows(out / "events.jsonl"), _rows(out / "metrics.jsonl")
+        free_metrics = _rows(free_out / "metrics.jsonl")
+        s_free, s_chaos = share(free_metrics, a.tail), share(metrics, a.tail)
+        kinds = Counter(i.kind for i in c.injected)
+        rows = [
+            ("every fault in events.jsonl at its exact step", *check_faults_at_steps(events, c.injected, a.steps)),
+            ("every restart restored the newest checkpoint", *check_restores(events)),
+            ("no agent stood in for a live child", *check_standins(events)),
+            ("every epoch once in metrics.jsonl", *check_epochs(metrics, a.epochs)),
+            ("the run finished", *check_finished(out, c.exit_codes, c.crashes)),
+            ("nothing left running", *check_nothing_left(c.pids, out)),
+            (
+                f"still learns: last {a.tail} within 0.5 >= fault-free - 10 points",
+                s_chaos >= s_free - 0.10,
+                f"{s_chaos:.0%} vs fault-free {s_free:.0%} (exit {free_code})",
+            ),
+            (
+                "every kind injected",
+                all(kinds[k] >= 1 for k in a.kinds),
+                ", ".join(f"{k} {kinds[k]}" for k in a.kinds),
+            ),
+        ]
+        n = len(c.injected)
+        print(
+            f"\nchaos soak: {a.epochs} epochs x {a.steps} steps, seed {a.seed}, process placement, deadline "
+            f"{a.deadline_ms} ms; {n} faults in {wall:.0f} s (one every {wall / max(n, 1):.1f} s), "
+            f"{c.crashes} crashes resumed, {len(c.refused)} refused, {sum(c.undelivered.values())} retried "
+            f"(the run was between a crash and its resume); fault-free run {free_s:.0f} s"
+            + (" (beside)" if a.beside else "")
+        )
+        print("| invariant | holds | what was seen |")
+        print("|---|---|---|")
+        for name, ok, detail in rows:
+            print(f"| {name} | {'yes' if ok else 'NO'} | {detail} |")
+        for r in c.refused[:5]:
+            print(f"refused: {r}")
+        failed = [name for name, ok, _ in rows if not ok]
+        if failed and a.out is None:
+            print(f"(the runs' log: {base / 'runs.log'}, kept only with --out)")
+        return 1 if failed else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
