@@ -77,6 +77,9 @@ class Chaos:
     resumes: int = 0
     exit_codes: list[int] = field(default_factory=list)
     order: list[str] = field(default_factory=list)
+    last_crash: float = -math.inf
+    loop: asyncio.AbstractEventLoop = field(default_factory=asyncio.new_event_loop)
+    client: Any = None  # kinswarm.actors.cli.control.Client, entered
 
     # -- the run -------------------------------------------------------------------------------------------
     def argv(self, run_id: str, out: Path) -> list[str]:
@@ -142,16 +145,25 @@ class Chaos:
             return ("cannot reach" not in line and "did not answer" not in line and "no supervisor" not in line), line
 
         async def one() -> tuple[bool, str]:
-            cfg = run_config_at(self.out)
+            if self.client is None:  # one session for many faults; a new one after a crash (a new endpoint)
+                cfg = run_config_at(self.out)
+                client = Client(cfg, tool_net(self.out, cfg, None))
+                self.client = await client.__aenter__()
             fault = make_fault(kind, [target], **{k: (int(v) if k == "steps" else v) for k, v in params.items()})
-            try:
-                async with Client(cfg, tool_net(self.out, cfg, None)) as c:
-                    reply = await c.fault(fault, timeout=5.0)
-            except ControlError as e:
-                return False, str(e)
+            reply = await self.client.fault(fault, timeout=5.0)
             return True, reply.error
 
-        return asyncio.run(one())
+        try:
+            return self.loop.run_until_complete(one())
+        except ControlError as e:
+            self.close_client()
+            return False, str(e)
+
+    def close_client(self) -> None:
+        if self.client is not None:
+            with contextlib.suppress(Exception):
+                self.loop.run_until_complete(self.client.__aexit__(None, None, None))
+            self.client = None
 
     def status_pids(self) -> dict[str, int]:
         from kinswarm.actors.cli.control import Client, ControlError, run_config_at, tool_net
@@ -180,6 +192,7 @@ class Chaos:
         for pid in pids:
             with contextlib.suppress(ProcessLookupError):
                 os.kill(pid, signal.SIGKILL)
+        self.close_client()
         self.exit_codes.append(self.proc.wait())
         for pid in pids:  # gone before the resume takes the run's lock
             while _alive(pid):
@@ -191,11 +204,18 @@ class Chaos:
 
     def inject(self, now: float, undo: list[tuple[float, str, str]]) -> None:
         kind = self.next_kind()
+        if kind == "crash" and now - self.last_crash < self.a.crash_gap and len(set(self.a.kinds)) > 1:
+            # a crash sets the run back to its last checkpoint and costs a restart of everything: spaced, or
+            # the run would spend its time starting again
+            self.order.insert(0, kind)
+            while kind == "crash":
+                kind = self.next_kind()
         if kind == "crash":
             if not self.crash():
                 self.order.append(kind)  # not up yet: later
                 self.undelivered[kind] += 1
             else:
+                self.last_crash = now
                 self.injected.append(Injected(kind, "swarm", {}, "crash", now, False))
             return
         target, params, undo_after = self.draw(kind)
@@ -227,6 +247,8 @@ class Chaos:
             assert self.proc is not None
             if self.proc.poll() is not None:
                 self.exit_codes.append(self.proc.returncode)
+                self.close_client()
+                self.loop.close()
                 break
             now = time.monotonic()
             if now >= next_line:
@@ -413,12 +435,13 @@ def check_nothing_left(pids: set[int], out: Path) -> tuple[bool, str]:
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--minutes", type=float, default=60.0, help="how long the chaos run learns (sizes --epochs)")
-    p.add_argument("--quick", action="store_true", help="about a minute, a fault every 1.5 s, every kind once")
-    p.add_argument("--every", type=float, default=None, help="mean seconds between faults (default 5; quick 1.5)")
+    p.add_argument("--quick", action="store_true", help="about a minute, a fault every 1-2 s, each kind at least once")
+    p.add_argument("--every", type=float, default=None, help="mean seconds between faults (default 5; quick 1)")
     p.add_argument("--epochs", type=int, default=None, help="default: what --minutes holds")
     p.add_argument("--steps", type=int, default=None, help="steps per epoch (default 500; quick 150)")
     p.add_argument("--tail", type=int, default=None, help="last epochs with no new fault, measured (default 20)")
     p.add_argument("--kinds", default=",".join(KINDS), help=f"comma-separated, of: {','.join(KINDS)}")
+    p.add_argument("--crash-gap", type=float, default=150.0, help="seconds at least between two crashes (quick: one)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--deadline-ms", type=int, default=100)
     p.add_argument("--beside", action="store_true", help="the fault-free run beside the chaos run, not before it")
@@ -430,7 +453,8 @@ def main(argv: list[str] | None = None) -> int:
     if a.quick:  # about 40 s of chaos on the 2-core machine, after a fault-free run of about 30 s
         a.minutes = min(a.minutes, 1.0)
         a.epochs = a.epochs or 40
-    a.every = a.every if a.every is not None else (1.5 if a.quick else 5.0)
+        a.crash_gap = math.inf
+    a.every = a.every if a.every is not None else (1.0 if a.quick else 5.0)
     a.steps = a.steps if a.steps is not None else (150 if a.quick else 500)
     a.tail = a.tail if a.tail is not None else (4 if a.quick else 20)
     if a.epochs is None:
