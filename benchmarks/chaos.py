@@ -47,7 +47,7 @@ PROCESS = ("kill", "freeze", "restart")
 MODEL = ("lock", "reverse", "scale", "deadzone", "offset", "lag", "disturb")
 LINK = ("drop", "delay", "duplicate", "corrupt")
 KINDS = (*PROCESS, *MODEL, *LINK, "crash")
-EPOCH_S_PER_STEP = 0.006  # process placement, chain4, on the 2-core machine under chaos: to size --minutes
+EPOCH_S_PER_STEP = 0.008  # process placement, chain4, 2-core machine, under chaos (0.009 --beside): sizes --minutes
 # events the supervisor records itself (at the sim's clock): in file order they never go back, but at a resume
 SUPERVISOR = {"fault", "refused", "exited", "restart", "lost", "alive", "thaw", "restored", "stall", "stall_end"}
 
@@ -436,7 +436,7 @@ def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--minutes", type=float, default=60.0, help="how long the chaos run learns (sizes --epochs)")
     p.add_argument("--quick", action="store_true", help="about a minute, a fault every 1-2 s, each kind at least once")
-    p.add_argument("--every", type=float, default=None, help="mean seconds between faults (default 5; quick 1)")
+    p.add_argument("--every", type=float, default=None, help="mean seconds between faults (default 4; quick 1)")
     p.add_argument("--epochs", type=int, default=None, help="default: what --minutes holds")
     p.add_argument("--steps", type=int, default=None, help="steps per epoch (default 500; quick 150)")
     p.add_argument("--tail", type=int, default=None, help="last epochs with no new fault, measured (default 20)")
@@ -454,7 +454,7 @@ def main(argv: list[str] | None = None) -> int:
         a.minutes = min(a.minutes, 1.0)
         a.epochs = a.epochs or 40
         a.crash_gap = math.inf
-    a.every = a.every if a.every is not None else (1.0 if a.quick else 5.0)
+    a.every = a.every if a.every is not None else (1.0 if a.quick else 4.0)
     a.steps = a.steps if a.steps is not None else (150 if a.quick else 500)
     a.tail = a.tail if a.tail is not None else (4 if a.quick else 20)
     if a.epochs is None:
