@@ -19,10 +19,11 @@ import zenoh
 from kinswarm.protocol import codec
 from kinswarm.protocol.keys import Keys
 
+from . import timeline as _timeline
 from .fleet import Gathering
 from .links import LINK_COUNTS, LinkFault, LinkFaults
 from .mailbox import Mailbox, _bus, _release
-from .timeline import HANDLED, timeline
+from .timeline import HANDLED
 
 #: a node logs the first rejected message on each of up to this many keys, then every 1000th: a flood on one key
 #: cannot hide a bad message on another, and the log stays bounded
@@ -92,7 +93,7 @@ class Node(LinkFaults, Gathering):
         self.fleet = 1
         self._gathered: dict[str, list[tuple[list[int], list[Any]]]] | None = None
         self._later: list[Callable[[], None]] = []  # what the lanes run once the gathered batches have left
-        self._tl = timeline(role, ident)  # None unless benchmarks/step_timeline.py asks (timeline.py)
+        self._tl = _timeline.timeline(role, ident)  # None unless benchmarks/step_timeline.py asks (timeline.py)
 
     # -- sending ---------------------------------------------------------------------------------
     def publisher(self, key: str) -> Any:
