@@ -14,6 +14,8 @@ dropped as warm-up. Per key, in the order of the step, medians in µs:
   wait     arrival -> handler start: the lock, the mailbox and the event loop (the wait this design adds)
   handler  the handler's wall time, and its CPU (what the step's logic costs; wall - CPU is preemption)
   inline   the share handled on Zenoh's thread rather than by the loop
+In `single` a handler runs the handlers of the messages it sends within its own (local delivery): its times hold
+theirs, and `wire` is the local bus's hand-over.
 
 Then the step period, the CPU a step (the actors from their first step message; every process of the run with its
 start-up, `getrusage` of the children), and `--floors`
@@ -69,12 +71,17 @@ def load(trace: Path) -> tuple[dict, dict, dict]:
     puts: dict[str, list[int]] = collections.defaultdict(list)
     arrive: dict[str, list[int]] = collections.defaultdict(list)
     handled: dict[str, list[tuple[int, int, int, str]]] = collections.defaultdict(list)
+    cpu: dict[str, tuple[int, int]] = {}  # pid -> the process's CPU ns at its first step message, at its close
+    who: dict[str, list[str]] = {}  # pid -> the actors it runs
     for f in sorted(trace.glob("*.tsv")):
         for line in f.read_text().splitlines():
             what, key, t, *rest = line.split("\t")
             key = key.split("/", 2)[-1]  # below ks/<run>/
-            if what == "cpu":
-                handled["cpu"].append((int(t), int(rest[0]), 0, ""))
+            if what == "cpu":  # one a process: the Nodes of one process (`single`) record the same CPU
+                pid = f.stem.rsplit("-", 1)[1]
+                who.setdefault(pid, []).append(f.stem.split("-")[1])
+                start, end = min(int(t), cpu.get(pid, (int(t), 0))[0]), max(int(rest[0]), cpu.get(pid, (0, 0))[1])
+                cpu[pid] = (start, end)
                 continue
             if what == "put":
                 puts[key].append(int(t))
@@ -82,15 +89,17 @@ def load(trace: Path) -> tuple[dict, dict, dict]:
                 arrive[key].append(int(t))
             else:
                 handled[key].append((int(t), int(rest[0]), int(rest[1]), rest[2]))
+    handled["cpu"] = [(start, end, 0, "+".join(sorted(who[pid]))) for pid, (start, end) in cpu.items()]
     return puts, arrive, handled
 
 
-def table(trace: Path, epochs: int) -> tuple[list[tuple], float, int, float]:
+def table(trace: Path, epochs: int) -> tuple[list[tuple], float, int, float, dict[str, float]]:
     """Per key (at, wire, wait, handler, cpu, inline), the step period (µs), the steps kept, and the actors' CPU a
     step (µs: every thread of every actor process, from its first step message to its Node's close)."""
     puts, arrive, handled = load(trace)
     tasks = sorted(puts["sim/task"])
-    actors_cpu = sum(end - start for start, end, _, _ in handled.pop("cpu", [])) / len(tasks) / 1e3
+    per = {who: (end - start) / len(tasks) / 1e3 for start, end, _, who in handled.pop("cpu", [])}
+    actors_cpu = sum(per.values())
     late = tasks[len(tasks) // epochs :]
     period = statistics.median(b - a for a, b in zip(late, late[1:], strict=False))
     rows = []
@@ -118,7 +127,7 @@ def table(trace: Path, epochs: int) -> tuple[list[tuple], float, int, float]:
             )
         )
     rows.sort(key=lambda r: r[1])
-    return rows, period / 1e3, len(tasks) - len(tasks) // epochs, actors_cpu
+    return rows, period / 1e3, len(tasks) - len(tasks) // epochs, actors_cpu, per
 
 
 def _latest(sorted_times: list[int], t: int) -> int | None:
@@ -139,7 +148,7 @@ def main() -> None:
     load1 = os.getloadavg()[0]
     with tempfile.TemporaryDirectory() as d:
         cpu = record(a.placement, a.epochs, a.steps, Path(d))
-        rows, period, kept, actors_cpu = table(Path(d), a.epochs)
+        rows, period, kept, actors_cpu, per = table(Path(d), a.epochs)
     floors: dict[str, list[float]] = {"async": [], "block": []}
     for _ in range(a.floors):
         for mode in floors:
@@ -156,6 +165,7 @@ def main() -> None:
         end="",
     )
     print(f"{1e6 * cpu / steps:.0f} µs every process of the whole run (start-up included)")
+    print("  by process (µs a step): " + ", ".join(f"{k} {v:.0f}" for k, v in sorted(per.items())))
     for mode, v in floors.items():
         if v:
             r = statistics.median(v)
