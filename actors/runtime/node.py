@@ -19,9 +19,11 @@ import zenoh
 from kinswarm.protocol import codec
 from kinswarm.protocol.keys import Keys
 
+from . import timeline as _timeline
 from .fleet import Gathering
 from .links import LINK_COUNTS, LinkFault, LinkFaults
 from .mailbox import Mailbox, _bus, _release
+from .timeline import HANDLED
 
 #: a node logs the first rejected message on each of up to this many keys, then every 1000th: a flood on one key
 #: cannot hide a bad message on another, and the log stays bounded
@@ -91,6 +93,7 @@ class Node(LinkFaults, Gathering):
         self.fleet = 1
         self._gathered: dict[str, list[tuple[list[int], list[Any]]]] | None = None
         self._later: list[Callable[[], None]] = []  # what the lanes run once the gathered batches have left
+        self._tl = _timeline.timeline(role, ident)  # None unless benchmarks/step_timeline.py asks (timeline.py)
 
     # -- sending ---------------------------------------------------------------------------------
     def publisher(self, key: str) -> Any:
@@ -116,7 +119,10 @@ class Node(LinkFaults, Gathering):
     def send(self, key: str, msg: Any) -> None:
         if not key.startswith(self._step_prefixes):
             self.publisher(key).put(codec.encode(msg, self.keys.run, self.ident, self.key))
-        elif self._link_faults:
+            return
+        if self._tl is not None:
+            self._tl.put(key)
+        if self._link_faults:
             for delay, p in self._fault(codec.encode(msg, self.keys.run, self.ident, self.key)):
                 if delay:  # never sleep: the loop puts it later
                     self._loop.call_later(delay, self._put_late, key, p)
@@ -156,6 +162,8 @@ class Node(LinkFaults, Gathering):
 
             def on_sample(s: Any) -> None:  # zenoh thread
                 key, payload = str(s.key_expr), s.payload.to_bytes()
+                if self._tl is not None:
+                    self._tl.arrive(key)
                 if self._link_faults:
                     self._receive_faulty(key, payload)
                 else:
@@ -186,13 +194,25 @@ class Node(LinkFaults, Gathering):
                     push(key, payload)
                 else:
                     self.inline_handled += 1
-                    handler(key, payload)
+                    if self._tl is None:
+                        handler(key, payload)
+                    else:
+                        self._timed(key, payload, handler, "inline")
             except BaseException as e:  # next() raises it on the loop
                 self._fail(e)
             finally:
                 self.lock.release()
         else:
             push(key, payload)
+
+    def _timed(self, key: str, payload: Any, handler: Callable[[str, Any], Any], where: str) -> Any:
+        """`handler(key, payload)`, its start, end and thread CPU recorded (benchmarks/step_timeline.py)."""
+        assert self._tl is not None
+        t0, c0 = time.perf_counter_ns(), time.thread_time_ns()
+        try:
+            return handler(key, payload)
+        finally:
+            self._tl.rows.append((HANDLED, key, t0, time.perf_counter_ns(), time.thread_time_ns() - c0, where))
 
     def _fail(self, e: BaseException) -> None:  # zenoh thread, lock held
         if self._failure is None:
@@ -223,7 +243,16 @@ class Node(LinkFaults, Gathering):
             try:
                 if self._failure is not None:  # an inline handler raised: the actor fails as if its loop had
                     raise self._failure
-                yield self.mailbox.pop()
+                item = self.mailbox.pop()
+                if self._tl is None or not item[0].startswith(self._step_prefixes):
+                    yield item
+                else:  # a step message that waited for the loop (benchmarks/step_timeline.py)
+                    t0, c0 = time.perf_counter_ns(), time.thread_time_ns()
+                    try:
+                        yield item
+                    finally:
+                        cpu = time.thread_time_ns() - c0
+                        self._tl.rows.append((HANDLED, item[0], t0, time.perf_counter_ns(), cpu, "loop"))
             except BaseException:
                 self.inline = False
                 raise
@@ -236,6 +265,8 @@ class Node(LinkFaults, Gathering):
         else into the mailbox."""
         if self._closed:
             return
+        if self._tl is not None:
+            self._tl.arrive(key)
         if self._link_faults and type(payload) is Local:  # faults act on bytes (corrupt: garbage of the same length)
             payload = payload.encoded()
         if asyncio._get_running_loop() is not self._loop:  # another loop or thread: as from Zenoh
@@ -330,6 +361,8 @@ class Node(LinkFaults, Gathering):
 
     def close(self) -> None:
         self.serve_inline(False)
+        if self._tl is not None:
+            self._tl.write()
         if not self._closed:
             self._bus.remove(self)
             _release(self._bus)
