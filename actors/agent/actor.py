@@ -74,7 +74,10 @@ class Agent:
             obs = settings.observation
             n_visible = sum(topo.agents[c].has_dof for c in self.spec.children)
             seed = agent_seed(cfg.seed, agent_id)
-            self.learner = learner or kind_of(cfg.learner, cfg.source).build(settings, n_visible, seed)
+            kind, index = kind_of(cfg.learner, cfg.source), topo.dof_agents.index(agent_id)
+            self.learner = learner or kind.build(
+                settings, n_visible, seed, agent=agent_id, index=index, options=cfg.learner
+            )
         self.passes = AgentStep(topo, agent_id, task, obs, cfg.action_rad)
         self.geom, self.visible = self.passes.geom, self.passes.visible
         self.trace = None  # what it saw and chose, for the recording (run.record_agents)

@@ -34,7 +34,10 @@ RNG = "rng_state"  # a checkpoint's array of the learner's random generator (JSO
 
 def learned_state(learner: Any) -> dict[str, np.ndarray]:
     """What a checkpoint holds of a learner: its state dict and where its random generator is, so a run resumed from
-    it draws what the run would have drawn (a restart's exploration goes on as it would have, too)."""
+    it draws what the run would have drawn (a restart's exploration goes on as it would have, too). A learner that
+    draws nothing (a frozen policy: no `rng`) has its state dict alone."""
+    if not hasattr(learner, "rng"):
+        return learner.state_dict()
     rng = json.dumps(learner.rng.bit_generator.state).encode()
     return {**learner.state_dict(), RNG: np.frombuffer(rng, dtype=np.uint8)}
 

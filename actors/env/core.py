@@ -121,7 +121,14 @@ class Stepper:
         from kinswarm.actors.agent.actor import agent_seed
 
         return {
-            a: self.kind.build(self.settings[a], len(self.agents[a].visible), agent_seed(self.cfg.seed, a))
+            a: self.kind.build(
+                self.settings[a],
+                len(self.agents[a].visible),
+                agent_seed(self.cfg.seed, a),
+                agent=a,
+                index=self.dof.index(a),
+                options=self.cfg.learner,
+            )
             for a in self.deciders
         }
 

@@ -6,20 +6,21 @@ Every kind is built over an agent's observation (observation.py) with the run's 
 Each says which [learner] fields it does not take, so a run file that gives one is refused by name.
 
 Adding a kind: a class in a module of this package that meets JointLearner, and a `LearnerKind` in KINDS naming it
-(docs/architecture.md, "Learners").
+(docs/architecture.md, "Learners"). A kind that needs more than numpy (a policy run by onnxruntime) lives in its own
+package and is named here by its module's full path, with the [learner] fields of its own that it `takes`: its module
+then has `build(settings, n_visible, seed, *, agent, index, options)` and `check(settings, order, options)`.
 """
 
 from __future__ import annotations
 
-from collections.abc import Collection, Sequence
-from dataclasses import dataclass
+from collections.abc import Collection, Mapping, Sequence
+from dataclasses import dataclass, fields
 from importlib import import_module
-from typing import TYPE_CHECKING, Protocol, runtime_checkable
+from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
-if TYPE_CHECKING:
-    from .settings import LearnerSettings
+from .settings import OBSERVATION_FIELDS, LearnerSettings
 
 #: the kind a run has when its [learner] table names none: the paper's
 DEFAULT = "fuzzy"
@@ -66,21 +67,50 @@ class LearnerKind:
 
     name: str
     summary: str
-    module: str  # of this package
-    cls: str
+    module: str  # of this package, or a full module path (a kind outside it: kinswarm.actors.policies.onnx)
+    cls: str  # the class built; for a kind outside this package, its module's builder function
     refuses: tuple[tuple[str, str], ...] = ()  # (field, why it does not apply)
+    takes: tuple[str, ...] = ()  # [learner] fields of its own, beyond LearnerSettings (given to build as options)
 
-    def build(self, settings: LearnerSettings, n_visible: int, seed: int | Sequence[int]) -> JointLearner:
-        cls = getattr(import_module(f".{self.module}", __package__), self.cls)
-        return cls(settings, n_visible, seed)
+    def _module(self):  # noqa: ANN202 - a module
+        return import_module(self.module if "." in self.module else f".{self.module}", __package__)
+
+    def build(
+        self,
+        settings: LearnerSettings,
+        n_visible: int,
+        seed: int | Sequence[int],
+        *,
+        agent: str = "",
+        index: int = 0,
+        options: Mapping[str, Any] | None = None,
+    ) -> JointLearner:
+        """`agent`, its `index` in the robot's DOF order and the run's [learner] table (`options`) reach only a kind
+        that takes fields of its own: the paper's learners are the same for every agent but their seed."""
+        make = getattr(self._module(), self.cls)
+        if not self.takes:
+            return make(settings, n_visible, seed)
+        return make(settings, n_visible, seed, agent=agent, index=index, options=options or {})
+
+    def check(self, settings: Mapping[str, LearnerSettings], order: Sequence[str], options: Mapping[str, Any]) -> None:
+        """What a kind with fields of its own opens before a run starts (its files), tried now: ValueError if bad."""
+        if self.takes:
+            self._module().check(settings, order, options)
 
     def refused(self, given: Collection[str]) -> str | None:
         """`field: why` for the first field in `given` this kind does not take, else None."""
         for field, why in self.refuses:
             if field in given:
                 return f"{field}: the {self.name} learner does not take it ({why})"
+        for field in given:
+            if field in OWN_FIELDS and field not in self.takes:
+                return f"{field}: the {self.name} learner does not take it (kind {OWN_FIELDS[field]!r} does)"
         return None
 
+
+#: the learner's own settings (LearnerSettings beyond the observation's fields): what a policy that learns nothing
+#: refuses
+_LEARNING_FIELDS = tuple(f.name for f in fields(LearnerSettings) if f.name not in OBSERVATION_FIELDS)
 
 KINDS: dict[str, LearnerKind] = {
     k.name: k
@@ -111,8 +141,19 @@ KINDS: dict[str, LearnerKind] = {
                 ("top_k", "one cell holds each state: no memberships to keep"),
             ),
         ),
+        LearnerKind(
+            "onnx",
+            "a frozen policy read from an ONNX file, run by onnxruntime: trained anywhere, acting as the agents",
+            "kinswarm.actors.policies.onnx",
+            "build",
+            tuple((f, "an ONNX policy is frozen: it has no fuzzy grid and learns nothing") for f in _LEARNING_FIELDS),
+            ("policy",),
+        ),
     )
 }
+
+#: every kind's fields of its own, with the kind that takes it: other kinds refuse them by name
+OWN_FIELDS: dict[str, str] = {f: k.name for k in KINDS.values() for f in k.takes}
 
 
 def kinds() -> tuple[str, ...]:

@@ -45,7 +45,7 @@ from pathlib import Path
 from typing import Any
 
 import msgspec
-from kinswarm.actors.learning.kinds import DEFAULT, LearnerKind, learner_kind
+from kinswarm.actors.learning.kinds import DEFAULT, OWN_FIELDS, LearnerKind, learner_kind
 from kinswarm.actors.learning.settings import SPATIAL_STATES, LearnerSettings
 from kinswarm.actors.learning.state import OWN_EXTRAS
 from kinswarm.actors.run.config import (
@@ -185,7 +185,7 @@ def resolve(
             hint = _OLD_LAYOUT.get(key, f"expected the tables {', '.join(SECTIONS)}, and base")
             raise SpecError(source, key, f"unknown table ({hint})")
     for keys, value in overrides:  # given on the command line: paths are the working directory's
-        put(data, keys, absolute(value, Path.cwd()) if keys[0] == "run" and keys[-1] in PATH_KEYS else value)
+        put(data, keys, absolute(value, Path.cwd()) if keys in PATH_KEYS else value)
 
     for name in ("robot", "task"):  # the tables a run cannot go without, before what is wrong inside one of them
         if name not in data:
@@ -193,9 +193,13 @@ def resolve(
     robot, topo = _robot(data.get("robot"), source)
     scene = parse_scene(data.get("scene"), topo, source)
     task = _task(data.get("task"), topo, scene, source)
-    learner_keys = {"kind", *(f.name for f in dataclasses.fields(LearnerSettings))}
+    learner_keys = {"kind", *OWN_FIELDS, *(f.name for f in dataclasses.fields(LearnerSettings))}
     learner = table(source, "learner", data.get("learner", {}), learner_keys)
-    learner_settings(task, learner, source)  # every agent's, checked now
+    settings = learner_settings(task, learner, source)  # every agent's, checked now
+    try:  # and what a kind opens (a policy's files), tried now: not in an agent's process after the spawn
+        kind_of(learner, source).check(settings, topo.dof_agents, learner)
+    except ValueError as e:
+        raise SpecError(source, "learner.policy", str(e)) from None
     run = table(source, "run", data.get("run", {}), set(RUN_KEYS))
     fields = {("from_dir" if k == "from" else k): v for k, v in run.items()}
     controller = run.get("controller", "agents")  # a model-based law's run is a baseline's: named so in runs/
@@ -288,11 +292,11 @@ def check_checkpoints(run_dir: Path, task: TaskDef, learner: Mapping[str, Any], 
         )
     settings = learner_settings(task, learner, source)
     kind = kind_of(learner, source)
-    for agent in topo.dof_agents:
+    for i, agent in enumerate(topo.dof_agents):
         arrays, _ = load_checkpoint(run_dir / "agents" / f"{agent}.npz", agent=agent, learner=kind.name)
         visible = sum(topo.agents[c].has_dof for c in topo.agents[agent].children)
         try:
-            kind.build(settings[agent], visible, 0).load_state_dict(arrays)
+            kind.build(settings[agent], visible, 0, agent=agent, index=i, options=learner).load_state_dict(arrays)
         except ValueError as e:
             raise CheckpointError(
                 f"run.from {run_dir}: {agent}'s checkpoint does not fit this run's learner ({e}); "
@@ -324,6 +328,7 @@ def learner_settings(task: TaskDef, learner: Mapping[str, Any], source: str = "<
     if (refused := kind.refused(learner)) is not None:
         field, _, why = refused.partition(": ")
         raise SpecError(source, f"learner.{field}", why)
+    learner = {k: v for k, v in learner.items() if k not in kind.takes}  # a kind's own: build's options
     fits = SPATIAL_STATES if task.topo.spatial else ("planar",)
     state = learner.get("state")
     if isinstance(state, str) and state not in fits:  # before the settings' own checks, which assume a kind's sets

@@ -14,7 +14,8 @@ import msgspec
 from kinswarm.actors.run.config import ConfigError
 from kinswarm.protocol.spec import SpecError
 
-PATH_KEYS = ("from", "scenario")  # [run] fields that name files, resolved against where they were written
+#: fields that name files, resolved against where they were written (a file's against it, a flag's the working dir)
+PATH_KEYS = (("run", "from"), ("run", "scenario"), ("learner", "policy"))
 
 
 def spec_error(e: msgspec.ValidationError, source: str, section: str, values: Any = None) -> SpecError:
@@ -75,11 +76,10 @@ def value_at(values: Any, path: str) -> Any:
 
 
 def absolute_paths(data: dict[str, Any], base: Path) -> None:
-    run = data.get("run")
-    if isinstance(run, dict):
-        for key in PATH_KEYS:
-            if key in run:
-                run[key] = absolute(run[key], base)
+    for section, key in PATH_KEYS:
+        table = data.get(section)
+        if isinstance(table, dict) and key in table:
+            table[key] = absolute(table[key], base)
     if isinstance(data.get("robot"), str):
         data["robot"] = absolute(data["robot"], base)
 

@@ -51,8 +51,10 @@ class InProcessRun:
         self.order = list(topo.order)  # top-down: every parent before its children
         self.agents = {a: AgentStep(topo, a, self.task, obs.get(a), cfg.action_rad) for a in self.order}
         self.learners = {
-            a: self.kind.build(settings[a], len(self.agents[a].visible), agent_seed(cfg.seed, a))
-            for a in topo.dof_agents
+            a: self.kind.build(
+                settings[a], len(self.agents[a].visible), agent_seed(cfg.seed, a), agent=a, index=i, options=cfg.learner
+            )
+            for i, a in enumerate(topo.dof_agents)
         }
         self.epochs_before = dict.fromkeys(self.learners, 0)
         if cfg.from_dir:
