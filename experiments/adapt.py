@@ -17,6 +17,13 @@ asked for the next test goal from where it stands (a second episode, the motor s
 is within 0.5 for good, against a fresh swarm in the same two episodes (500 steps old at the fault), the rule and
 the pseudo-inverse. At the goal itself a controller that holds still does not feel a reversed motor; on the way to
 the next goal every one does.
+
+Plasticity (`[learner] plasticity`, actors/learning/plasticity.py): the same trained swarm with "direction" (each agent
+finds which way its own motor turns from its own encoder) as a further controller in every table; each of the 30
+goals as its own episode started afresh from the trained checkpoint, the fault from step 0 (`kinswarm run --from
+TRAINED --learn on`); a live sequence per fault kind (reversed one joint, two, scale, offset, lock): at a goal intact,
+the fault from the next episode on, then LIVE_SEQUENCE next goals from where it stands; and the frozen swarm on test
+sets 0 and 1 with the mechanism on, which must keep its generalisation.
 """
 
 from __future__ import annotations
@@ -50,8 +57,26 @@ CONDITIONS: dict[str, list[tuple[str, list[str], dict[str, Any]]]] = {
 }
 QUICK_CONDITIONS = ("intact", "a1 reversed")
 LAWS = {"rule": "rule", "pseudo-inverse": "pinv", "greedy per joint": "greedy"}
-CONTROLLERS = ("fresh, learning", "trained, learning", "trained, frozen", *LAWS)
+PLASTIC = "trained + direction, learning"
+CONTROLLERS = ("fresh, learning", "trained, learning", PLASTIC, "trained, frozen", *LAWS)
 FRESH = settings()  # the default learner; the chain's default reward, shaped
+# the recipe's learner with the motor-direction plasticity (actors/learning/plasticity.py); it changes nothing while
+# every motor turns as commanded (tests/test_plasticity.py), so it runs on the checkpoint the recipe trained
+DIRECTION = settings(**dict(LEARNER), plasticity="direction")
+# each goal its own episode from the trained checkpoint, the fault from step 0
+AFRESH_CONDITIONS = ("a1 reversed", "a2, a3 reversed", "a1 reads +10°")
+AFRESH = ("trained, learning", PLASTIC)
+# the live sequence: at a goal intact, the fault from the next episode on, then this many next goals
+LIVE_SEQUENCE = 10
+SEQUENCE_FAULTS: dict[str, list[tuple[str, list[str], dict[str, Any]]]] = {
+    "a1 reversed": [("reverse", ["a1"], {})],
+    "a2, a3 reversed": [("reverse", ["a2", "a3"], {})],
+    "a2 gain x0.3": [("scale", ["a2"], {"factor": 0.3})],
+    "a1 reads +10°": [("offset", ["a1"], {"degrees": 10.0})],
+    "a2 locked": [("lock", ["a2"], {})],
+}
+SEQUENCE = ("fresh, learning", "trained, learning", PLASTIC, "rule", "pseudo-inverse")
+FROZEN_SETS = (0, 1)
 LIVE = (
     "trained, learning",
     "trained, learning, exploring afresh",
@@ -126,6 +151,17 @@ def run(ctx: Context) -> dict[str, Any]:
             specs[(label, "trained, learning", seed)] = [
                 Spec(f"adapt-trained-{slug(label)}", reward="graded", **trained_common, **common)
             ]
+            specs[(label, PLASTIC, seed)] = [
+                Spec(f"adapt-direction-{slug(label)}", reward="graded", **{**trained_common, "learner": DIRECTION},
+                     **common)
+            ]  # fmt: skip
+            if label in AFRESH_CONDITIONS:
+                for c, learner in zip(AFRESH, (LEARNER, DIRECTION), strict=True):
+                    specs[(label, f"afresh {c}", seed)] = [
+                        Spec(f"adapt-afresh-{slug(c)}-{slug(label)}-g{i}", reward="graded", seed=seed, epochs=1,
+                             goals=(g,), learner=learner, from_dir=t, **common)
+                        for i, g in enumerate(goals)
+                    ]  # fmt: skip
             specs[(label, "trained, frozen", seed)] = [
                 Spec(
                     f"adapt-frozen-{slug(label)}",
@@ -170,7 +206,39 @@ def run(ctx: Context) -> dict[str, Any]:
         for seed in ctx.seed_list:
             live[(name, seed)] = runs_
 
-    flat = [s for group in (*specs.values(), *live.values()) for s in group]
+    n_seq = 2 if q else LIVE_SEQUENCE
+    seq: dict[tuple[str, str, int], list[Spec]] = {}
+    for label, faults in SEQUENCE_FAULTS.items():
+        if q and label not in QUICK_CONDITIONS:
+            continue
+        path = scenario(ctx, "seq-" + slug(label), [(0, f, t, {**p, "epoch": 1}) for f, t, p in faults])
+        for seed in ctx.seed_list:
+            t = str(trained[seed].out)
+            order = [goals[(seed * n_seq + i) % len(goals)] for i in range(n_seq + 1)]  # a goal, then the next ones
+            common = {"seed": seed, "epochs": n_seq + 1, "goals": tuple(order), "steps": steps, "scenario": path,
+                      "successive": True}  # fmt: skip
+            tag = f"{slug(label)}-s{seed}"
+            seq[(label, "fresh, learning", seed)] = [Spec(f"adapt-seq-fresh-{tag}", learner=FRESH, **common)]
+            seq[(label, "trained, learning", seed)] = [
+                Spec(f"adapt-seq-trained-{tag}", learner=LEARNER, reward="graded", from_dir=t, **common)
+            ]
+            seq[(label, PLASTIC, seed)] = [
+                Spec(f"adapt-seq-direction-{tag}", learner=DIRECTION, reward="graded", from_dir=t, **common)
+            ]
+            for name, law in (("rule", "rule"), ("pseudo-inverse", "pinv")):
+                seq[(label, name, seed)] = [Spec(f"adapt-seq-{law}-{tag}", controller=law, **{**common, "seed": 0})]
+    n_frozen = 4 if q else len(halton(0))
+    frozen: dict[tuple[int, str, int], list[Spec]] = {}
+    for b in FROZEN_SETS:
+        test = tuple(halton(b)[:n_frozen])
+        for seed in ctx.seed_list:
+            for c, learner in (("trained, frozen", LEARNER), ("trained + direction, frozen", DIRECTION)):
+                frozen[(b, c, seed)] = [
+                    Spec(f"adapt-frozen-set{b}-{slug(c)}", seed=seed, epochs=len(test), goals=test, steps=steps,
+                         learner=learner, reward="graded", learn=False, explore=False, from_dir=str(trained[seed].out))
+                ]  # fmt: skip
+
+    flat = [s for group in (*specs.values(), *live.values(), *seq.values(), *frozen.values()) for s in group]
     unique = list(dict.fromkeys(flat))
     done = dict(zip(unique, run_specs(ctx, unique, "episodes"), strict=True))
 
@@ -181,7 +249,8 @@ def run(ctx: Context) -> dict[str, Any]:
     per: dict[str, dict[str, Any]] = {}
     for label in conditions:
         per[label] = {}
-        for c in CONTROLLERS:
+        afresh = [f"afresh {c}" for c in AFRESH] if label in AFRESH_CONDITIONS else []
+        for c in (*CONTROLLERS, *afresh):
             eps = [episodes(specs[(label, c, seed)]) for seed in ctx.seed_list]
             finals = [[e[-1] for e in seed_eps] for seed_eps in eps]
             reach = [steps_to_within(e) for seed_eps in eps for e in seed_eps]
@@ -213,6 +282,25 @@ def run(ctx: Context) -> dict[str, Any]:
             "mean_curve": np.mean([h + o for h, o in zip(held, onward, strict=True)], axis=0).tolist(),
         }
 
+    sequence: dict[str, dict[str, Any]] = {}
+    for (label, c, _seed), group in seq.items():
+        onward = episodes(group)[1:]  # the goals after the fault
+        reach = [steps_to_within(e) for e in onward]
+        row = sequence.setdefault(label, {}).setdefault(c, {"within": [], "steps": []})
+        row["within"].append(float(np.mean([e[-1] <= WITHIN for e in onward])))
+        row["steps"] += reach
+    for cs in sequence.values():
+        for row in cs.values():
+            row["median_steps_to_within"] = median_steps(row["steps"])
+            row["never_within"] = int(np.sum(np.isinf(row["steps"])))
+            row["steps"] = [None if math.isinf(x) else x for x in row["steps"]]
+    frozen_per: dict[str, dict[str, Any]] = {}
+    for (b, c, _seed), group in frozen.items():
+        finals = [e[-1] for e in episodes(group)]
+        row = frozen_per.setdefault(f"test set {b}", {}).setdefault(c, {"mean": [], "within": []})
+        row["mean"].append(float(np.mean(finals)))
+        row["within"].append(float(np.mean([f <= WITHIN for f in finals])))
+
     rep = Report(ctx, "What learning buys: faults in the robot's model", "ours (the paper's model-free claim)")
     rep.results.update(
         {
@@ -222,9 +310,12 @@ def run(ctx: Context) -> dict[str, Any]:
             "conditions": {k: [{"fault": f, "targets": t, **p} for f, t, p in v] for k, v in conditions.items()},
             "per_condition": per,
             "live": {"steps": live_steps, "reversed_at": live_at, "goals": n_live, "per": live_per},
+            "sequence": {"next_goals": n_seq, "per": sequence},
+            "frozen": {"goals": n_frozen, "per": frozen_per},
         }
     )
     _text(rep, ctx, per, live_per, steps, n_goals, level, recipe.epochs, live_steps, live_at, n_live)
+    _plasticity_text(rep, ctx, per, sequence, frozen_per, n_seq, n_frozen)
     _figures(rep, per, live_per, live_at)
     rep.write(
         {
@@ -346,6 +437,47 @@ def _text(rep: Report, ctx: Context, per: dict, live: dict, steps: int, n_goals:
     )
 
 
+def _plasticity_text(rep: Report, ctx: Context, per: dict, sequence: dict, frozen: dict, n_seq: int,
+                     n_frozen: int) -> None:  # fmt: skip
+    rep.text(
+        "## Plasticity: the motor's direction, from the agent's own encoder",
+        "",
+        f"'{PLASTIC}' is the trained swarm with `[learner] plasticity = \"direction\"`: each agent compares the move "
+        "it meant with the change of its own joint angle; when they keep disagreeing it sends the opposite command "
+        "from then on (actors/learning/plasticity.py). It reads no fault. 'afresh': each goal its own episode from "
+        "the trained checkpoint, the fault from step 0 (`kinswarm run … --from TRAINED --learn on`).",
+    )
+    rows = []
+    for label, cs in per.items():
+        for c in (k for k in cs if k.startswith("afresh")):
+            w, ws = mean_std(cs[c]["within"])
+            rows.append([label, c, f"{100 * w:.0f} ± {100 * ws:.0f} %", f"{mean_std(cs[c]['mean_final'])[0]:.3f}",
+                         _fmt_steps(cs[c]["median_steps_to_within"]), cs[c]["never_within"]])  # fmt: skip
+    if rows:
+        rep.table(["fault", "controller", f"within {WITHIN}", "mean final error", "median steps to within", "never"],
+                  rows)  # fmt: skip
+    rep.text(
+        "",
+        "The live sequence: at a goal intact (one episode, learning), the fault from the next episode on, then "
+        f"{n_seq} next goals from where it stands ({len(ctx.seed_list)} seeds: "
+        f"{n_seq * len(ctx.seed_list)} goals per row).",
+    )
+    rows = []
+    for label, cs in sequence.items():
+        for i, (c, row) in enumerate(cs.items()):
+            w, ws = mean_std(row["within"])
+            rows.append([label if i == 0 else "", c, f"{100 * w:.0f} ± {100 * ws:.0f} %",
+                         _fmt_steps(row["median_steps_to_within"]), row["never_within"]])  # fmt: skip
+    rep.table(["fault", "controller", f"next goals within {WITHIN}", "median steps to within", "never"], rows)
+    rep.text("", f"Intact and frozen, on {n_frozen} goals of each test set: the mechanism must not cost the skill.")
+    rows = []
+    for b, cs in frozen.items():
+        for c, row in cs.items():
+            m, ms = mean_std(row["mean"])
+            rows.append([b, c, f"{m:.3f} ± {ms:.3f}", f"{100 * mean_std(row['within'])[0]:.0f} %"])
+    rep.table(["goals", "controller", "mean final error", f"within {WITHIN}"], rows)
+
+
 def _figures(rep: Report, per: dict, live: dict, live_at: int) -> None:
     plt = plt_module()
     n = len(per)
@@ -354,7 +486,7 @@ def _figures(rep: Report, per: dict, live: dict, live_at: int) -> None:
     fig, axes = plt.subplots(rows, cols, figsize=(6.5 * cols, 2.9 * rows), squeeze=False, sharex=True)
     for ax, (label, cs) in zip(axes.flat, per.items(), strict=False):
         for i, c in enumerate(CONTROLLERS):
-            ax.plot(cs[c]["mean_curve"], lw=1.1, color=f"C{i}", label=c)
+            ax.plot(cs[c]["mean_curve"], lw=1.1, color=f"C{i}", label=c)  # the afresh rows: in the tables only
         ax.axhline(WITHIN, color="grey", ls="--", lw=0.8)
         ax.set_title(f"{label} (from step 0)", fontsize=9)
         ax.set_ylabel("error, mean over episodes")

@@ -1,0 +1,152 @@
+"""`[learner] plasticity = "surprise"`: the gate turns plastic on a run of surprising TD errors and settles after;
+it reads only the agent's own experience, so its decisions are the same whether a fault is announced (a scenario's
+event, recorded) or the body just changed with no word to anyone."""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Mapping
+from pathlib import Path
+
+import numpy as np
+import pytest
+from conftest import ROOT
+from kinswarm.actors.learning.learner import Learner
+from kinswarm.actors.learning.plasticity import BOOST, WARMUP, MotorDirection, SurpriseGate
+from kinswarm.actors.learning.settings import LearnerSettings
+from kinswarm.actors.run.runfile import load_run
+from kinswarm.actors.supervisor.inprocess import InProcessRun
+from kinswarm.sim import kinematics
+
+
+def test_the_gate_turns_plastic_on_a_run_of_surprises_and_settles_after() -> None:
+    gate, rng = SurpriseGate(), np.random.default_rng(0)
+    for _ in range(WARMUP + 300):  # the usual: TD errors of size ~1
+        gate.update(float(rng.normal()))
+    assert gate.factor == 1.0 and not gate.surprised
+    usual = gate.usual
+    gate.update(20.0)  # one odd TD error is not a run of them
+    assert gate.factor == 1.0
+    for _ in range(60):  # a run of TD errors 20x the usual
+        gate.update(20.0 * float(np.sign(rng.normal())))
+    assert gate.surprised and gate.factor == BOOST
+    # only the updates before the gate turned count towards the usual: a long surprise does not become usual
+    assert gate.usual == pytest.approx(usual, rel=0.1)
+    for _ in range(200):  # experience matches again: the boost fades
+        gate.update(float(rng.normal()))
+    assert not gate.surprised and 1.0 < gate.factor < BOOST / 2
+    for _ in range(600):
+        gate.update(float(rng.normal()))
+    assert gate.factor == pytest.approx(1.0, abs=0.01)
+
+
+def test_a_fresh_gate_waits_for_its_usual_and_a_checkpoint_keeps_it() -> None:
+    gate = SurpriseGate()
+    for _ in range(WARMUP - 1):
+        gate.update(100.0 if gate.seen % 2 else 0.0)
+    assert gate.factor == 1.0  # no usual yet: nothing is surprising
+    learner = Learner(LearnerSettings(plasticity="surprise"), 1, 0)
+    rng = np.random.default_rng(1)
+    for _ in range(WARMUP + 50):
+        learner.step(rng.random(6), float(rng.normal()), [1])
+    state = learner.state_dict()
+    again = Learner(LearnerSettings(plasticity="surprise"), 1, 0)
+    again.load_state_dict(state)
+    assert (again.gate.usual, again.gate.seen) == (learner.gate.usual, learner.gate.seen) and again.gate.seen > 0
+    off = Learner(LearnerSettings(), 1, 0)
+    off.load_state_dict(state)  # a checkpoint with the gate's fields loads into the paper's learner, which ignores them
+    assert off.gate is None and "surprise_usual" not in off.state_dict()
+
+
+def test_the_setting_is_checked() -> None:
+    with pytest.raises(ValueError, match="plasticity must be one of off, surprise, direction"):
+        LearnerSettings(plasticity="always")
+    with pytest.raises(ValueError, match="reads the joint angle q, which the turn state has not"):
+        LearnerSettings.for_turn(plasticity="direction")
+
+
+def _drive(motor: MotorDirection, q: float, moves: int, gain: float, rng: np.random.Generator) -> float:
+    """`moves` steps of a joint whose motor turns `gain` x the command it is sent; returns the angle it ends at."""
+    for _ in range(moves):
+        meant = int(rng.integers(0, 3))
+        motor.meant(meant)
+        q += gain * (motor.command(meant) - 1) * 0.01
+        motor.sees(q)
+    return q
+
+
+def test_the_motor_direction_turns_round_on_a_reversed_motor_and_holds_on_a_sound_or_locked_one() -> None:
+    motor, rng = MotorDirection(), np.random.default_rng(0)
+    q = _drive(motor, 0.0, 300, 1.0, rng)
+    assert (motor.sign, motor.agree) == (1, pytest.approx(1.0))  # a sound motor: every move as meant
+    q = _drive(motor, q, 5, -1.0, rng)
+    assert motor.sign == 1  # a few moves the other way are not enough
+    q = _drive(motor, q, 60, -1.0, rng)
+    assert motor.sign == -1  # reversed: it now sends the opposite command ...
+    assert [motor.command(a) for a in range(3)] == [2, 1, 0]
+    q = _drive(motor, q, 200, -1.0, rng)
+    assert motor.sign == -1 and motor.agree > 0.9  # ... and the moves are as meant again
+    agree = motor.agree
+    _drive(motor, q, 200, 0.0, rng)  # locked: the joint does not move, which says nothing of its direction
+    assert (motor.sign, motor.agree) == (-1, agree)
+    motor.reset_episode()  # no change of angle spans a reset of the pose
+    motor.meant(2)
+    motor.sees(3.0)
+    assert motor.agree == agree
+
+
+def test_a_learner_means_its_moves_and_sends_them_through_its_motor() -> None:
+    learner = Learner(LearnerSettings(plasticity="direction"), 0, 0)
+    learner.motor.sign = -1
+    s = np.zeros(6)
+    sent = learner.decide(s, None, avoid=(0,))  # a wall refused sending 0: the move meant by 2
+    assert sent != 0 and learner._own == 2 - sent
+    assert learner.state_dict()["motor_sign"] == -1
+
+
+class ReversedA1(kinematics.ModelWorld):
+    """The planar chain with a1's motor wired backwards inside the body: no fault, no event, nobody told."""
+
+    def apply_increments(self, deltas: Mapping[str, float]) -> dict[str, float]:
+        return super().apply_increments({a: -d if a == "a1" else d for a, d in deltas.items()})
+
+
+def _plastic(learner: Learner) -> tuple:
+    """What the mechanism decided: the gate's factor and usual size, or the motor's direction and agreement."""
+    if learner.gate is not None:
+        return learner.gate.factor, learner.gate.state()
+    return learner.motor.sign, learner.motor.agree
+
+
+def _decisions(tmp_path: Path, scenario: Path | None, world_cls: type, mode: str) -> tuple[list, list]:
+    """A learning swarm with the mechanism on, 3 epochs: each epoch's final error and what the mechanism of each agent
+    decided by each epoch's end; and the events the run recorded."""
+    cfg = load_run(ROOT / "examples" / "chain4.toml", ["run.steps=150", "run.seed=3", f'learner.plasticity="{mode}"'])
+    cfg = dataclasses.replace(cfg, out=str(tmp_path), scenario=str(scenario) if scenario else None)
+    topo = cfg.topo()
+    run = InProcessRun(cfg, topo, world=world_cls(topo))
+    events: list = []
+    factors: list = []
+    errors: list = []
+    try:
+        for epoch in range(3):
+            done = run.epoch(epoch, lambda *e: events.append(e))
+            errors.append(done.final_error)
+            factors.append([_plastic(run.learners[a]) for a in sorted(run.learners)])
+    finally:
+        run.close()
+    return [errors, factors], events
+
+
+@pytest.mark.parametrize("mode", ["surprise", "direction"])
+def test_the_mechanism_decides_the_same_whether_or_not_the_fault_was_announced(mode: str, tmp_path: Path) -> None:
+    scenario = tmp_path / "reverse.toml"
+    scenario.write_text('name = "a1 reversed"\n\n[[event]]\nstep = 0\nepoch = 0\nfault = "reverse"\ntarget = "a1"\n')
+    announced, events = _decisions(tmp_path / "announced", scenario, kinematics.ModelWorld, mode)
+    silent, none = _decisions(tmp_path / "silent", None, ReversedA1, mode)
+    intact, _ = _decisions(tmp_path / "intact", None, kinematics.ModelWorld, mode)
+    assert events and not none  # one run was told (an event recorded), the other not
+    assert announced == silent  # the same errors and the same decisions of the mechanism, to the bit
+    assert intact != announced  # the reversal changed what the robot and the mechanism did: not vacuous
+    if mode == "direction":  # a1 found its motor reversed, the others kept theirs
+        assert [sign for sign, _ in announced[1][-1]] == [-1, 1, 1, 1]
