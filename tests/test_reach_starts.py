@@ -79,3 +79,18 @@ def test_the_run_starts_each_epoch_from_its_drawn_pose(tmp_path: Path) -> None:
         drawn = [math.degrees(task.start(r["epoch"])[a]) for a in ("a1", "a2", "a3")]
         first = r["angles_deg"][0]  # after the first step: at most one 1-degree move per joint from the start
         assert all(abs(a - b) <= 1.0 + 1e-3 for a, b in zip(first, drawn, strict=True)), (first, drawn)
+
+
+def test_a_generalisation_row_trains_from_random_poses_and_its_successive_row_tests_those_swarms() -> None:
+    from kinswarm.experiments.generalisation.protocol import LEARNER, Training, training_spec
+
+    home = Training("Level-3", 3, 128, LEARNER)
+    rs = Training("Level-3, random starts", 3, 128, LEARNER, random_starts=0.5)
+    succ = Training(
+        "Level-3, random starts, successive", 3, 128, LEARNER, False, True, 0, random_starts=0.5, trained_as=rs.label
+    )
+    assert training_spec(home, 2, 500).task == ()
+    spec = training_spec(rs, 2, 500)
+    assert dict(spec.task) == {"start_pose": "random", "start_share": 0.5, "start_seed": 2}
+    assert spec.name != training_spec(home, 2, 500).name and spec.identity() != training_spec(home, 2, 500).identity()
+    assert succ.suffix == rs.suffix  # its test runs are named as the swarm it tests
