@@ -12,6 +12,9 @@ via_width = 0.3
 waypoints = [[8.0, 4.0]]  # optional: sub-goals handed down one after the other (next_waypoint)
 waypoint_radius = 0.5
 settle_radius = 0.3       # reward settle: within this the tip has arrived
+start_pose = "random"     # home (default) | random: each epoch from joint angles drawn within the joint limits
+start_share = 1.0         # random: the share of epochs drawn (the others start from home)
+start_seed = 0            # random: the draws are a function of (start_seed, epoch) alone
 ```
 """
 
@@ -20,6 +23,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import numpy as np
 from kinswarm.actors.learning.observation import Observation
 from kinswarm.protocol.messages import Task
 
@@ -28,6 +32,7 @@ from .base import AgentTask, Head, TaskDef, Vec2, centroid
 REWARD_MODES: tuple[str, ...] = ("shaped", "paper", "strict", "graded", "settle")
 #: settle: within this of the goal (at t - 1 and t) the tip has arrived (default: the corridor's success tolerance)
 SETTLE_RADIUS = 0.3
+START_POSES: tuple[str, ...] = ("home", "random")
 
 
 @dataclass(frozen=True)
@@ -40,6 +45,11 @@ class ReachSettings:
     waypoints: tuple[Vec2, ...] = ()  # sub-goals, one after the other
     waypoint_radius: float = 0.0  # ... the next one once the tip is within this
     settle_radius: float = SETTLE_RADIUS  # reward "settle": within this of the goal the tip has arrived
+    # Where each epoch starts. A swarm trained from home only learns a way out of home: frozen and asked for each
+    # goal from where the last one ended (§5.2's successive requests) it stopped far from goals it reached from home.
+    start_pose: str = "home"  # home | random (uniform within every joint's limits, per epoch)
+    start_share: float = 1.0  # random: the share of epochs that start from a drawn pose, the others from home
+    start_seed: int = 0  # random: the poses drawn depend on (start_seed, epoch) only, so a rerun or resume repeats them
 
     def __post_init__(self) -> None:
         if self.goal is None and not self.goals:
@@ -57,6 +67,14 @@ class ReachSettings:
             raise ValueError("waypoint_radius: only with waypoints")
         if not (math.isfinite(self.settle_radius) and self.settle_radius > 0.0):
             raise ValueError(f"settle_radius: must be a distance > 0, got {self.settle_radius}")
+        if self.start_pose not in START_POSES:
+            raise ValueError(f"start_pose: {self.start_pose!r} is not one of {', '.join(START_POSES)}")
+        if not (isinstance(self.start_share, (int, float)) and 0.0 <= self.start_share <= 1.0):
+            raise ValueError(f"start_share: must be a share in [0, 1], got {self.start_share}")
+        if self.start_pose != "random" and (self.start_share != 1.0 or self.start_seed != 0):
+            raise ValueError('start_share, start_seed: only with start_pose = "random"')
+        if isinstance(self.start_seed, bool) or not isinstance(self.start_seed, int) or self.start_seed < 0:
+            raise ValueError(f"start_seed: must be an integer >= 0, got {self.start_seed!r}")
 
 
 class ReachTask(TaskDef):
@@ -69,6 +87,11 @@ class ReachTask(TaskDef):
         s = self.settings
         if s.reward not in self.rewards:
             return f"reward: {s.reward!r} is not one of {', '.join(self.rewards)}"
+        if s.start_pose == "random":
+            for a in self.topo.dof_agents:
+                lo, hi = self.topo.agents[a].limits
+                if not (math.isfinite(lo) and math.isfinite(hi)):
+                    return f"start_pose: random draws within the joint limits; {a} has none that are finite"
         return self.out_of_reach("goal", [s.goal] if s.goal is not None else []) or self.out_of_reach(
             "goals", list(s.goals)
         )
@@ -77,6 +100,17 @@ class ReachTask(TaskDef):
         s = self.settings
         goal = s.goals[epoch % len(s.goals)] if s.goals else s.goal
         return (float(goal[0]), float(goal[1])), []
+
+    def start(self, epoch: int) -> dict[str, float]:
+        """Home, or with start_pose = "random" (in start_share of the epochs) every DOF agent's angle drawn uniformly
+        within its limits, from a generator seeded by (start_seed, epoch): the same poses in every placement."""
+        s = self.settings
+        if s.start_pose != "random":
+            return {}
+        rng = np.random.default_rng([s.start_seed, epoch])
+        if rng.random() >= s.start_share:
+            return {}
+        return {a: float(rng.uniform(*self.topo.agents[a].limits)) for a in self.topo.dof_agents}
 
     def agent(self, agent: str, observation: Observation | None) -> AgentTask:
         return ReachAgent(self.settings, self.topo.subtree_leaves(agent))

@@ -115,10 +115,15 @@ class Training:
     # the learner kind (actors/learning/kinds.py): the paper's, or a control on the same settings that takes one of
     # its two design choices away; a control is tested on both test sets, as the sweep's rows
     kind: str = DEFAULT_KIND
+    # the share of training epochs that start from a random pose within the joint limits (task start_pose), the
+    # others from home: 0 trains from home only, as the paper does
+    random_starts: float = 0.0
+    trained_as: str = ""  # a successive row: the label of the row whose swarms it tests ("": the level's own row)
 
     @property
     def suffix(self) -> str:
-        return run_suffix(self.learner, self.reward) + ("" if self.kind == DEFAULT_KIND else f"-{self.kind}")
+        starts = f"-rs{self.random_starts:g}" if self.random_starts else ""
+        return run_suffix(self.learner, self.reward) + ("" if self.kind == DEFAULT_KIND else f"-{self.kind}") + starts
 
     @property
     def control(self) -> bool:
@@ -152,6 +157,10 @@ def training_spec(t: Training, seed: int, steps: int) -> Spec:
         reward=t.reward,
         successive=t.train_successive,
         checkpoint=True,
+        # the poses drawn per seed: seed s's swarm trains from other poses than seed s + 1's
+        task=(("start_pose", "random"), ("start_share", t.random_starts), ("start_seed", seed))
+        if t.random_starts
+        else (),
     )
 
 
@@ -216,7 +225,7 @@ def train_and_test(ctx: Context, trainings: list[Training], second_level: int, w
     for t in trainings:
         if t.successive:
             for seed in seeds_of(t):
-                trained[(t.label, seed)] = trained[(f"Level-{t.level}", seed)]
+                trained[(t.label, seed)] = trained[(t.trained_as or f"Level-{t.level}", seed)]
 
     eval_specs: dict[tuple[str, int, int], Spec] = {}
     for t in trainings:
