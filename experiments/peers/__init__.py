@@ -3,8 +3,8 @@
 SAC (sbx, SB3's JAX port, when installed; else SB3's) on gym_env's continuous Box, PPO on gym_env's MultiDiscrete (a
 central policy seeing the whole robot), and PPO with one policy shared by every joint on parallel_env (independent
 learners with parameter sharing), each trained on the generalisation protocol's Level-3 goals (64 quad-tree centres,
-twice each in a seeded order, 500-step episodes: the swarm's 64k env steps) with library defaults and the task's own
-reward (`graded`), then:
+twice each in a seeded order, 500-step episodes: PPO for the swarm's 64k env steps, SAC for 16k) with library
+defaults and the task's own reward (`graded`), then:
 
   generalisation   frozen, deterministic, from the start pose: test sets 0 and 1 (100 Halton goals, 200 steps each)
   time to skill    the test set 0 share within 0.5 every EVERY env steps: env steps and training CPU-seconds until
