@@ -21,6 +21,7 @@ Needs the `peers` extra: pip install -e '.[peers]'.
 from __future__ import annotations
 
 import json
+import os
 import resource
 import tempfile
 import time
@@ -187,14 +188,19 @@ def run(ctx: Context) -> dict[str, Any]:
     z = _size(ctx.quick)
     ctx.seeds = 1  # one seed (0) of each peer: the budget allows no more
     ctx.out.mkdir(parents=True, exist_ok=True)
-    order = ["ppo", "ppo-shared", "sac"]  # the cheap ones first
+    # a subset by name (KINSWARM_PEERS_METHODS=ppo,ppo-shared): what the machine's budget allows, said in the report
+    chosen = os.environ.get("KINSWARM_PEERS_METHODS", ",".join(METHODS)).split(",")
+    unknown = [m for m in chosen if m not in METHODS]
+    if unknown:
+        raise ValueError(f"KINSWARM_PEERS_METHODS: unknown method {unknown[0]!r} (choose from {', '.join(METHODS)})")
+    order = [m for m in ("ppo", "ppo-shared", "sac") if m in chosen]  # the cheap ones first
     args = [(m, ctx.quick, str(ctx.out)) for m in order]
     if ctx.jobs > 1:
         with ProcessPoolExecutor(min(ctx.jobs, 2)) as pool:
             done = dict(zip(order, pool.map(run_method, *zip(*args, strict=True)), strict=True))
     else:
         done = {m: run_method(*a) for m, a in zip(order, args, strict=True)}
-    peers = {m: done[m] for m in METHODS}
+    peers = {m: done[m] for m in METHODS if m in done}
     swarm_cpu = swarm_training_cpu(ctx.quick)
     ref = committed()
     from .report import write

@@ -7,6 +7,7 @@ from typing import Any
 from ..common import Context
 
 BARS = (0.90, 0.95)
+METHOD_NAMES = {"sac": "SAC", "ppo": "PPO, central", "ppo-shared": "PPO, shared by the joints"}
 
 
 def _pct(x: float | None) -> str:
@@ -172,9 +173,11 @@ def write(
                 else f"Not checked: {onnx.get('why')}."
             ),
         )
+    missing = [METHOD_NAMES[m] for m in METHOD_NAMES if m not in peers]
     rep.text(
         "## Not done here",
-        "The successive protocol (each goal from where the last ended), the iiwa's reach3d row, more seeds of "
+        (f"Not run for this report: {', '.join(missing)} (the machine's CPU budget). " if missing else "")
+        + "The successive protocol (each goal from where the last ended), the iiwa's reach3d row, more seeds of "
         "the peers and longer budgets: not run within this report's CPU budget.",
     )
     rep.results = {"size": z, "peers": peers, "committed": ref, "swarm_training_cpu_seconds": round(swarm_cpu, 1)}
