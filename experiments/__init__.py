@@ -16,8 +16,8 @@ from typing import Any
 EXPERIMENTS = ("cost", "optimality", "convergence", "robustness", "generalisation")
 # Run by name only, not by `all` (their own reports, their own cost): the evidence for the learner the README
 # recommends for generalisation, what learning buys under faults in the robot's model, the paper's corridor and
-# grasp (§5.4, §5.5), reaching points and poses in 3D on a real arm, and the moving goal
-BY_NAME: tuple[str, ...] = ("ablations", "adapt", "corridor", "grasp", "reach3d", "pose3d", "track")
+# grasp (§5.4, §5.5), reaching points and poses in 3D on a real arm, the moving goal, and the deep-RL peers
+BY_NAME: tuple[str, ...] = ("ablations", "adapt", "corridor", "grasp", "reach3d", "pose3d", "track", "peers")
 
 
 def run_experiment(

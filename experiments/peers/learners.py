@@ -1,0 +1,313 @@
+"""The deep-RL peers on kinswarm.env: Stable-Baselines3's SAC and PPO on the whole robot (gym_env), PPO with one
+policy shared by every joint (parallel_env, each joint a row of a vector env), their evaluation on test goals
+(frozen, from the start pose), their learning curves, and the shared policy's export to ONNX."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import gymnasium
+import numpy as np
+import torch
+from gymnasium import spaces
+from kinswarm.env import gym_env, parallel_env
+from stable_baselines3 import PPO, SAC
+from stable_baselines3.common.callbacks import BaseCallback
+from stable_baselines3.common.vec_env.base_vec_env import VecEnv
+
+# the generalisation recipe's robot, task and reward (graded)
+RUN_FILE = str(Path(__file__).resolve().parents[2] / "examples" / "reach-generalise.toml")
+Goal = tuple[float, float]
+Faults = list[dict[str, Any]]
+
+
+def _goals_text(goals: Sequence[Goal]) -> str:
+    return "task.goals=[" + ", ".join(f"[{x!r}, {y!r}]" for x, y in goals) + "]"
+
+
+# -- the whole robot, one agent ------------------------------------------------------------------------------------
+def central_env(goals: Sequence[Goal], steps: int, continuous: bool, seed: int) -> gymnasium.Env:
+    """gym_env on the training goals, one per episode in the given order (the task's goal list cycles)."""
+    return gym_env(RUN_FILE, continuous=continuous, steps=steps, seed=seed, sets=[_goals_text(goals)], render_mode=None)
+
+
+class GoalsEnv(gymnasium.Wrapper):
+    """Each reset the next goal of a list, with the given faults from the first step (the joints freed first);
+    records each episode's final error. What a policy learning online meets: one episode per goal."""
+
+    def __init__(self, env: gymnasium.Env, goals: Sequence[Goal], faults: Faults) -> None:
+        super().__init__(env)
+        self.goals, self.faults, self.i = list(goals), faults, 0
+        self.final_errors: list[float] = []
+
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> Any:
+        goal = self.goals[self.i % len(self.goals)]
+        self.i += 1
+        return self.env.reset(seed=seed, options={"goal": list(goal), "faults": self.faults})
+
+    def step(self, action: Any) -> Any:
+        obs, r, term, trunc, info = self.env.step(action)
+        if term or trunc:
+            self.final_errors.append(float(info["error"]))
+        return obs, r, term, trunc, info
+
+
+# -- every joint, one shared policy ------------------------------------------------------------------------------
+class JointsVecEnv(VecEnv):
+    """parallel_env's joints as the rows of an SB3 vector env, so that one PPO policy is shared by all of them
+    (independent learners with parameter sharing). A row's observation is its agent's S_i as parallel_env gives it
+    (clipped to its bounds) followed by a one-hot of the agent's index; all rows end their episode together."""
+
+    def __init__(self, par: Any, seed: int | None = None, goals_faults: tuple[Sequence[Goal], Faults] | None = None):
+        self.par, self.agents = par, list(par.possible_agents)
+        self.n = len(self.agents)
+        boxes = [par.observation_space(a)["observation"] for a in self.agents]
+        self.obs_dim = boxes[0].shape[0]
+        if any(b.shape != boxes[0].shape for b in boxes):
+            raise ValueError("shared policy: the joints' observations differ in size")
+        lo = np.concatenate([np.min([b.low for b in boxes], 0), np.zeros(self.n)]).astype(np.float32)
+        hi = np.concatenate([np.max([b.high for b in boxes], 0), np.ones(self.n)]).astype(np.float32)
+        self.render_mode = None
+        super().__init__(self.n, spaces.Box(lo, hi, dtype=np.float32), spaces.Discrete(3))
+        self._first_seed, self._actions = seed, np.zeros(self.n, dtype=np.int64)
+        self.goals_faults, self.i = goals_faults, 0
+        self.final_errors: list[float] = []
+
+    def _stack(self, obs: dict[str, dict[str, np.ndarray]]) -> np.ndarray:
+        out = np.zeros((self.n, self.obs_dim + self.n), dtype=np.float32)
+        for i, a in enumerate(self.agents):
+            out[i, : self.obs_dim] = obs[a]["observation"]
+            out[i, self.obs_dim + i] = 1.0
+        return out
+
+    def _reset(self) -> np.ndarray:
+        seed, self._first_seed = self._first_seed, None
+        options = None
+        if self.goals_faults is not None:
+            goals, faults = self.goals_faults
+            options = {"goal": list(goals[self.i % len(goals)]), "faults": faults}
+            self.i += 1
+        obs, _ = self.par.reset(seed=seed, options=options)
+        return self._stack(obs)
+
+    def reset(self) -> np.ndarray:
+        return self._reset()
+
+    def step_async(self, actions: np.ndarray) -> None:
+        self._actions = np.asarray(actions).reshape(self.n)
+
+    def step_wait(self) -> Any:
+        obs, rew, _, trunc, infos = self.par.step({a: int(self._actions[i]) for i, a in enumerate(self.agents)})
+        stacked = self._stack(obs)
+        done = any(trunc.values())
+        rewards = np.array([rew[a] for a in self.agents], dtype=np.float32)
+        out_infos: list[dict[str, Any]] = [{"error": infos[a]["error"]} for a in self.agents]
+        if done:
+            self.final_errors.append(float(infos[self.agents[0]]["error"]))
+            for i, info in enumerate(out_infos):
+                info["terminal_observation"] = stacked[i]
+                info["TimeLimit.truncated"] = True
+            stacked = self._reset()
+        return stacked, rewards, np.full(self.n, done), out_infos
+
+    def close(self) -> None:
+        self.par.close()
+
+    def get_attr(self, attr_name: str, indices: Any = None) -> list[Any]:
+        return [getattr(self, attr_name)] * len(self._indices(indices))
+
+    def set_attr(self, attr_name: str, value: Any, indices: Any = None) -> None:
+        setattr(self, attr_name, value)
+
+    def env_method(self, method_name: str, *args: Any, indices: Any = None, **kwargs: Any) -> list[Any]:
+        return [getattr(self, method_name)(*args, **kwargs)] * len(self._indices(indices))
+
+    def env_is_wrapped(self, wrapper_class: type, indices: Any = None) -> list[bool]:
+        return [False] * len(self._indices(indices))
+
+    def _indices(self, indices: Any) -> list[int]:
+        if indices is None:
+            return list(range(self.n))
+        return [indices] if isinstance(indices, int) else list(indices)
+
+
+def joints_env(goals: Sequence[Goal], steps: int, seed: int) -> JointsVecEnv:
+    par = parallel_env(RUN_FILE, steps=steps, seed=seed, sets=[_goals_text(goals)], render_mode=None)
+    return JointsVecEnv(par, seed=seed)
+
+
+# -- evaluation -----------------------------------------------------------------------------------------------------
+def evaluate(model: Any, method: str, goals: Sequence[Goal], steps: int, faults: Faults | None = None) -> list[float]:
+    """Final errors of the frozen, deterministic policy, one `steps`-step episode per goal from the start pose."""
+    faults = faults or []
+    if method == "ppo-shared":
+        venv = JointsVecEnv(parallel_env(RUN_FILE, steps=steps, render_mode=None), goals_faults=(goals, faults))
+        obs = venv.reset()
+        while len(venv.final_errors) < len(goals):
+            actions, _ = model.predict(obs, deterministic=True)
+            venv.step_async(actions)
+            obs, *_ = venv.step_wait()
+        venv.close()
+        return venv.final_errors
+    env = GoalsEnv(gym_env(RUN_FILE, continuous=method == "sac", steps=steps, render_mode=None), goals, faults)
+    for _ in goals:
+        obs, _ = env.reset()
+        over = False
+        while not over:
+            action, _ = model.predict(obs, deterministic=True)
+            obs, _, term, trunc, _ = env.step(action)
+            over = term or trunc
+    env.close()
+    return env.final_errors
+
+
+def within(errors: Sequence[float], tol: float = 0.5) -> float:
+    return float(np.mean(np.asarray(errors) <= tol)) if len(errors) else 0.0
+
+
+@dataclass
+class Curve:
+    """Test-set results over training: env steps, training CPU-seconds (evaluation excluded), share within 0.5."""
+
+    env_steps: list[int] = field(default_factory=list)
+    cpu_seconds: list[float] = field(default_factory=list)
+    within: list[float] = field(default_factory=list)
+    mean: list[float] = field(default_factory=list)
+
+    def first(self, bar: float) -> tuple[int, float] | None:
+        for s, c, w in zip(self.env_steps, self.cpu_seconds, self.within, strict=True):
+            if w >= bar:
+                return s, c
+        return None
+
+
+class CurveCallback(BaseCallback):
+    """Every `every` env steps: the frozen policy on the test goals (its CPU time not counted as training)."""
+
+    def __init__(self, method: str, per_step: int, every: int, check: Callable[[Any], list[float]]) -> None:
+        super().__init__()
+        self.method, self.per_step, self.every, self.check = method, per_step, every, check
+        self.curve, self.next, self.eval_cpu, self.cpu0 = Curve(), every, 0.0, time.process_time()
+
+    def _on_step(self) -> bool:
+        env_steps = self.num_timesteps // self.per_step
+        if env_steps >= self.next:
+            self.next += self.every
+            c0 = time.process_time()
+            trained_cpu = c0 - self.cpu0 - self.eval_cpu
+            errors = self.check(self.model)
+            self.eval_cpu += time.process_time() - c0
+            self.curve.env_steps.append(env_steps)
+            self.curve.cpu_seconds.append(round(trained_cpu, 1))
+            self.curve.within.append(within(errors))
+            self.curve.mean.append(float(np.mean(errors)))
+        return True
+
+
+def train(
+    method: str,
+    goals: Sequence[Goal],
+    steps: int,
+    budget: int,
+    seed: int,
+    every: int,
+    check_goals: Sequence[Goal],
+    quick: bool = False,
+) -> tuple[Any, Curve, float]:
+    """One peer trained for `budget` env steps on the training goals; its curve on `check_goals` (200-step
+    episodes); the CPU-seconds of training alone."""
+    torch.set_num_threads(1)  # two shared cores: one for us
+    small = {"n_steps": 64, "batch_size": 32} if quick else {}  # the quick version: seconds, not a 2048-step rollout
+    if method == "ppo-shared":
+        env: Any = joints_env(goals, steps, seed)
+        per_step = env.n
+        model: Any = PPO("MlpPolicy", env, seed=seed, verbose=0, device="cpu", **small)
+    else:
+        env = central_env(goals, steps, method == "sac", seed)
+        per_step = 1
+        if method == "sac":  # sbx (SB3's JAX port) when installed: measured ~1.7x SB3's env steps per CPU-second here
+            model = sac_class()("MlpPolicy", env, seed=seed, verbose=0, **({"learning_starts": 64} if quick else {}))
+        else:
+            model = PPO("MlpPolicy", env, seed=seed, verbose=0, device="cpu", **small)
+    cb = CurveCallback(method, per_step, every, lambda m: evaluate(m, method, check_goals, 20 if quick else 200))
+    c0 = time.process_time()
+    model.learn(total_timesteps=budget * per_step, callback=cb)
+    cpu = time.process_time() - c0 - cb.eval_cpu
+    return model, cb.curve, cpu
+
+
+def sac_class() -> Any:
+    try:
+        from sbx import SAC as SBX_SAC
+
+        return SBX_SAC
+    except ImportError:
+        return SAC
+
+
+def online(model: Any, goals: Sequence[Goal], steps: int, faults: Faults) -> list[float]:
+    """The trained central SAC policy learning on: one `steps`-step episode per goal, the faults unknown to it, its
+    learning carried from goal to goal (as adapt's 'trained, learning'). Final errors per goal."""
+    env = GoalsEnv(gym_env(RUN_FILE, continuous=True, steps=steps, render_mode=None), goals, faults)
+    model.set_env(env)
+    model.learn(total_timesteps=len(goals) * steps, reset_num_timesteps=False)
+    env.close()
+    return env.final_errors[: len(goals)]
+
+
+# -- export ---------------------------------------------------------------------------------------------------------
+class SharedScores(torch.nn.Module):
+    """The shared per-joint policy as one ONNX graph: inputs `obs` (float32, (1, obs_dim): the agent's observation as
+    parallel_env gives it) and `agent` (int64, (1,): its index in parallel_env's agents); output `scores` (float32,
+    (1, 3): the action logits over −, 0, +; the caller masks with action_mask and takes the argmax)."""
+
+    def __init__(self, policy: Any, n_agents: int) -> None:
+        super().__init__()
+        self.policy = policy
+        self.register_buffer("eye", torch.eye(n_agents, dtype=torch.float32))
+
+    def forward(self, obs: torch.Tensor, agent: torch.Tensor) -> torch.Tensor:
+        x = torch.cat([obs, self.eye[agent]], dim=1)
+        latent, _ = self.policy.mlp_extractor(self.policy.extract_features(x, self.policy.pi_features_extractor))
+        return self.policy.action_net(latent)
+
+
+def export_onnx(model: Any, n_agents: int, obs_dim: int, path: Path) -> Path:
+    module = SharedScores(model.policy, n_agents).eval()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with torch.no_grad():
+        torch.onnx.export(
+            module,
+            (torch.zeros(1, obs_dim), torch.zeros(1, dtype=torch.int64)),
+            str(path),
+            input_names=["obs", "agent"],
+            output_names=["scores"],
+            dynamo=False,
+        )
+    return path
+
+
+def check_onnx(model: Any, path: Path, goals: Sequence[Goal], steps: int) -> dict[str, Any]:
+    """The exported file against the torch policy in parallel_env: every joint's action at every step of one
+    episode per goal, the torch policy acting. onnxruntime if installed, else not checked."""
+    try:
+        import onnxruntime as ort
+    except ImportError:
+        return {"checked": False, "why": "onnxruntime is not installed"}
+    sess = ort.InferenceSession(str(path), providers=["CPUExecutionProvider"])
+    venv = JointsVecEnv(parallel_env(RUN_FILE, steps=steps, render_mode=None), goals_faults=(goals, []))
+    obs, same, total = venv.reset(), 0, 0
+    while len(venv.final_errors) < len(goals):
+        actions, _ = model.predict(obs, deterministic=True)
+        for i in range(venv.n):
+            (scores,) = sess.run(None, {"obs": obs[i : i + 1, : venv.obs_dim], "agent": np.array([i], np.int64)})
+            same += int(np.argmax(scores[0]) == actions[i])
+            total += 1
+        venv.step_async(actions)
+        obs, *_ = venv.step_wait()
+    venv.close()
+    return {"checked": True, "decisions": total, "same": same}

@@ -1,0 +1,69 @@
+"""`kinswarm experiment peers --quick` end to end (slow suite; skipped without the peers extra): every peer trained,
+tested and reported; the shared per-joint policy exported to ONNX and acting as the torch policy does."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+pytest.importorskip("stable_baselines3")
+pytest.importorskip("kinswarm.env")
+
+pytestmark = [pytest.mark.slow, pytest.mark.timeout(900)]
+
+
+def test_quick_peers_report(tmp_path: Path) -> None:
+    from kinswarm.actors.cli.commands import main as kinswarm
+
+    assert kinswarm(["experiment", "peers", "--quick", "--out", str(tmp_path)]) == 0
+    out = tmp_path / "peers"
+    report = (out / "report.md").read_text()
+    for heading in ("## Generalisation", "## Time to skill", "## A wrong model", "## The shared policy in ONNX"):
+        assert heading in report
+    assert "](curves.png)" in report and (out / "curves.png").stat().st_size > 1000
+    res = json.loads((out / "results.json").read_text())
+    assert res["experiment"] == "peers" and res["quick"] is True
+    assert set(res["peers"]) == {"sac", "ppo", "ppo-shared"}
+    for method, r in res["peers"].items():
+        for k in (0, 1):
+            assert len(r[f"test_set_{k}"]["errors"]) == res["size"]["tests"], method
+            assert all(np.isfinite(r[f"test_set_{k}"]["errors"]))
+        assert r["curve"]["env_steps"] and all(0.0 <= w <= 1.0 for w in r["curve"]["within"])
+        assert set(r["wrong"]) == {"a1 reversed", "a2, a3 reversed"}
+    assert "learning" in res["peers"]["sac"]["wrong"]["a1 reversed"]  # SAC kept learning under the fault
+    assert res["swarm_training_cpu_seconds"] > 0
+    onnx = res["peers"]["ppo-shared"]["onnx"]
+    assert (out / onnx["file"]).stat().st_size > 0
+    if onnx["checked"]:  # onnxruntime installed: the exported file chooses as the torch policy does
+        assert onnx["decisions"] > 0 and onnx["same"] == onnx["decisions"]
+
+
+def test_exported_scores_take_the_agent_index(tmp_path: Path) -> None:
+    """The shared file's scores for one observation differ by the agent index it is given (the one-hot reaches the
+    network), and match the torch policy's logits for that agent."""
+    ort = pytest.importorskip("onnxruntime")
+    import torch
+    from kinswarm.experiments.goals import quadtree
+    from kinswarm.experiments.peers import learners
+    from stable_baselines3 import PPO
+
+    venv = learners.joints_env(quadtree(1), 10, 0)
+    model = PPO("MlpPolicy", venv, seed=0, n_steps=16, batch_size=16, device="cpu")
+    path = learners.export_onnx(model, venv.n, venv.obs_dim, tmp_path / "p.onnx")
+    sess = ort.InferenceSession(str(path), providers=["CPUExecutionProvider"])
+    one = venv.reset()[:1, : venv.obs_dim]  # the first agent's observation, given as every agent's
+    n = venv.n
+    scores = [sess.run(None, {"obs": one, "agent": np.array([i], np.int64)})[0] for i in range(n)]
+    with torch.no_grad():
+        x = torch.as_tensor(np.concatenate([np.repeat(one, n, 0), np.eye(n)], 1).astype("f4"))
+        dist = model.policy.get_distribution(x)
+        logits = dist.distribution.logits.numpy()
+    for i in range(venv.n):
+        assert scores[i].shape == (1, 3)
+        # SB3 normalises the logits (log-softmax); the argmax and the differences between scores are the same
+        assert np.allclose(scores[i][0] - scores[i][0].max(), logits[i] - logits[i].max(), atol=1e-5)
+    assert not np.allclose(scores[0], scores[1])
+    venv.close()
