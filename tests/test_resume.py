@@ -194,3 +194,23 @@ def test_a_crash_between_two_agents_checkpoints_resumes_from_the_one_all_hold(tm
     assert [r["epoch"] for r in rows(out / "metrics.jsonl")] == [0, 1, 2]
     (resume,) = resumes(out / "events.jsonl")
     assert resume["epoch"] == 2 and "checkpoint of epoch 1; metrics rows dropped past it: 1" in resume["detail"]
+
+
+@pytest.mark.timeout(600)
+def test_a_run_whose_agents_hold_no_common_epoch_resumes_after_the_oldest_not_from_scratch(tmp_path):
+    """a2 was down over two of the others' saves: its checkpoints (epoch 1) are older than theirs (epochs 2, 3), so no
+    epoch is held by all. The run goes on from epoch 2 (a2 from its epoch 1, the others from their oldest, epoch 2),
+    every epoch once, instead of throwing away every trained epoch and starting again."""
+    base = ["run", CHAIN4, "--steps", "40", "--seed", "5", "--placement", "single", "--run-id", "m", "--no-progress"]
+    early, out = tmp_path / "early", tmp_path / "run"
+    assert cli([*base, "--epochs", "2", "--out", str(early), *LOCKSTEP_ARGS]) == 0
+    assert cli([*base, "--epochs", "4", "--out", str(out), *LOCKSTEP_ARGS]) == 0
+    (out / "summary.json").unlink()  # the crash: no summary ...
+    agents = out / "agents"
+    os.replace(early / "agents" / "a2.npz", agents / "a2.npz")  # ... and a2's newest checkpoint is of epoch 1
+    (agents / "a2.prev.npz").unlink()
+    assert cli(["run", "--resume", str(out), "--no-progress"]) == 0
+    assert [r["epoch"] for r in rows(out / "metrics.jsonl")] == [0, 1, 2, 3]
+    (resume,) = resumes(out / "events.jsonl")
+    assert resume["epoch"] == 2 and "no epoch every agent holds" in resume["detail"], resume
+    assert "metrics rows dropped past it: 2" in resume["detail"], resume

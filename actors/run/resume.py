@@ -5,7 +5,11 @@ The last complete checkpoint is the newest epoch every learning agent holds a go
 when the supervisor died between two agents' saves, `<id>.prev.npz`), and that metrics.jsonl holds whole rows up
 to. Before the run goes on, under the run's lock: the rows of metrics.jsonl, poses.jsonl and agents.jsonl past that
 epoch are dropped (the epochs train again), each agent's `<id>.npz` is made that epoch's checkpoint (a newer one is
-dropped: it learned from an epoch that trains again), and events.jsonl says where the run resumed. Its agents
+dropped: it learned from an epoch that trains again), and events.jsonl says where the run resumed. When no epoch is
+held by every agent (one was down over two of the others' saves, so its two checkpoints are older than theirs), the
+run goes on after the oldest agent's newest: each agent from its newest checkpoint up to that epoch, else its
+oldest. It is not the uninterrupted run's state then (no epoch's is complete), but no trained epoch is thrown away:
+starting from scratch would lose them all, as a chaos soak found (525 epochs, at the 14th crash). Its agents
 restore their learned state from there, their random generators included, so a deterministic run (`single`
 placement, a checkpoint every epoch, same seed) ends as it would have without the crash.
 
@@ -118,10 +122,13 @@ def prepare_resume(out: Path, cfg: RunConfig) -> Resume:
     whole = _whole_epochs(out / "metrics.jsonl")
     last_row = whole[-1] if whole else -1
     directory = out / "agents"
+    mixed = False
     if agents:
-        held = [_checkpoints(directory, a) for a in agents]
+        held = [{e: p for e, p in _checkpoints(directory, a).items() if e <= last_row} for a in agents]
         common = set.intersection(*(set(h) for h in held)) if held else set()
-        last = max((e for e in common if e <= last_row), default=-1)
+        last = max(common, default=-1)
+        if last < 0 and all(held):  # every agent holds one, of no one epoch: an agent down over two saves lags
+            last, mixed = min(max(h) for h in held), True  # each its newest up to the oldest of theirs, else its oldest
     else:  # nothing learns: every whole epoch stands
         held, last = [], last_row
     dropped = {name: _keep_rows(out / name, last) for name in ("metrics.jsonl", "poses.jsonl", "agents.jsonl")}
@@ -132,9 +139,13 @@ def prepare_resume(out: Path, cfg: RunConfig) -> Resume:
         if last < 0:  # no checkpoint every agent has: from the start, as the run began
             newest.unlink(missing_ok=True)
             previous(newest).unlink(missing_ok=True)
-        elif found[last] != newest:  # saved after the last complete checkpoint: that epoch trains again
-            os.replace(found[last], newest)
-    if last >= 0 and agents:
+        else:  # saved after the last complete checkpoint: that epoch trains again
+            use = max((e for e in found if e <= last), default=min(found))
+            if found[use] != newest:
+                os.replace(found[use], newest)
+    if mixed:
+        source = f"epoch {last}, each agent its newest checkpoint up to it or its oldest (no epoch every agent holds)"
+    elif last >= 0 and agents:
         source = f"the checkpoint of epoch {last}"
     elif agents:
         source = "the start (no checkpoint every agent holds)"
