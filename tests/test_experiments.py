@@ -332,12 +332,18 @@ def test_quick_adapt_experiment(tmp_path):
         assert (out / f).is_file(), f
     per = res["per_condition"]
     assert set(per) == {"intact", "a1 reversed"}
+    every = {"fresh, learning", "trained, learning", "trained + direction, learning", "trained, frozen", "rule",
+             "pseudo-inverse", "greedy per joint"}  # fmt: skip
+    assert set(per["intact"]) == every
+    # a fault's rows add each goal as its own episode from the trained checkpoint, with and without the plasticity
+    assert set(per["a1 reversed"]) == every | {"afresh trained, learning", "afresh trained + direction, learning"}
     for cs in per.values():
-        assert set(cs) == {"fresh, learning", "trained, learning", "trained, frozen", "rule", "pseudo-inverse",
-                           "greedy per joint"}  # fmt: skip
         for c in cs.values():
             assert len(c["final_error"][0]) == 4 and 0.0 <= c["within"][0] <= 1.0
     assert per["intact"]["rule"]["within"] == [1.0] and per["a1 reversed"]["rule"]["within"] == [0.0]
+    # on a sound robot the plasticity changes nothing: the same episodes to the bit
+    assert per["intact"]["trained + direction, learning"] == per["intact"]["trained, learning"]
+    assert res["sequence"]["per"] and res["frozen"]["per"]
     assert set(res["live"]["per"]) == {"trained, learning", "trained, learning, exploring afresh", "fresh, learning",
                                        "fresh, learning, the trained swarm's learner",
                                        "rule", "pseudo-inverse"}  # fmt: skip
