@@ -105,16 +105,17 @@ class Learner:
         self._counting = not 0 < self.settings.count_freeze <= self.epoch
         self.t = int(t)
         self._pending = None
-        if self.gate is not None:
-            self.gate.reset_episode()
-        if self.motor is not None:
-            self.motor.reset_episode()
+        self._reset_plasticity()
 
     def resync(self, t: int) -> None:
         """The agent missed steps (lost messages, a freeze): the schedule moves to step t, and the pending
         transition is dropped, since r(t-1) rewards a joint action this agent did not take part in."""
         self.t = int(t)
         self._pending = None
+        self._reset_plasticity()
+
+    def _reset_plasticity(self) -> None:
+        """No TD error or change of angle spans a reset or a gap (plasticity.py)."""
         if self.gate is not None:
             self.gate.reset_episode()
         if self.motor is not None:

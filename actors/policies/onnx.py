@@ -9,7 +9,7 @@ The contract a policy meets (docs/env.md, "Run a policy as a swarm"), the same a
   the moves its task allows (parallel_env's action_mask), the first of equal ones.
 
 `policy` names one `.onnx` file (shared by every agent) or a directory holding `<agent>.onnx` for each DOF agent.
-Every file is opened and tried on its agent's observation before anything is spawned (check_policies): a missing
+Every file is opened and tried on its agent's observation before anything is spawned (`check`): a missing
 file, a file that is no ONNX model, an input of another size, other than three scores or a non-finite score is
 refused in one line. A non-finite score at run time (an input the check did not try) makes the agent keep still at
 that step, and says so once on its log (stderr): the swarm goes on; the agent's log names the step.
@@ -27,8 +27,6 @@ from typing import Any
 import numpy as np
 from kinswarm.actors.learning.settings import N_ACTIONS, LearnerSettings
 
-#: the [learner] field this kind takes beyond the observation's, with its help line
-FIELDS = (("policy", "an .onnx file shared by every agent, or a directory of <agent>.onnx files"),)
 INSTALL = "pip install 'kinswarm[onnx]'"
 
 
@@ -74,8 +72,7 @@ class OnnxPolicy:
         try:
             self.session = ort.InferenceSession(str(path), options, providers=["CPUExecutionProvider"])
         except Exception as e:  # onnxruntime raises its own kinds for a bad file: its first line says what
-            first = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
-            raise PolicyError(f"{path}: not a model onnxruntime can run ({first})") from None
+            raise PolicyError(f"{path}: not a model onnxruntime can run ({_first_line(e)})") from None
         self._lo = np.array([lo for lo, _ in bounds], dtype=np.float64)
         self._hi = np.array([hi for _, hi in bounds], dtype=np.float64)
         inputs, outputs = self.session.get_inputs(), self.session.get_outputs()
@@ -109,8 +106,7 @@ class OnnxPolicy:
         try:
             out = self.session.run([self._out], feed)[0]
         except Exception as e:  # a model whose shapes do not fit this input fails at run: its first line says what
-            first = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
-            raise PolicyError(f"{self.path}: cannot run on this agent's observation ({first})") from None
+            raise PolicyError(f"{self.path}: cannot run on this agent's observation ({_first_line(e)})") from None
         return np.asarray(out, dtype=np.float64).reshape(-1)
 
     # -- the JointLearner protocol -------------------------------------------------------------------
@@ -134,11 +130,9 @@ class OnnxPolicy:
                     flush=True,
                 )
             return 1
-        scores = scores.copy()
-        for a in avoid:
-            if 0 <= a < N_ACTIONS:
-                scores[a] = -np.inf
-        return int(np.argmax(scores))
+        allowed = np.ones(N_ACTIONS, dtype=bool)
+        allowed[[a for a in avoid if 0 <= a < N_ACTIONS]] = False
+        return int(np.argmax(np.where(allowed, scores, -np.inf)))
 
     def observe(self, visible_actions: Sequence[int], learn: bool = True) -> None:
         pass  # a policy models no children
@@ -155,6 +149,11 @@ class OnnxPolicy:
     def load_state_dict(self, d: dict[str, np.ndarray]) -> None:
         if d:
             raise ValueError(f"an ONNX policy learns nothing; a checkpoint of {', '.join(sorted(d))} does not fit it")
+
+
+def _first_line(e: Exception) -> str:
+    text = str(e).strip()
+    return text.splitlines()[0] if text else type(e).__name__
 
 
 def _dtype(path: Path, arg: Any) -> type:
