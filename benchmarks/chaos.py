@@ -16,8 +16,10 @@ mean --every seconds) and overlapping, on random agents and joints:
 - crash: the whole run dies at once (SIGKILL to the supervisor, the simulator and every agent: a power cut), and
   goes on with `kinswarm run --resume`. (A simulator killed alone ends its run by design, docs/faults.md.)
 
-The last --tail epochs get no new fault (everything is freed and cleared as they start): the swarm's recovery is what
-they measure. Exit code 1 when an invariant fails; the table says which.
+The last --settle + --tail epochs get no new fault (everything is freed and cleared as they start); the last --tail
+of them measure the swarm's recovery. The settle epochs let an agent killed in the last faulty epoch come back first:
+it restores its newest checkpoint, and its parent stands in meanwhile (quick mode: 2; its tail is only 4 epochs).
+Exit code 1 when an invariant fails; the table says which.
 """
 
 from __future__ import annotations
@@ -263,7 +265,7 @@ class Chaos:
             for due, what, target in [u for u in undo if u[0] <= now]:
                 undo.remove((due, what, target))
                 self.send(what, target, {}, via_cli=False)
-            if not quiet and self.epochs_done() >= a.epochs - a.tail:
+            if not quiet and self.epochs_done() >= a.epochs - a.tail - a.settle:
                 quiet = True  # the tail: the swarm left to recover
                 for what in ("free", "clear"):
                     self.send(what, "all", {}, via_cli=False)
@@ -440,6 +442,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--epochs", type=int, default=None, help="default: what --minutes holds")
     p.add_argument("--steps", type=int, default=None, help="steps per epoch (default 500; quick 150)")
     p.add_argument("--tail", type=int, default=None, help="last epochs with no new fault, measured (default 20)")
+    p.add_argument("--settle", type=int, default=None, help="quiet epochs before the tail (default 0; quick 2)")
     p.add_argument("--kinds", default=",".join(KINDS), help=f"comma-separated, of: {','.join(KINDS)}")
     p.add_argument("--crash-gap", type=float, default=150.0, help="seconds at least between two crashes (quick: one)")
     p.add_argument("--seed", type=int, default=0)
@@ -457,10 +460,11 @@ def main(argv: list[str] | None = None) -> int:
     a.every = a.every if a.every is not None else (1.0 if a.quick else 4.0)
     a.steps = a.steps if a.steps is not None else (150 if a.quick else 500)
     a.tail = a.tail if a.tail is not None else (4 if a.quick else 20)
+    a.settle = a.settle if a.settle is not None else (2 if a.quick else 0)
     if a.epochs is None:
-        a.epochs = max(a.tail + 4, round(a.minutes * 60 / (a.steps * EPOCH_S_PER_STEP)))
-    if a.every <= 0 or a.epochs <= a.tail or a.steps < 1:
-        p.error("--every must be > 0, --epochs more than --tail, --steps at least 1")
+        a.epochs = max(a.tail + a.settle + 4, round(a.minutes * 60 / (a.steps * EPOCH_S_PER_STEP)))
+    if a.every <= 0 or a.epochs <= a.tail + a.settle or a.steps < 1 or a.settle < 0:
+        p.error("--every must be > 0, --epochs more than --tail + --settle, --settle at least 0, --steps at least 1")
     a.warmup = 1.0
     a.run_id = "chaos"
     with tempfile.TemporaryDirectory() as tmp:
