@@ -215,8 +215,10 @@ def test_a_fleet_runs_each_kind(tmp_path):
         assert len(s["fleet_final_error"]) == 2 and all(len(row) == 2 for row in s["fleet_final_error"])
 
 
+# independent is the paper's Learner with no visible agent (the same state, checkpointed by the same code as fuzzy's,
+# whose kill and restore tests/test_faults.py runs in the default suite): its ~35 s run is in the slow suite
 @pytest.mark.timeout(600)
-@pytest.mark.parametrize("name", OTHER_KINDS)
+@pytest.mark.parametrize("name", [pytest.param("independent", marks=pytest.mark.slow), "tabular"])
 def test_a2_killed_mid_run_is_restored_from_its_checkpoint(tmp_path, name):
     """`kinswarm fault RUN kill a2` on a live run: a2 is restarted and restores its newest checkpoint (the state it
     restored hashes as the checkpoint did), and the run goes on to its end. A restart loads the compiled kernel anew
