@@ -393,6 +393,7 @@ def test_all_experiments_full(tmp_path):
     assert gen["per_level"]["Level-3"]["test_set_0"]["frac_within_0_5"] > 0.5
 
 
+@pytest.mark.slow  # ~60 s of ~25 short iiwa runs; its machinery (reach3d.py) runs in the default suite via pose3d's
 @pytest.mark.timeout(600)
 def test_quick_reach3d_experiment(tmp_path):
     """The 3D report's smoke version: points, every control on both test sets, the locked and disturbed joints."""
