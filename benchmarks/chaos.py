@@ -74,7 +74,8 @@ class Chaos:
     injected: list[Injected] = field(default_factory=list)
     refused: list[str] = field(default_factory=list)
     undelivered: Counter = field(default_factory=Counter)
-    pids: set[int] = field(default_factory=set)
+    # pid -> its start time: over an hour the system gives a dead actor's PID to another process (pid_max 32768)
+    pids: dict[int, int] = field(default_factory=dict)
     crashes: int = 0
     resumes: int = 0
     exit_codes: list[int] = field(default_factory=list)
@@ -93,7 +94,7 @@ class Chaos:
     def start(self, argv: list[str]) -> None:
         with open(self.log, "a") as f:
             self.proc = subprocess.Popen(argv, stdout=f, stderr=subprocess.STDOUT, start_new_session=True)
-        self.pids.add(self.proc.pid)
+        self.note({self.proc.pid})
 
     def epochs_done(self) -> int:
         path = self.out / "metrics.jsonl"
@@ -167,6 +168,12 @@ class Chaos:
                 self.loop.run_until_complete(self.client.__aexit__(None, None, None))
             self.client = None
 
+    def note(self, pids: set[int]) -> None:
+        """Remember processes of the run, each with its start time (one gone already cannot be left running)."""
+        for pid in pids:
+            if pid not in self.pids and (st := _stat(pid)) is not None:
+                self.pids[pid] = st[1]
+
     def status_pids(self) -> dict[str, int]:
         from kinswarm.actors.cli.control import Client, ControlError, run_config_at, tool_net
 
@@ -188,7 +195,7 @@ class Chaos:
         pids = {p for p in self.status_pids().values() if p > 0}
         if not pids:
             return False
-        self.pids |= pids
+        self.note(pids)
         with contextlib.suppress(ProcessLookupError):  # its process group: the run and what it spawned
             os.killpg(self.proc.pid, signal.SIGKILL)
         for pid in pids:
@@ -272,19 +279,26 @@ class Chaos:
                 undo.clear()
             if not quiet and now >= next_at and self.epochs_done() >= 1:
                 if len(self.injected) % 5 == 0:  # the actors' PIDs, for "nothing left running"
-                    self.pids |= {p for p in self.status_pids().values() if p > 0}
+                    self.note({p for p in self.status_pids().values() if p > 0})
                 self.inject(now - t0, undo)
                 next_at = max(next_at + self.rng.expovariate(1.0 / a.every), time.monotonic() - a.every)
             time.sleep(0.05)
         return time.monotonic() - t0
 
 
-def _alive(pid: int) -> bool:
+def _stat(pid: int) -> tuple[str, int] | None:
+    """(state, start time in clock ticks since boot) of a process, None when there is none."""
     try:
-        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
     except OSError:
-        return False
-    return state != "Z"
+        return None
+    return fields[0], int(fields[19])
+
+
+def _alive(pid: int, start: int | None = None) -> bool:
+    """Running (not a zombie), and the same process as the one seen at `start` when given."""
+    st = _stat(pid)
+    return st is not None and st[0] != "Z" and (start is None or st[1] == start)
 
 
 def _rows(path: Path) -> list[dict[str, Any]]:
@@ -419,9 +433,9 @@ def check_finished(out: Path, codes: list[int], crashes: int) -> tuple[bool, str
     return ok, f"exit codes {codes} ({crashes} crashes, each SIGKILLed)" + (f"; {s['error']}" if s.get("error") else "")
 
 
-def check_nothing_left(pids: set[int], out: Path) -> tuple[bool, str]:
+def check_nothing_left(pids: dict[int, int], out: Path) -> tuple[bool, str]:
     deadline = time.monotonic() + 10.0
-    while (left := sorted(p for p in pids if _alive(p))) and time.monotonic() < deadline:
+    while (left := sorted(p for p, start in pids.items() if _alive(p, start))) and time.monotonic() < deadline:
         time.sleep(0.1)
     marker = str(out)
     for d in os.listdir("/proc"):  # anything else that still names the run's directory

@@ -117,6 +117,25 @@ def test_lock_free_disturb(tmp_path, chain4):
     asyncio.run(body())
 
 
+def test_a_fault_before_the_first_epoch_is_stamped_at_its_step_0(tmp_path, chain4):
+    """A joint fault that reaches the sim before any epoch (sent while a resumed run comes up) acts from the first
+    epoch's step 0, and its event says so: not epoch -1 (seen in the chaos hour: 25 such events after resumes)."""
+
+    async def body() -> None:
+        sim = make_sim(tmp_path, chain4, epochs=10)
+        q0 = sim.topo.initial_angles()
+        sim.apply_fault(fault("lock", "a2"))
+        sim.apply_fault(fault("offset", "a3", degrees=2.0))
+        assert events(sim) == []  # not yet: the epoch it acts in is not known
+        sim._on_epoch(EpochStart(epoch=7, steps=50, goal=GOAL))  # a resumed run's first epoch
+        q = step(sim)
+        assert q["a2"] == q0["a2"], "locked from the first step"
+        sim.apply_fault(fault("free", "a2"))
+        assert events(sim) == [("lock", "a2", 7, 0), ("offset", "a3", 7, 0), ("free", "a2", 7, 1)]
+
+    asyncio.run(body())
+
+
 def test_disturbed_lock_stays_locked_at_new_angle_and_faults_persist_across_epochs(tmp_path, chain4):
     async def body() -> None:
         sim = make_sim(tmp_path, chain4)
@@ -265,10 +284,12 @@ def test_other_faults_and_bad_faults_are_ignored(tmp_path, chain4):
         sim.apply_fault(fault("lock", "zz"))  # not an agent
         sim.apply_fault(fault("disturb", "a1"))  # no steps
         assert not sim.faults.moves_changed
-        sent = [(m.event, m.target, m.detail) for _, m in sim.node.sent]  # type: ignore[attr-defined]
+        assert not sim.node.sent  # type: ignore[attr-defined]  # before the first epoch: stamped at its step 0
+        sim._on_epoch(EpochStart(epoch=0, steps=50, goal=GOAL))
+        sent = [(m.event, m.target, m.detail, m.epoch, m.step) for m in sim.node.of(Event)]  # type: ignore[attr-defined]
         assert sent == [
-            ("refused", "zz", "lock zz: lock: 'zz' is not an agent of this run (a1, a2, a3, a4)"),
-            ("refused", "a1", "disturb a1: disturb: needs steps"),
+            ("refused", "zz", "lock zz: lock: 'zz' is not an agent of this run (a1, a2, a3, a4)", 0, 0),
+            ("refused", "a1", "disturb a1: disturb: needs steps", 0, 0),
         ]
 
     asyncio.run(body())

@@ -65,6 +65,9 @@ class SimActor:
         self._obs_after = [a for a in self.dof if a != topo.root]
         self.epoch: EpochStart | None = None
         self.last_epoch = -1  # the last accepted EpochStart
+        # a joint fault applied before the first epoch acts from that epoch's step 0: its events wait to be stamped so
+        # (a resumed run's first epoch is not known until its EpochStart)
+        self._early: list[tuple[str, str, str]] = []
         self.cmds: dict[str, float] = {}
         self.waiting: set[str] = set()  # agents whose cmd the current step still waits for
         self.down: set[str] = set()  # agents whose liveliness token went away (and has not come back)
@@ -219,6 +222,9 @@ class SimActor:
         self.missed = 0
         self.started = time.perf_counter()
         self.longest_step = 0.0
+        for name, target, detail in self._early:
+            self._event(name, target, detail)
+        self._early.clear()
         if self.paused:
             self.held = True
             return
@@ -325,6 +331,9 @@ class SimActor:
         events, refused = self.body.apply_fault(f)
         for problem in refused:
             self.node.log.warning(problem)
+        if self.epoch is None and self.last_epoch < 0:
+            self._early.extend(events)
+            return
         for name, target, detail in events:
             self._event(name, target, detail)
 
