@@ -269,7 +269,7 @@ class Chaos:
                     flush=True,
                 )
                 next_line += 60.0
-            for due, what, target in [u for u in undo if u[0] <= now]:
+            for due, what, target in [u for u in undo if u[0] <= now - t0]:  # inject() dates them from t0
                 undo.remove((due, what, target))
                 self.send(what, target, {}, via_cli=False)
             if not quiet and self.epochs_done() >= a.epochs - a.tail - a.settle:
