@@ -33,6 +33,7 @@ import os
 import random
 import re
 import signal
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -49,6 +50,9 @@ PROCESS = ("kill", "freeze", "restart")
 MODEL = ("lock", "reverse", "scale", "deadzone", "offset", "lag", "disturb")
 LINK = ("drop", "delay", "duplicate", "corrupt")
 KINDS = (*PROCESS, *MODEL, *LINK, "crash")
+# quick mode: a fault-free epoch of 150 steps on a quiet 2-core machine; a slower machine (its fault-free run's
+# median epoch) stretches the schedule's seconds by as much, so that it gets as many faults a step as a quiet one
+QUICK_EPOCH_S = 0.5
 EPOCH_S_PER_STEP = 0.008  # process placement, chain4, 2-core machine, under chaos (0.009 --beside): sizes --minutes
 # events the supervisor records itself (at the sim's clock): in file order they never go back, but at a resume
 SUPERVISOR = {"fault", "refused", "exited", "restart", "lost", "alive", "thaw", "restored", "stall", "stall_end"}
@@ -83,6 +87,7 @@ class Chaos:
     last_crash: float = -math.inf
     loop: asyncio.AbstractEventLoop = field(default_factory=asyncio.new_event_loop)
     client: Any = None  # kinswarm.actors.cli.control.Client, entered
+    pace: float = 1.0  # the schedule's seconds stretched by this (quick mode on a slow machine)
 
     # -- the run -------------------------------------------------------------------------------------------
     def argv(self, run_id: str, out: Path) -> list[str]:
@@ -109,10 +114,10 @@ class Chaos:
 
     def draw(self, kind: str) -> tuple[str, dict[str, float], float]:
         """(target, parameters, seconds until it is undone by us: 0 for none)."""
-        r = self.rng
+        r, x = self.rng, self.pace
         target = r.choice(AGENTS)
         if kind == "freeze":
-            return target, {"seconds": round(r.uniform(0.3, 3.0), 2)}, 0.0
+            return target, {"seconds": round(x * r.uniform(0.3, 3.0), 2)}, 0.0
         if kind in PROCESS:
             return target, {}, 0.0
         if kind in MODEL:
@@ -123,10 +128,10 @@ class Chaos:
                 "lag": {"steps": float(r.randint(1, 8))},
                 "disturb": {"steps": float(r.randint(20, 300))},
             }.get(kind, {})
-            return target, params, (0.0 if kind == "disturb" else round(r.uniform(1.0, 8.0), 2))
+            return target, params, (0.0 if kind == "disturb" else round(x * r.uniform(1.0, 8.0), 2))
         if r.random() < 0.2:
             target = "all"
-        seconds = round(r.uniform(1.0, 6.0), 2)
+        seconds = round(x * r.uniform(1.0, 6.0), 2)
         if kind == "delay":
             return target, {"ms": float(r.randint(5, 60)), "seconds": seconds}, 0.0
         return target, {"rate": round(r.uniform(0.02, 0.2), 3), "seconds": seconds}, 0.0
@@ -504,6 +509,11 @@ def main(argv: list[str] | None = None) -> int:
             print(
                 f"chaos: the fault-free run took {time.monotonic() - t0:.0f} s (exit {free.returncode}); now the chaos"
             )
+            epoch_s = [r["seconds"] for r in _rows(free_out / "metrics.jsonl")]
+            if a.quick and epoch_s and (pace := statistics.median(epoch_s) / QUICK_EPOCH_S) > 1.0:
+                c.pace, a.every = pace, a.every * pace
+                print(f"chaos: a fault-free epoch took {statistics.median(epoch_s):.2f} s (quiet: {QUICK_EPOCH_S}): "
+                      f"the schedule's seconds stretched x{pace:.1f}, a fault every {a.every:.1f} s")  # fmt: skip
         wall = c.soak()
         free_code = free.wait()
         summary = free_out / "summary.json"
