@@ -118,8 +118,8 @@ def run_method(method: str, quick: bool, out: str) -> dict[str, Any]:
         goals = goals[:4]
     tests = {k: halton(k)[: z["tests"]] for k in (0, 1)}
     cached = Path(out) / f"{method}.json"
-    if cached.is_file():  # this method's results of an earlier call with the same out dir
-        return json.loads(cached.read_text())
+    if cached.is_file():  # this method's results of an earlier call with the same out dir (the report says so)
+        return {**json.loads(cached.read_text()), "reused": True}
     every, budget = z.get("every", EVERY[method]), z.get("budget", BUDGETS[method])
     model, curve, cpu = learners.train(method, goals, z["train_steps"], budget, SEED, every, tests[0], quick)
     res: dict[str, Any] = {
@@ -167,7 +167,8 @@ def swarm_training_cpu(quick: bool) -> dict[str, float]:
         run_spec(spec, Path(tmp))
         ch1 = resource.getrusage(resource.RUSAGE_CHILDREN)
     cpu = time.process_time() - c0 + (ch1.ru_utime - ch0.ru_utime) + (ch1.ru_stime - ch0.ru_stime)
-    return {"cpu_seconds": cpu, "env_steps": spec.epochs * spec.steps}
+    # CPU-seconds grow with the machine's load (caches and cores shared): the load they were measured at goes with them
+    return {"cpu_seconds": cpu, "env_steps": spec.epochs * spec.steps, "load": os.getloadavg()[0]}
 
 
 def committed() -> dict[str, Any]:

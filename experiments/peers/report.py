@@ -47,6 +47,13 @@ def write(
         "'central' policies see the whole robot (every reading, the tip, the goal); the shared PPO sees what one "
         "agent of the swarm sees (its S_i and a one-hot of its index) and moves one joint."
     )
+    reused = [r["label"] for r in peers.values() if r.get("reused")]
+    if reused:
+        rep.text(
+            f"Reused from an earlier call with this --out (`OUT/peers/<method>.json`, trained and tested then, their "
+            f"CPU-seconds measured then): {'; '.join(reused)}. This call's wall time is the rest: the swarm's "
+            "CPU-seconds, the ONNX swarm runs and the report."
+        )
     rep.text("## Generalisation: unseen goals, frozen, from the start pose")
     rows = []
     for r in peers.values():
@@ -95,8 +102,9 @@ def write(
         "the frozen policy is tested on test set 0; CPU-seconds are the "
         "training's alone (this process's CPU time, tests excluded; torch at one thread). The swarm's "
         "generalisation runs record no curve: its point is its budget, and its CPU-seconds are one Level-3 "
-        f"training (seed 0, {swarm_steps:,} env steps, inprocess placement) measured here: {swarm_cpu:.0f} CPU-s. "
-        "PPO collects 2,048 steps per update: its last point can pass the budget.",
+        f"training (seed 0, {swarm_steps:,} env steps, inprocess placement) measured here: {swarm_cpu:.0f} CPU-s"
+        + (f" (at a load average of {swarm['load']:.1f}). " if "load" in swarm else ". ")
+        + "PPO collects 2,048 steps per update: its last point can pass the budget.",
     )
     rows = []
     for r in peers.values():
