@@ -97,3 +97,21 @@ def test_the_whole_row_a_process_swarm_intact_and_locked_live_as_the_env(tmp_pat
     assert r["after"], r["lock"]  # epochs came after the landing one
     assert r["before_identical"] and r["after_identical"], r
     assert [r["env_locked"][i] for i in r["after"]] != [r["env_intact"][i] for i in r["after"]]
+
+
+def test_without_the_peers_extra_the_experiment_says_so_in_one_line(tmp_path: Path) -> None:
+    """torch and SB3 hidden (as if not installed; torch's import alone would cost seconds): `kinswarm experiment
+    peers` exits 2 with one line naming the extra."""
+    import subprocess
+    import sys
+
+    code = (
+        "import sys; sys.modules['torch'] = sys.modules['stable_baselines3'] = None\n"
+        "from kinswarm.actors.cli.commands import main\n"
+        f"sys.exit(main(['experiment', 'peers', '--quick', '--out', {str(tmp_path / 'out')!r}]))\n"
+    )
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert r.returncode == 2, r.stderr
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1 and "needs the peers extra" in lines[0] and "pip install" in lines[0], r.stderr
+    assert not (tmp_path / "out" / "peers").exists()  # nothing trained, nothing written

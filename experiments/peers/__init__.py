@@ -40,11 +40,11 @@ from ..goals import halton, quadtree, training_order
 
 def _learners() -> Any:
     """The peers' training code (torch, SB3), imported when a peer is trained: the ONNX row (onnx_swarm) needs none of
-    it. Without the extra: one line naming it, not a traceback."""
+    it. Without the extra: one line naming it, not a traceback (a ValueError: the CLI's kind of a user's error)."""
     try:
         from . import learners
     except ImportError as e:
-        raise ImportError(
+        raise ValueError(
             f"kinswarm experiment peers needs the peers extra ({e.name} is missing): pip install -e '.[peers]'"
         ) from None
     return learners
