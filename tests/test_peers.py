@@ -1,5 +1,6 @@
 """`kinswarm experiment peers --quick` end to end (slow suite; skipped without the peers extra): every peer trained,
-tested and reported; the shared per-joint policy exported to ONNX and acting as the torch policy does."""
+tested and reported; the shared per-joint policy exported to ONNX, acting as the torch policy does, and run as
+a process swarm as in the env."""
 
 from __future__ import annotations
 
@@ -39,6 +40,11 @@ def test_quick_peers_report(tmp_path: Path) -> None:
     assert (out / onnx["file"]).stat().st_size > 0
     if onnx["checked"]:  # onnxruntime installed: the exported file chooses as the torch policy does
         assert onnx["decisions"] > 0 and onnx["same"] == onnx["decisions"]
+    # the exported file as a process swarm: as in the env to the bit, intact and after a live lock of a2
+    assert "## Trained elsewhere, run as a swarm, broken live" in report
+    row = res["onnx_swarm"]
+    assert len(row["swarm_intact"]) == res["size"]["onnx_goals"] and row["intact_identical"]
+    assert row["lock"] is not None and row["after"] and row["after_identical"] and row["before_identical"], row
 
 
 def test_exported_scores_take_the_agent_index(tmp_path: Path) -> None:

@@ -14,7 +14,9 @@ defaults and the task's own reward (`graded`), then:
 
 against the swarm's three kinds, the rule and the pseudo-inverse as their committed reports give them
 (docs/results/generalisation, docs/results/adapt: not rerun), and the swarm's training CPU-seconds measured here.
-The shared policy is exported to ONNX (learners.export_onnx) and checked against torch with onnxruntime.
+The shared policy is exported to ONNX (learners.export_onnx), checked against torch with onnxruntime, and run through
+`kinswarm run` as `[learner] kind = "onnx"` in a process swarm on test goals, intact and with `kinswarm fault ... lock
+a2` sent live, beside the same file stepped in parallel_env (onnx_swarm.py: onnxruntime, no torch).
 Needs the `peers` extra: pip install -e '.[peers]'.
 """
 
@@ -23,6 +25,7 @@ from __future__ import annotations
 import json
 import os
 import resource
+import shutil
 import tempfile
 import time
 from concurrent.futures import ProcessPoolExecutor
@@ -34,12 +37,18 @@ import numpy as np
 from ..common import Context, Report, plt_module
 from ..goals import halton, quadtree, training_order
 
-try:
-    from . import learners
-except ImportError as e:  # one line naming the extra, not a traceback
-    raise ImportError(
-        f"kinswarm experiment peers needs the peers extra ({e.name} is missing): pip install -e '.[peers]'"
-    ) from None
+
+def _learners() -> Any:
+    """The peers' training code (torch, SB3), imported when a peer is trained: the ONNX row (onnx_swarm) needs none of
+    it. Without the extra: one line naming it, not a traceback (a ValueError: the CLI's kind of a user's error)."""
+    try:
+        from . import learners
+    except ImportError as e:
+        raise ValueError(
+            f"kinswarm experiment peers needs the peers extra ({e.name} is missing): pip install -e '.[peers]'"
+        ) from None
+    return learners
+
 
 METHODS = {
     "sac": "SAC, central (Box)",
@@ -59,6 +68,10 @@ WRONG = {
 }
 WRONG_GOALS, WRONG_STEPS = 30, 500
 ONLINE_GOALS = 10  # SAC learning on: the first 10 of them (its env steps cost ~15x the swarm's)
+# the shared policy's ONNX file as a process swarm: the first 30 goals of test set 0, 200 steps each, `kinswarm fault
+# ... lock a2` sent once 4 epochs are done (the quick version: 6 goals of 100 steps, the lock after the first, so that
+# it lands with epochs still to come)
+ONNX_GOALS, ONNX_LOCK_AFTER = 30, 4
 RESULTS = Path(__file__).resolve().parents[2] / "docs" / "results"
 SWARM_ROWS = {
     "swarm, fuzzy (the paper's)": "Level-3",
@@ -79,6 +92,9 @@ def _size(quick: bool) -> dict[str, int]:
             "wrong": 2,
             "wrong_steps": 20,
             "online": 1,
+            "onnx_goals": 6,
+            "onnx_steps": 100,
+            "onnx_lock_after": 1,
         }
     return {
         "train_steps": TRAIN_STEPS,
@@ -87,19 +103,23 @@ def _size(quick: bool) -> dict[str, int]:
         "wrong": WRONG_GOALS,
         "wrong_steps": WRONG_STEPS,
         "online": ONLINE_GOALS,
+        "onnx_goals": ONNX_GOALS,
+        "onnx_steps": EVAL_STEPS,
+        "onnx_lock_after": ONNX_LOCK_AFTER,
     }
 
 
 def run_method(method: str, quick: bool, out: str) -> dict[str, Any]:
     """One peer: trained, its curve, its frozen tests, the wrong-model rows; the shared policy exported."""
+    learners = _learners()
     z = _size(quick)
     goals = list(training_order(quadtree(LEVEL), REPS, SEED))
     if quick:
         goals = goals[:4]
     tests = {k: halton(k)[: z["tests"]] for k in (0, 1)}
     cached = Path(out) / f"{method}.json"
-    if cached.is_file():  # this method's results of an earlier call with the same out dir
-        return json.loads(cached.read_text())
+    if cached.is_file():  # this method's results of an earlier call with the same out dir (the report says so)
+        return {**json.loads(cached.read_text()), "reused": True}
     every, budget = z.get("every", EVERY[method]), z.get("budget", BUDGETS[method])
     model, curve, cpu = learners.train(method, goals, z["train_steps"], budget, SEED, every, tests[0], quick)
     res: dict[str, Any] = {
@@ -147,7 +167,8 @@ def swarm_training_cpu(quick: bool) -> dict[str, float]:
         run_spec(spec, Path(tmp))
         ch1 = resource.getrusage(resource.RUSAGE_CHILDREN)
     cpu = time.process_time() - c0 + (ch1.ru_utime - ch0.ru_utime) + (ch1.ru_stime - ch0.ru_stime)
-    return {"cpu_seconds": cpu, "env_steps": spec.epochs * spec.steps}
+    # CPU-seconds grow with the machine's load (caches and cores shared): the load they were measured at goes with them
+    return {"cpu_seconds": cpu, "env_steps": spec.epochs * spec.steps, "load": os.getloadavg()[0]}
 
 
 def committed() -> dict[str, Any]:
@@ -185,6 +206,7 @@ def committed() -> dict[str, Any]:
 
 
 def run(ctx: Context) -> dict[str, Any]:
+    _learners()  # the extra, said before anything runs
     z = _size(ctx.quick)
     ctx.seeds = 1  # one seed (0) of each peer: the budget allows no more
     ctx.out.mkdir(parents=True, exist_ok=True)
@@ -202,7 +224,15 @@ def run(ctx: Context) -> dict[str, Any]:
         done = {m: run_method(*a) for m, a in zip(order, args, strict=True)}
     peers = {m: done[m] for m in METHODS if m in done}
     swarm_cpu = swarm_training_cpu(ctx.quick)
+    onnx_row = None
+    if "ppo-shared" in peers:
+        from .onnx_swarm import row
+
+        where = ctx.out / "onnx-swarm"
+        shutil.rmtree(where, ignore_errors=True)  # made again each time: the file it runs may be a new one
+        policy, goals = ctx.out / peers["ppo-shared"]["onnx"]["file"], halton(0)[: z["onnx_goals"]]
+        onnx_row = row(policy, goals, z["onnx_steps"], where, z["onnx_lock_after"])
     ref = committed()
     from .report import write
 
-    return write(ctx, z, peers, ref, swarm_cpu, Report, plt_module)
+    return write(ctx, z, peers, ref, swarm_cpu, Report, plt_module, onnx_row)

@@ -30,6 +30,7 @@ def write(
     swarm: dict[str, float],
     report_cls: Any,
     plt_module: Any,
+    onnx_row: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
     swarm_cpu, swarm_steps = swarm["cpu_seconds"], int(swarm["env_steps"])
     rep = report_cls(ctx, "The deep-RL peers on the same work", "§5.2 and the adapt experiment's faults")
@@ -46,6 +47,13 @@ def write(
         "'central' policies see the whole robot (every reading, the tip, the goal); the shared PPO sees what one "
         "agent of the swarm sees (its S_i and a one-hot of its index) and moves one joint."
     )
+    reused = [r["label"] for r in peers.values() if r.get("reused")]
+    if reused:
+        rep.text(
+            f"Reused from an earlier call with this --out (`OUT/peers/<method>.json`, trained and tested then, their "
+            f"CPU-seconds measured then): {'; '.join(reused)}. This call's wall time is the rest: the swarm's "
+            "CPU-seconds, the ONNX swarm runs and the report."
+        )
     rep.text("## Generalisation: unseen goals, frozen, from the start pose")
     rows = []
     for r in peers.values():
@@ -94,8 +102,9 @@ def write(
         "the frozen policy is tested on test set 0; CPU-seconds are the "
         "training's alone (this process's CPU time, tests excluded; torch at one thread). The swarm's "
         "generalisation runs record no curve: its point is its budget, and its CPU-seconds are one Level-3 "
-        f"training (seed 0, {swarm_steps:,} env steps, inprocess placement) measured here: {swarm_cpu:.0f} CPU-s. "
-        "PPO collects 2,048 steps per update: its last point can pass the budget.",
+        f"training (seed 0, {swarm_steps:,} env steps, inprocess placement) measured here: {swarm_cpu:.0f} CPU-s"
+        + (f" (at a load average of {swarm['load']:.1f}). " if "load" in swarm else ". ")
+        + "PPO collects 2,048 steps per update: its last point can pass the budget.",
     )
     rows = []
     for r in peers.values():
@@ -173,6 +182,8 @@ def write(
                 else f"Not checked: {onnx.get('why')}."
             ),
         )
+    if onnx_row is not None:
+        _swarm_row(rep, onnx_row, peers["ppo-shared"], z["eval_steps"])
     missing = [METHOD_NAMES[m] for m in METHOD_NAMES if m not in peers]
     rep.text(
         "## Not done here",
@@ -181,5 +192,66 @@ def write(
         "the peers and longer budgets: not run within this report's CPU budget.",
     )
     rep.results = {"size": z, "peers": peers, "committed": ref, "swarm_training_cpu_seconds": round(swarm_cpu, 1)}
+    if onnx_row is not None:
+        rep.results["onnx_swarm"] = onnx_row
     rep.write({"run_file": "examples/reach-generalise.toml", "size": z, "seed": 0})
     return rep.results
+
+
+def _share(errors: list[float], tol: float = 0.5) -> str:
+    return f"{sum(e <= tol for e in errors)} / {len(errors)}"
+
+
+def _same(flag: bool | None) -> str:
+    return {True: "yes, to the bit", False: "no", None: "—"}[flag]
+
+
+def _swarm_row(rep: Any, r: dict[str, Any], torch_row: dict[str, Any], eval_steps: int) -> None:
+    """Trained elsewhere, deployed as a swarm, broken live: onnx_swarm.row's numbers."""
+    n, steps = r["goals"], r["steps"]
+    lock = r.get("lock")
+    rep.text(
+        "## Trained elsewhere, run as a swarm, broken live",
+        'The file above as `[learner] kind = "onnx"` (the run file: `OUT/peers/onnx-swarm/onnx-swarm.toml`, the '
+        "recipe's robot, reward and observation, the policy shared by every agent with its index), through "
+        "`kinswarm run` in "
+        f"`process` placement (one OS process per actor, over Zenoh) on the first {n} goals of test set 0, one "
+        f"{steps}-step epoch each from the start pose; once, intact; once with `kinswarm fault RUN lock a2` sent "
+        f"while it ran, after its first {r.get('lock_after', '?')} epochs. Beside it, the same file stepped in "
+        "parallel_env (onnxruntime, the argmax over the moves the action mask allows, as the agents take them), "
+        "intact and with a2 locked from each episode's first step. A fault stays across epochs and the world reset "
+        "puts every joint at its initial angle, so every epoch after the one the lock landed in is the env's locked "
+        "episode."
+        + (
+            " The live run's epochs before the landing one are the intact env's, to the bit."
+            if r.get("before_identical")
+            else ""
+        ),
+    )
+    rows = [
+        [f"parallel_env, intact ({n} goals)", _share(r["env_intact"]), "—"],
+        [f"process swarm, intact ({n} goals)", _share(r["swarm_intact"]), _same(r["intact_identical"])],
+    ]
+    if lock is not None and r.get("after"):
+        after = r["after"]
+        pick = lambda xs: [xs[i] for i in after]  # noqa: E731 -- the epochs after the landing one
+        first, last = after[0] + 1, after[-1] + 1
+        rows += [
+            [
+                f"process swarm, `lock a2` sent live (landed at epoch {lock['epoch'] + 1}, step {lock['step']}): "
+                f"epochs {first}-{last}",
+                _share(pick(r["swarm_live"])),
+                _same(r["after_identical"]),
+            ],
+            [f"parallel_env, a2 locked from step 0, the same {len(after)} goals", _share(pick(r["env_locked"])), "—"],
+            [f"parallel_env, intact, the same {len(after)} goals", _share(pick(r["env_intact"])), "—"],
+        ]
+    else:
+        said = (r.get("fault") or {}).get("said", "not sent")
+        rows.append(["process swarm, `lock a2` sent live", f"did not land before the run ended ({said})", "—"])
+    unmasked = torch_row["test_set_0"]["errors"][:n]
+    if len(unmasked) == n and eval_steps == steps:  # the generalisation table's test of the torch policy, these goals
+        rows.append(
+            [f"the torch policy in parallel_env, no action mask (as tested above), {n} goals", _share(unmasked), "—"]
+        )
+    rep.table(["the shared PPO policy", "within 0.5", "final errors the same as the env's"], rows)

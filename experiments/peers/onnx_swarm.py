@@ -1,0 +1,202 @@
+"""The ONNX-in-the-swarm row: a per-joint policy exported to ONNX, run through `kinswarm run` as a `process`-placement
+swarm (one OS process per actor, over Zenoh) on unseen goals, intact and with `kinswarm fault RUN-DIR lock a2` sent
+live while it runs, beside the same file stepped in parallel_env (intact, and with a2 locked from each episode's
+first step).
+
+Needs onnxruntime (the `onnx` extra), not torch: any ONNX file meeting the contract of docs/env.md will do.
+
+Why the live lock compares to the env's lock from step 0: a lock lands at some step of some epoch (the sim's clock
+says which, events.jsonl), and a fault stays across epochs while the world reset puts every joint at its initial
+angle; so every epoch after the landing one is the env's episode with a2 locked from its first step.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import json
+import subprocess
+import sys
+import time
+import tomllib
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from kinswarm.actors.env import parallel_env
+from kinswarm.actors.learning.settings import OBSERVATION_FIELDS
+
+ROOT = Path(__file__).resolve().parents[2]
+RECIPE = ROOT / "examples" / "reach-generalise.toml"  # the observation and reward the peers were trained on
+LOCK = [{"fault": "lock", "targets": ["a2"]}]
+DEADLINE_MS = 10_000  # a loaded machine must not make a joint hold a step: the run stays a function of its inputs
+Goal = tuple[float, float]
+
+
+def _toml(v: Any) -> str:
+    """One TOML value (strings, numbers, booleans, arrays and inline tables: what a run file holds)."""
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, str):
+        return json.dumps(v)  # a TOML basic string escapes as JSON does
+    if isinstance(v, int | float):
+        return repr(float(v)) if isinstance(v, float) else str(v)
+    if isinstance(v, dict):
+        return "{ " + ", ".join(f"{k} = {_toml(x)}" for k, x in v.items()) + " }"
+    return "[" + ", ".join(_toml(x) for x in v) + "]"
+
+
+def write_run_file(path: Path, policy: Path, goals: Sequence[Goal], steps: int, recipe: Path = RECIPE) -> Path:
+    """A run file acting with `policy` (kind onnx) on `goals` (one epoch each, from the start pose) with the recipe's
+    robot, task and observation: the recipe's learner table keeps only what S_i is made of (its other fields are the
+    fuzzy learner's, refused with kind onnx)."""
+    spec = tomllib.loads(recipe.read_text())
+    base = (recipe.parent / spec["base"]).resolve() if "base" in spec else None
+    learner = {k: v for k, v in spec.get("learner", {}).items() if k in OBSERVATION_FIELDS}
+    task = {**spec.get("task", {}), "goals": [list(g) for g in goals]}
+    run = {
+        "placement": "process",
+        "epochs": len(goals),
+        "steps": steps,
+        "seed": 0,
+        "deadline_ms": DEADLINE_MS,
+        "record": False,
+        "checkpoint_every": 0,
+    }
+    tables = {"run": run, "task": task, "learner": {"kind": "onnx", "policy": str(policy.resolve()), **learner}}
+    lines = [f"base = {_toml(str(base))}"] if base is not None else []
+    for name, table in tables.items():
+        lines += ["", f"[{name}]", *(f"{k} = {_toml(v)}" for k, v in table.items())]
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def env_finals(run_file: Path, faults: list[dict[str, Any]] | None = None) -> list[float]:
+    """The policy of `run_file` stepped in parallel_env, one episode per epoch of the file (its goals in order), as any
+    user of the env takes the actions: the argmax of the scores over the moves the action mask allows. `faults`: from
+    every episode's first step."""
+    env = parallel_env(str(run_file), render_mode=None)
+    try:
+        learners = env.stepper.learners()  # the swarm's own builder: the OnnxPolicy objects the agents run
+        finals = []
+        for _ in range(env.stepper.cfg.epochs):
+            obs, infos = env.reset(options={"faults": faults} if faults else None)
+            while env.agents:
+                actions = {}
+                for a in env.possible_agents:
+                    scores = learners[a].scores(obs[a]["observation"])
+                    actions[a] = int(np.argmax(np.where(obs[a]["action_mask"] == 1, scores, -np.inf)))
+                obs, _, _, _, infos = env.step(actions)
+            finals.append(float(next(iter(infos.values()))["error"]))
+        return finals
+    finally:
+        env.close()
+
+
+def _cli(*args: str) -> list[str]:
+    return [sys.executable, "-m", "kinswarm.actors.cli", *args]
+
+
+def _fault(run_dir: Path, *words: str) -> dict[str, Any]:
+    """`kinswarm fault RUN-DIR WORDS...`, the CLI's own code, in this process (its imports already paid for: a new
+    interpreter would cost seconds of a loaded machine, and a short run may end before the fault is sent)."""
+    from kinswarm.actors.cli.commands import main
+
+    said = io.StringIO()
+    with contextlib.redirect_stdout(said), contextlib.redirect_stderr(said):
+        code = main(["fault", str(run_dir), *words])
+    return {"returncode": code, "said": said.getvalue().strip()}
+
+
+def _rows(run_dir: Path) -> list[dict[str, Any]]:
+    try:
+        text = (run_dir / "metrics.jsonl").read_text()
+    except OSError:
+        return []
+    return [json.loads(line) for line in text.splitlines() if line.strip()]
+
+
+def swarm_run(run_file: Path, out: Path, lock_after: int | None = None, timeout: float = 1800) -> dict[str, Any]:
+    """`kinswarm run RUN_FILE --out OUT` (process placement, as the file says). `lock_after`: once that many epochs
+    are in metrics.jsonl, `kinswarm fault OUT lock a2` is sent (the CLI as an operator types it, run here); where the
+    sim applied it is read back from events.jsonl. Returns the epochs' final errors (and the lock's epoch and step)."""
+    if out.exists():
+        raise ValueError(f"{out}: exists; a run directory is made by the run")
+    if lock_after is not None:
+        import kinswarm.actors.cli.control  # noqa: F401 -- imported now, not while the run goes by
+
+    log = out.parent / f"{out.name}.log"  # the run's own output (a pipe nobody reads while it runs could fill)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    with open(log, "w") as sink:
+        proc = subprocess.Popen(_cli("run", str(run_file), "--out", str(out)), stdout=sink, stderr=subprocess.STDOUT)
+        sent: dict[str, Any] | None = None
+        try:
+            t0 = time.monotonic()
+            while lock_after is not None and sent is None and proc.poll() is None:
+                if time.monotonic() - t0 > timeout:
+                    raise RuntimeError(f"{out}: no {lock_after} epochs within {timeout:.0f} s")
+                if len(_rows(out)) >= lock_after:
+                    sent = _fault(out, "lock", "a2")
+                else:
+                    time.sleep(0.2)
+            proc.wait(timeout=timeout)
+        finally:
+            if proc.poll() is None:  # ours: ended by its pid, its actors with it (the run stops them on SIGTERM)
+                proc.terminate()
+                proc.wait(timeout=60)
+    if proc.returncode != 0:
+        tail = log.read_text(errors="replace").strip().splitlines()[-1:]
+        raise RuntimeError(f"kinswarm run {run_file}: exit {proc.returncode}: {' '.join(tail)} ({log})")
+    res: dict[str, Any] = {"final_errors": [float(r["final_error"]) for r in _rows(out)]}
+    if lock_after is not None:
+        events = [json.loads(x) for x in (out / "events.jsonl").read_text().splitlines() if x.strip()]
+        landed = [e for e in events if e.get("event") == "lock" and e.get("target") == "a2"]
+        res["fault"] = sent
+        res["lock"] = {"epoch": landed[0]["epoch"], "step": landed[0]["step"]} if landed else None
+    return res
+
+
+def row(policy: Path, goals: Sequence[Goal], steps: int, out: Path, lock_after: int) -> dict[str, Any]:
+    """The whole row: the swarm intact and with a2 locked live, the env intact and with a2 locked from step 0.
+
+    `after`: the epochs after the lock's landing one (0-based indices into `goals`), all of them the env's locked
+    episodes; the swarm's, the env's locked and the env's intact final errors on them, and whether swarm and env agree
+    to the bit."""
+    file = write_run_file(out / "onnx-swarm.toml", policy, goals, steps)
+    env_intact, env_locked = env_finals(file), env_finals(file, LOCK)
+    intact = swarm_run(file, out / "swarm-intact")
+    live = swarm_run(file, out / "swarm-lock-a2", lock_after=lock_after)
+    res: dict[str, Any] = {
+        "goals": len(goals),
+        "steps": steps,
+        "lock_after": lock_after,
+        "run_file": file.name,
+        "env_intact": env_intact,
+        "env_locked": env_locked,
+        "swarm_intact": intact["final_errors"],
+        "swarm_live": live["final_errors"],
+        "intact_identical": intact["final_errors"] == env_intact,
+        "fault": live["fault"],
+        "lock": live["lock"],
+    }
+    if live["lock"] is not None and len(live["final_errors"]) == len(goals):
+        first = _epoch_index(out / "swarm-lock-a2", live["lock"]["epoch"]) + 1
+        after = list(range(first, len(goals)))
+        res["after"] = after
+        res["before_identical"] = live["final_errors"][: first - 1] == env_intact[: first - 1]
+        res["after_identical"] = [live["final_errors"][i] for i in after] == [env_locked[i] for i in after]
+    return res
+
+
+def _epoch_index(run_dir: Path, epoch: int) -> int:
+    """The position in metrics.jsonl (= in the goals) of the epoch an event names."""
+    for i, r in enumerate(_rows(run_dir)):
+        if r["epoch"] == epoch:
+            return i
+    raise RuntimeError(f"{run_dir}: epoch {epoch} of its events.jsonl is not in its metrics.jsonl")
+
+
+def within(errors: Sequence[float], tol: float = 0.5) -> int:
+    return int(sum(e <= tol for e in errors))
