@@ -344,6 +344,10 @@ def test_quick_adapt_experiment(tmp_path):
     # on a sound robot the plasticity changes nothing: the same episodes to the bit
     assert per["intact"]["trained + direction, learning"] == per["intact"]["trained, learning"]
     assert res["sequence"]["per"] and res["frozen"]["per"]
+    # the live sequence's ceiling: the same goals with nothing broken, where the plasticity again changes nothing
+    seq = res["sequence"]["per"]
+    assert set(seq) == {"intact", "a1 reversed"}
+    assert seq["intact"]["trained + direction, learning"] == seq["intact"]["trained, learning"]
     assert set(res["live"]["per"]) == {"trained, learning", "trained, learning, exploring afresh", "fresh, learning",
                                        "fresh, learning, the trained swarm's learner",
                                        "rule", "pseudo-inverse"}  # fmt: skip

@@ -1,5 +1,5 @@
-"""`[learner] plasticity = "surprise"`: the gate turns plastic on a run of surprising TD errors and settles after;
-it reads only the agent's own experience, so its decisions are the same whether a fault is announced (a scenario's
+"""`[learner] plasticity = "direction"`: an agent finds which way its own motor turns from its own encoder; it reads
+only the agent's own command and encoder, so its decisions are the same whether a fault is announced (a scenario's
 event, recorded) or the body just changed with no word to anyone."""
 
 from __future__ import annotations
@@ -11,56 +11,39 @@ from pathlib import Path
 import numpy as np
 import pytest
 from conftest import ROOT
+from kinswarm.actors.agent.memory import checkpoint_meta, restore_learner
 from kinswarm.actors.learning.learner import Learner
-from kinswarm.actors.learning.plasticity import BOOST, WARMUP, MotorDirection, SurpriseGate
-from kinswarm.actors.learning.settings import LearnerSettings
+from kinswarm.actors.learning.plasticity import MotorDirection
+from kinswarm.actors.learning.settings import PLASTICITY, LearnerSettings
+from kinswarm.actors.run.checkpoint import save_checkpoint
 from kinswarm.actors.run.runfile import load_run
 from kinswarm.actors.supervisor.inprocess import InProcessRun
 from kinswarm.sim import kinematics
 
 
-def test_the_gate_turns_plastic_on_a_run_of_surprises_and_settles_after() -> None:
-    gate, rng = SurpriseGate(), np.random.default_rng(0)
-    for _ in range(WARMUP + 300):  # the usual: TD errors of size ~1
-        gate.update(float(rng.normal()))
-    assert gate.factor == 1.0 and not gate.surprised
-    usual = gate.usual
-    gate.update(20.0)  # one odd TD error is not a run of them
-    assert gate.factor == 1.0
-    for _ in range(60):  # a run of TD errors 20x the usual
-        gate.update(20.0 * float(np.sign(rng.normal())))
-    assert gate.surprised and gate.factor == BOOST
-    # only the updates before the gate turned count towards the usual: a long surprise does not become usual
-    assert gate.usual == pytest.approx(usual, rel=0.1)
-    for _ in range(200):  # experience matches again: the boost fades
-        gate.update(float(rng.normal()))
-    assert not gate.surprised and 1.0 < gate.factor < BOOST / 2
-    for _ in range(600):
-        gate.update(float(rng.normal()))
-    assert gate.factor == pytest.approx(1.0, abs=0.01)
-
-
-def test_a_fresh_gate_waits_for_its_usual_and_a_checkpoint_keeps_it() -> None:
-    gate = SurpriseGate()
-    for _ in range(WARMUP - 1):
-        gate.update(100.0 if gate.seen % 2 else 0.0)
-    assert gate.factor == 1.0  # no usual yet: nothing is surprising
-    learner = Learner(LearnerSettings(plasticity="surprise"), 1, 0)
+def test_a_checkpoint_of_the_removed_surprise_gate_loads_with_its_fields_ignored(tmp_path: Path) -> None:
+    """Runs trained with the surprise gate (measured and removed: docs/notebook/adapt.md) hold its two fields beside
+    the learner's own: `--from` such a run starts from its Q-values and counts, and the gate's fields are dropped."""
+    trained = Learner(LearnerSettings(), 1, 0)
     rng = np.random.default_rng(1)
-    for _ in range(WARMUP + 50):
-        learner.step(rng.random(6), float(rng.normal()), [1])
-    state = learner.state_dict()
-    again = Learner(LearnerSettings(plasticity="surprise"), 1, 0)
-    again.load_state_dict(state)
-    assert (again.gate.usual, again.gate.seen) == (learner.gate.usual, learner.gate.seen) and again.gate.seen > 0
-    off = Learner(LearnerSettings(), 1, 0)
-    off.load_state_dict(state)  # a checkpoint with the gate's fields loads into the paper's learner, which ignores them
-    assert off.gate is None and "surprise_usual" not in off.state_dict()
+    for _ in range(50):
+        trained.step(rng.random(6), float(rng.normal()), [1])
+    old = {**trained.state_dict(), "surprise_usual": np.array(0.7), "surprise_seen": np.array(250, dtype=np.int64)}
+    meta = checkpoint_meta("a1", "fuzzy", "chain4", 0, 0, 0)
+    save_checkpoint(tmp_path / "a1.npz", old, meta)
+    for plasticity in PLASTICITY:
+        learner = Learner(LearnerSettings(plasticity=plasticity), 1, 0)
+        assert restore_learner(learner, tmp_path / "a1.npz", "a1", "fuzzy") == 1
+        state = learner.state_dict()
+        assert not {"surprise_usual", "surprise_seen"} & set(state)
+        assert np.array_equal(state["phi"], trained.state_dict()["phi"])
+        assert np.array_equal(state["counts"], trained.counts)
 
 
 def test_the_setting_is_checked() -> None:
-    with pytest.raises(ValueError, match="plasticity must be one of off, surprise, direction"):
-        LearnerSettings(plasticity="always")
+    for removed in ("always", "surprise"):
+        with pytest.raises(ValueError, match=f"plasticity must be one of off, direction, got '{removed}'"):
+            LearnerSettings(plasticity=removed)
     with pytest.raises(ValueError, match="reads the joint angle q, which the turn state has not"):
         LearnerSettings.for_turn(plasticity="direction")
 
@@ -112,9 +95,7 @@ class ReversedA1(kinematics.ModelWorld):
 
 
 def _plastic(learner: Learner) -> tuple:
-    """What the mechanism decided: the gate's factor and usual size, or the motor's direction and agreement."""
-    if learner.gate is not None:
-        return learner.gate.factor, learner.gate.state()
+    """What the mechanism decided: the motor's direction and agreement."""
     return learner.motor.sign, learner.motor.agree
 
 
@@ -138,7 +119,7 @@ def _decisions(tmp_path: Path, scenario: Path | None, world_cls: type, mode: str
     return [errors, factors], events
 
 
-@pytest.mark.parametrize("mode", ["surprise", "direction"])
+@pytest.mark.parametrize("mode", ["direction"])
 def test_the_mechanism_decides_the_same_whether_or_not_the_fault_was_announced(mode: str, tmp_path: Path) -> None:
     scenario = tmp_path / "reverse.toml"
     scenario.write_text('name = "a1 reversed"\n\n[[event]]\nstep = 0\nepoch = 0\nfault = "reverse"\ntarget = "a1"\n')

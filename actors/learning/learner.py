@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import fcntl
 import hashlib
-import math
 import tempfile
 from collections.abc import Collection, Iterator, Sequence
 from contextlib import contextmanager, nullcontext
@@ -14,7 +13,7 @@ import numpy as np
 
 from . import jasm, kernels
 from .fuzzy import FuzzyPartition
-from .plasticity import MotorDirection, SurpriseGate
+from .plasticity import MotorDirection
 from .qlearning import SparseFuzzyQ
 from .settings import N_ACTIONS, LearnerSettings
 
@@ -65,8 +64,6 @@ class Learner:
         self.lr = float(settings.lr)
         self.epsilon = settings.epsilon  # epsilon(epoch) = epsilon (1 - epsilon_decay)^epoch
         self.t = 0
-        # [learner] plasticity = "surprise": the gate that raises lr while its TD errors surprise it (plasticity.py)
-        self.gate = SurpriseGate() if settings.plasticity == "surprise" else None
         # [learner] plasticity = "direction": which way its motor turns, from its own encoder (plasticity.py)
         self.motor = MotorDirection() if settings.plasticity == "direction" else None
         self._load_compiled()
@@ -115,9 +112,7 @@ class Learner:
         self._reset_plasticity()
 
     def _reset_plasticity(self) -> None:
-        """No TD error or change of angle spans a reset or a gap (plasticity.py)."""
-        if self.gate is not None:
-            self.gate.reset_episode()
+        """No change of angle spans a reset or a gap (plasticity.py)."""
         if self.motor is not None:
             self.motor.reset_episode()
 
@@ -170,15 +165,12 @@ class Learner:
         e = fz.exponentials(state)  # Eq. 3's e^(-sigma (x - b)) for s(t)
         T = jasm.temperature(self.t, st.T_max, st.s)
         td = learn and self.lr > 0.0 and reward is not None and self._pending is not None and self._pending >= 0
-        gate = self.gate if td else None
-        lr = self.lr if gate is None else min(self.lr * gate.factor, 1.0)
-        expected = float(self._E[self._own]) if gate is not None else 0.0  # what Q expected of a(t-1)
         activated = False
         # The rules s(t) fires and their O (Eqs. 3-4), w = O / sum O and Q(s(t), .) (Eq. 2); (a) with td, the TD
         # update of s(t-1) and its joint action with s(t) as s' (Eqs. 5-6); (b) P (Eq. 7), E (Eq. 9) and z.
         while status := kernels.decide(
             e, fz.grid, fz.L_pad, fz.top_k, activated, self._fired, self._w, now,
-            self._pending if td else -1, td, float(reward) if td else 0.0, lr, float(st.gamma), T,
+            self._pending if td else -1, td, float(reward) if td else 0.0, self.lr, float(st.gamma), T,
             q.phi, q.index.table, q.index.entries, q.index.size, self._selection,
         ):  # fmt: skip
             if status == kernels.TIED:
@@ -186,8 +178,6 @@ class Learner:
             else:
                 q.reserve(status)  # phi rows for the rules of s(t-1) never updated
             activated = True
-        if gate is not None:  # the TD error of this update, as the agent sees it: its reward and its own Q
-            gate.update(float(reward) + float(st.gamma) * float(self._E.max()) - expected)
 
         # (b) JASM: the Boltzmann policy pi (Eq. 8; numpy's exp, kernels.py says why), epsilon-decreasing choice.
         p_explore = jasm.explore_probability(T, st.T_max, self.epsilon)
@@ -249,14 +239,11 @@ class Learner:
 
     def state_dict(self) -> dict[str, np.ndarray]:
         keys, phi = self.q.export()
-        gate = {}
-        if self.gate is not None:  # the usual size of its TD errors is learned too
-            usual, seen = self.gate.state()
-            gate = {"surprise_usual": np.array(usual), "surprise_seen": np.array(seen, dtype=np.int64)}
+        plastic = {}
         if self.motor is not None:  # the direction it found is learned too
-            gate["motor_sign"] = np.array(self.motor.sign, dtype=np.int64)
+            plastic["motor_sign"] = np.array(self.motor.sign, dtype=np.int64)
         return {
-            **gate,
+            **plastic,
             "version": np.array(STATE_DICT_VERSION, dtype=np.int64),
             "phi_keys": keys,
             "phi": phi,
@@ -289,11 +276,8 @@ class Learner:
         self.epoch = int(epoch)
         self.t = 0
         self._pending = None
-        if self.gate is not None and "surprise_usual" in d and "surprise_seen" in d:
-            usual, seen = float(np.asarray(d["surprise_usual"])), int(np.asarray(d["surprise_seen"]))
-            if not (math.isfinite(usual) and usual >= 0 and seen >= 0):
-                raise ValueError(f"surprise_usual must be >= 0 and surprise_seen >= 0, got {usual!r}, {seen!r}")
-            self.gate.load(usual, seen)
+        # fields of no mechanism this learner has (a checkpoint of another plasticity, or of one since removed)
+        # are ignored: the Q-values and counts they sit beside are the same learner's
         if self.motor is not None and "motor_sign" in d:
             sign = int(np.asarray(d["motor_sign"]))
             if sign not in (-1, 1):

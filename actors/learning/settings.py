@@ -34,8 +34,8 @@ from .observation import (
     ranges_for,
 )
 
-#: [learner] plasticity: "off" (the paper's learner), "surprise" or "direction" (plasticity.py)
-PLASTICITY: tuple[str, ...] = ("off", "surprise", "direction")
+#: [learner] plasticity: "off" (the paper's learner) or "direction" (plasticity.py)
+PLASTICITY: tuple[str, ...] = ("off", "direction")
 #: Own actions: 0 decrease, 1 keep, 2 increase the joint angle by the run's action size.
 N_ACTIONS = 3
 #: The sets of a spatial joint's rotation-plane variables (LearnerSettings.for_plane)
@@ -93,8 +93,8 @@ class LearnerSettings:
     g3: str = "signed"  # "unsigned": |g3|, so a goal straight behind the tip is one case, not both ends of g3
     extra_state: tuple[StateVariable, ...] = ()  # variables appended to S_i (a task's come first)
     state: str = "planar"  # what S_i holds (STATE_KINDS): the paper's six, a spatial joint's "plane" or its "turn"
-    # "direction": the agent finds which way its motor turns from its own encoder and acts through it; "surprise": it
-    # learns 16x faster while a run of its TD errors is far above their usual size (plasticity.py); "off": the paper's
+    # "direction": the agent finds which way its motor turns from its own encoder and acts through it (plasticity.py);
+    # "off": the paper's learner
     plasticity: str = "off"
 
     @property
