@@ -22,6 +22,7 @@ from .protocol import (
     CONTROLS,
     DEFAULT_LEARNER,
     EVAL_STEPS,
+    FREE_JOINTS,
     G_PERP_TEXT,
     L3_SEEDS,
     LEARNER,
@@ -48,6 +49,7 @@ __all__ = [
     "CONTROLS",
     "DEFAULT_LEARNER",
     "EVAL_STEPS",
+    "FREE_JOINTS",
     "G_PERP_TEXT",
     "L3_SEEDS",
     "LEARNER",
@@ -83,7 +85,13 @@ def run(ctx: Context) -> dict[str, Any]:
         trainings.append(Training(f"Level-1, {control_epochs} epochs (control)", 1, control_epochs, LEARNER, False))
         # §5.2 "successive on-line requests": the Level-3 swarm, each test goal from where the last one ended
         trainings.append(Training("Level-3, successive test goals", 3, REPS * 4**3, LEARNER, False, True))
+        # ... and on the same chain with joints that turn freely (FREE_JOINTS): the same swarms and goals
+        trainings.append(
+            Training(
+                "Level-3, successive test goals, joints free", 3, REPS * 4**3, LEARNER, False, True, robot=FREE_JOINTS
+            )
+        )
         # what JASM and the fuzzy sets buy: the Level-3 row with each taken away
         trainings += controls(3, REPS * 4**3, L3_SEEDS)
-    t = train_and_test(ctx, trainings, second_level=1 if q else 3, with_scratch=True)
+    t = train_and_test(ctx, trainings, second_level=1 if q else 3, with_scratch=True, free_joints=not q)
     return report(ctx, t, levels)
