@@ -53,3 +53,30 @@ def test_successive_rows_test_the_level_swarms_on_the_free_chain(
     assert all(s.goals == tuple(halton(k)[:100]) for s in [*swarms, *rule])  # test set K, as the other rows
     assert "rule on g_perp, successive test goals, joints free" in tested.references
     assert f"test_set_{k}" in tested.per["Level-3, successive test goals, joints free"]
+
+
+def test_the_any_pose_row_trains_on_the_free_chain_from_random_poses(tmp_path: Path, monkeypatch) -> None:
+    ran = []
+
+    def fake_run_specs(ctx, specs, desc=""):
+        ran.extend(specs)
+        return [RunOutcome(s, tmp_path / s.name, {}, [{"final_error": 0.1, "errors": [0.1]}] * s.epochs) for s in specs]
+
+    monkeypatch.setattr(protocol, "run_specs", fake_run_specs)
+    ctx = Context("generalisation", tmp_path, tmp_path / "runs", seeds=1, quick=False, test_set=0)
+    label = "Level-3, random starts, joints free"
+    rows = [
+        Training(label, 3, 128, LEARNER, False, random_starts=1.0, robot=FREE_JOINTS),
+        Training(
+            f"{label}, successive", 3, 128, LEARNER, False, True, random_starts=1.0, trained_as=label, robot=FREE_JOINTS
+        ),
+    ]
+    tested = train_and_test(ctx, rows, second_level=3, with_scratch=False)
+    (train,) = [s for s in ran if s.learn and s.controller == "agents"]
+    assert train.file == FREE_JOINTS and dict(train.task)["start_pose"] == "random"
+    tests = [s for s in ran if not s.learn and s.controller == "agents"]
+    assert {(s.successive, s.goals[0]) for s in tests} == {
+        (b, tuple(halton(k)[0])) for b in (False, True) for k in (0, 1)
+    }
+    assert all(s.from_dir == str(tmp_path / train.name) and s.file == FREE_JOINTS for s in tests)
+    assert set(tested.per[f"{label}, successive"]) == {"test_set_0", "test_set_1"}

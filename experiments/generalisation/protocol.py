@@ -125,7 +125,8 @@ class Training:
     # others from home: 0 trains from home only, as the paper does
     random_starts: float = 0.0
     trained_as: str = ""  # a successive row: the label of the row whose swarms it tests ("": the level's own row)
-    robot: str = ""  # a successive row: the run file its tests run on ("": chain4's, where the swarms were trained)
+    # the run file its runs use ("": chain4's); a successive row tests its swarms on it, wherever they were trained
+    robot: str = ""
 
     @property
     def suffix(self) -> str:
@@ -154,8 +155,9 @@ def run_suffix(learner: tuple, reward: str) -> str:
 def training_spec(t: Training, seed: int, steps: int) -> Spec:
     """The run that trains row `t`'s swarm of one seed: the level's goals in a seeded order, checkpointed."""
     goals = training_order(quadtree(t.level), math.ceil(t.epochs / 4**t.level), seed)[: t.epochs]
+    free = "-free" if t.robot else ""
     return Spec(
-        f"gen-train-L{t.level}-e{t.epochs}{t.suffix}{'-succ' if t.train_successive else ''}",
+        f"gen-train-L{t.level}-e{t.epochs}{t.suffix}{free}{'-succ' if t.train_successive else ''}",
         seed=seed,
         epochs=t.epochs,
         steps=steps,
@@ -168,6 +170,7 @@ def training_spec(t: Training, seed: int, steps: int) -> Spec:
         task=(("start_pose", "random"), ("start_share", t.random_starts), ("start_seed", seed))
         if t.random_starts
         else (),
+        **({"file": t.robot} if t.robot else {}),
     )
 
 
@@ -239,7 +242,8 @@ def train_and_test(
     eval_specs: dict[tuple[str, int, int], Spec] = {}
     for t in trainings:
         label, level = t.label, t.level
-        sets = [k, k + 1] if level >= second_level and (t.main or t.control) else [k]
+        # the sweep's rows, the controls and the rows trained from random poses are tested on a second set too
+        sets = [k, k + 1] if level >= second_level and (t.main or t.control or t.random_starts) else [k]
         for block in sets:
             for seed in seeds_of(t):
                 eval_specs[(label, block, seed)] = Spec(

@@ -248,13 +248,10 @@ def _against_the_rule(per: dict, references: dict, k: int) -> list[str]:
         )
     )
     free = "successive test goals, joints free"
-    pairs.append(
-        (
-            free,
-            per.get(f"Level-3, {free}", {}).get(f"test_set_{k}"),
-            references.get(f"rule on g_perp, {free}", {}).get(f"test_set_{k}"),
-        )
-    )
+    rule_free = references.get(f"rule on g_perp, {free}", {}).get(f"test_set_{k}")
+    pairs.append((free, per.get(f"Level-3, {free}", {}).get(f"test_set_{k}"), rule_free))
+    any_pose = per.get("Level-3, random starts, joints free, successive test goals", {}).get(f"test_set_{k}")
+    pairs.append(("successive test goals, joints free, trained from random poses", any_pose, rule_free))
     out = []
     for what, swarm, r in pairs:
         if swarm is None or r is None:
