@@ -22,6 +22,7 @@ from .protocol import (
     CONTROLS,
     DEFAULT_LEARNER,
     EVAL_STEPS,
+    FREE_JOINTS,
     G_PERP_TEXT,
     L3_SEEDS,
     LEARNER,
@@ -48,6 +49,7 @@ __all__ = [
     "CONTROLS",
     "DEFAULT_LEARNER",
     "EVAL_STEPS",
+    "FREE_JOINTS",
     "G_PERP_TEXT",
     "L3_SEEDS",
     "LEARNER",
@@ -83,7 +85,33 @@ def run(ctx: Context) -> dict[str, Any]:
         trainings.append(Training(f"Level-1, {control_epochs} epochs (control)", 1, control_epochs, LEARNER, False))
         # §5.2 "successive on-line requests": the Level-3 swarm, each test goal from where the last one ended
         trainings.append(Training("Level-3, successive test goals", 3, REPS * 4**3, LEARNER, False, True))
+        # ... and on the same chain with joints that turn freely (FREE_JOINTS): the same swarms and goals
+        trainings.append(
+            Training(
+                "Level-3, successive test goals, joints free", 3, REPS * 4**3, LEARNER, False, True, robot=FREE_JOINTS
+            )
+        )
+        # a skill from any pose: trained on the free chain from a random pose each epoch, tested from the start
+        # configuration and the paper's way (docs/notebook/reaching.md, "A skill from any pose")
+        any_pose = "Level-3, random starts, joints free"
+        trainings.append(
+            Training(any_pose, 3, REPS * 4**3, LEARNER, False, min_seeds=L3_SEEDS, random_starts=1.0, robot=FREE_JOINTS)
+        )
+        trainings.append(
+            Training(
+                f"{any_pose}, successive test goals",
+                3,
+                REPS * 4**3,
+                LEARNER,
+                False,
+                True,
+                min_seeds=L3_SEEDS,
+                random_starts=1.0,
+                trained_as=any_pose,
+                robot=FREE_JOINTS,
+            )
+        )
         # what JASM and the fuzzy sets buy: the Level-3 row with each taken away
         trainings += controls(3, REPS * 4**3, L3_SEEDS)
-    t = train_and_test(ctx, trainings, second_level=1 if q else 3, with_scratch=True)
+    t = train_and_test(ctx, trainings, second_level=1 if q else 3, with_scratch=True, free_joints=not q)
     return report(ctx, t, levels)

@@ -16,7 +16,7 @@ from kinswarm.actors.learning.settings import LearnerSettings, StateVariable
 
 from ..common import Context, frac_within, mean_std, run_specs, settings
 from ..goals import TEST_SIZE, halton, quadtree, training_order
-from ..swarm import RunOutcome, Spec, learner_overrides
+from ..swarm import ROOT, RunOutcome, Spec, learner_overrides
 
 PAPER = {1: (0.3814, 0.5596), 3: (0.2366, 0.2036)}  # §5.2: Level-1 and Level-3 mean / STD
 REPS = 2  # epochs per training goal (Level-4: 1, its 256 goals are already 256 epochs)
@@ -92,6 +92,12 @@ REWARD = "graded"
 # no learning, no model; what learning adds is measured against it, under both protocols.
 REFERENCES = {"pseudo-inverse": "pinv", "greedy per joint": "greedy", "rule on g_perp": "rule"}
 SUCCESSIVE_REFERENCES = {"rule on g_perp, successive test goals": "rule"}  # on test set K, as the swarm's row
+# The chain with joints that turn freely (limits out of reach; the paper states none): on chain4's ±180° every
+# controller that follows the goal distance, the rule and the pseudo-inverse too, winds the arm against a limit when
+# each goal starts where the last ended (docs/notebook/reaching.md, "A skill from any pose"). The successive rows
+# are run on it as well: the same swarms, the same goals.
+FREE_JOINTS = str(ROOT / "examples" / "chain4-free.toml")
+FREE_REFERENCES = {"rule on g_perp, successive test goals, joints free": "rule"}
 # The controls for the paper's two central design choices (actors/learning/kinds.py), each the recipe with one taken
 # away: "independent" learns Q over its own actions only (no joint action model, no fictitious play: what JASM
 # buys), "tabular" a Q-table over the same grid, the state's nearest cell (no fuzzy interpolation: what the fuzzy
@@ -119,6 +125,8 @@ class Training:
     # others from home: 0 trains from home only, as the paper does
     random_starts: float = 0.0
     trained_as: str = ""  # a successive row: the label of the row whose swarms it tests ("": the level's own row)
+    # the run file its runs use ("": chain4's); a successive row tests its swarms on it, wherever they were trained
+    robot: str = ""
 
     @property
     def suffix(self) -> str:
@@ -147,8 +155,9 @@ def run_suffix(learner: tuple, reward: str) -> str:
 def training_spec(t: Training, seed: int, steps: int) -> Spec:
     """The run that trains row `t`'s swarm of one seed: the level's goals in a seeded order, checkpointed."""
     goals = training_order(quadtree(t.level), math.ceil(t.epochs / 4**t.level), seed)[: t.epochs]
+    free = "-free" if t.robot else ""
     return Spec(
-        f"gen-train-L{t.level}-e{t.epochs}{t.suffix}{'-succ' if t.train_successive else ''}",
+        f"gen-train-L{t.level}-e{t.epochs}{t.suffix}{free}{'-succ' if t.train_successive else ''}",
         seed=seed,
         epochs=t.epochs,
         steps=steps,
@@ -161,6 +170,7 @@ def training_spec(t: Training, seed: int, steps: int) -> Spec:
         task=(("start_pose", "random"), ("start_share", t.random_starts), ("start_seed", seed))
         if t.random_starts
         else (),
+        **({"file": t.robot} if t.robot else {}),
     )
 
 
@@ -201,10 +211,12 @@ class Tested:
         return [r.final_errors[-1] for r in self.scratch.values()]
 
 
-def train_and_test(ctx: Context, trainings: list[Training], second_level: int, with_scratch: bool) -> Tested:
+def train_and_test(
+    ctx: Context, trainings: list[Training], second_level: int, with_scratch: bool, free_joints: bool = False
+) -> Tested:
     """Train every row's swarms (one per seed), test each frozen on test set K (the sweep's rows from
-    `second_level` up on K+1 too), run the model-based references on the same goals, and, `with_scratch`,
-    the learning-on episodes from scratch."""
+    `second_level` up on K+1 too), run the model-based references on the same goals (`free_joints`: the rule's
+    successive row on the chain with free joints too), and, `with_scratch`, the learning-on episodes from scratch."""
     q = ctx.quick
     train_steps, eval_steps = (100, 100) if q else (500, EVAL_STEPS)
     n_test = 8 if q else TEST_SIZE
@@ -230,11 +242,12 @@ def train_and_test(ctx: Context, trainings: list[Training], second_level: int, w
     eval_specs: dict[tuple[str, int, int], Spec] = {}
     for t in trainings:
         label, level = t.label, t.level
-        sets = [k, k + 1] if level >= second_level and (t.main or t.control) else [k]
+        # the sweep's rows, the controls and the rows trained from random poses are tested on a second set too
+        sets = [k, k + 1] if level >= second_level and (t.main or t.control or t.random_starts) else [k]
         for block in sets:
             for seed in seeds_of(t):
                 eval_specs[(label, block, seed)] = Spec(
-                    f"gen-test{block}-L{level}{t.suffix}",
+                    f"gen-test{block}-L{level}{t.suffix}{'-free' if t.robot else ''}",
                     seed=seed,
                     epochs=len(test_sets[block]),
                     steps=eval_steps,
@@ -245,6 +258,7 @@ def train_and_test(ctx: Context, trainings: list[Training], second_level: int, w
                     learn=False,
                     explore=False,
                     successive=t.successive,
+                    **({"file": t.robot} if t.robot else {}),
                 )
     scratch_specs = {
         (i, seed): Spec(
@@ -261,14 +275,19 @@ def train_and_test(ctx: Context, trainings: list[Training], second_level: int, w
     }
     ref_specs = {
         (name, block): Spec(
-            f"gen-ref{block}-{controller}{'-succ' if successive else ''}",
+            f"gen-ref{block}-{controller}{'-succ' if successive else ''}{'-free' if robot else ''}",
             epochs=len(test_sets[block]),
             steps=eval_steps,
             goals=tuple(test_sets[block]),
             controller=controller,
             successive=successive,
+            **({"file": robot} if robot else {}),
         )
-        for refs, successive in ((REFERENCES, False), (SUCCESSIVE_REFERENCES, True))
+        for refs, successive, robot in (
+            (REFERENCES, False, ""),
+            (SUCCESSIVE_REFERENCES, True, ""),
+            (FREE_REFERENCES if free_joints else {}, True, FREE_JOINTS),
+        )
         for name, controller in refs.items()
         for block in (test_sets if not successive else [k])
     }
