@@ -255,9 +255,9 @@ def _first(events: list[dict[str, Any]], event: str, target: str, after: float, 
 
 
 def own(events: list[dict[str, Any]], host: str) -> list[dict[str, Any]]:
-    """A host's record of its own agents' restarts and restores (the leader hears other hosts' restores only while
-    the link is up, and never their restarts)."""
-    return [e for e in events if e["event"] in ("restart", "restored") and e["target"] in HOSTS[host]]
+    """A host's record of its own agents' exits, restarts and restores (the leader hears other hosts' restores only
+    while the link is up, and never their restarts)."""
+    return [e for e in events if e["event"] in ("exited", "restart", "restored") and e["target"] in HOSTS[host]]
 
 
 def merged(brain: list[dict[str, Any]], limbs: list[dict[str, Any]]) -> list[dict[str, Any]]:

@@ -97,6 +97,30 @@ def test_the_invariants_catch_what_they_are_for():
     assert not chaos.check_restores([{**restored, "checkpoint_epoch": 4, "newest_saved": 5}])[0]  # not the newest
     assert chaos.check_restores([{**restored, "checkpoint_epoch": 5, "newest_saved": 5}])[0]
     assert not chaos.check_epochs([{"epoch": e} for e in (0, 1, 1, 3)], 4)[0]
+    good = {**restored, "target": "a4", "checkpoint_epoch": 5, "newest_saved": 5}
+    twice = [_ev("restart", "a4", 7, 104), _ev("exited", "a4", 8, 117), _ev("restart", "a4", 8, 117), good]
+    assert chaos.check_restores(twice)[0]  # restarted again while it started: that process restored nothing
+    ok, detail = chaos.check_restores([_ev("restart", "a4", 7, 104), _ev("restart", "a4", 8, 117), good])
+    assert not ok and "1 restarts never said" in detail, detail
+    assert not chaos.check_restores([good, _ev("restart", "a4", 8, 117)])[0]  # a restore is not for a later restart
+    late = [{**_ev("restart", "a4", 8, 117), "wall": 1000.0}]  # the run ended while it started again
+    ok, detail = chaos.check_restores(late, ended=1010.0)
+    assert ok and "1 still starting when the run ended" in detail, detail
+    assert not chaos.check_restores(late, ended=1000.0 + chaos.START_S + 1)[0]  # it had a minute to come back
+
+
+def _model_faults_held(events: list[dict]) -> list[float]:
+    """Seconds from each model fault to the `free` of its joint that the soak sent (1-8 s drawn), as recorded."""
+    chaos = _chaos()
+    held = []
+    for i, e in enumerate(events):
+        kind = e["detail"].split(" ")[0]
+        if e["event"] == "fault" and kind in chaos.MODEL and kind != "disturb" and e["target"] != "all":
+            free = next((f for f in events[i + 1 :] if f["event"] == "fault" and f["detail"] == f"free {e['target']}"),
+                        None)  # fmt: skip
+            if free is not None:
+                held.append(free["wall"] - e["wall"])
+    return sorted(held)
 
 
 @pytest.mark.timeout(240)
@@ -144,6 +168,8 @@ def test_quick_chaos_holds_every_invariant(tmp_path, capsys):
     assert "| invariant | holds |" in out, out
     assert "| NO |" not in out, out
     assert code == 0, out
+    held = _model_faults_held(_chaos()._rows(tmp_path / "chaos" / "events.jsonl"))  # they were freed at once
+    assert held and held[len(held) // 2] >= 1.0, held
 
 
 def _hosts_unavailable() -> str:
@@ -204,3 +230,5 @@ def test_quick_chaos_across_two_hosts_holds_every_invariant(tmp_path, capsys):
     assert "| after every cut the run went on | yes |" in out, out
     assert "| NO |" not in out, out
     assert code == 0, out
+    held = _model_faults_held(_chaos()._rows(tmp_path / "chaos" / "brain" / "events.jsonl"))
+    assert held and held[len(held) // 2] >= 1.0, held
