@@ -4,6 +4,7 @@ at once, then the invariants a user counts on, checked from what the run left be
     python benchmarks/chaos.py --minutes 60                 # the hour (a line a minute says it is alive)
     python benchmarks/chaos.py --quick                      # about a minute: every kind at least once
     python benchmarks/chaos.py --minutes 10 --every 3 --kinds kill,freeze --seed 1
+    python benchmarks/chaos.py --hosts --minutes 15         # split over two hosts, the cut between them a fault too
 
 Both runs (fault-free, then chaos, same seed and settings) are `kinswarm run` child processes. Faults go in as a user
 sends them: the first of each kind through `kinswarm fault RUN ...` itself, the others through the same client
@@ -16,6 +17,12 @@ mean --every seconds) and overlapping, on random agents and joints:
 - crash: the whole run dies at once (SIGKILL to the supervisor, the simulator and every agent: a power cut), and
   goes on with `kinswarm run --resume`. (A simulator killed alone ends its run by design, docs/faults.md.)
 
+With --hosts the swarm is split over two hosts (network namespaces on a bridge, root needed: the sim and a1 on
+`brain`, the leader; a2-a4 on `limbs`; `kinswarm up` with one plan on each), faults go in from the leader's host
+(`kinswarm fault` and the client run inside its namespace), and one more kind joins the schedule: cut, limbs' link
+down for 1-6 s, then mended. Kinds a split run cannot take are left out, the reason printed (benchmarks/chaos_hosts.py).
+
+
 The last --settle + --tail epochs get no new fault (everything is freed and cleared as they start); the last --tail
 of them measure the swarm's recovery. The settle epochs let an agent killed in the last faulty epoch come back first:
 it restores its newest checkpoint, and its parent stands in meanwhile (quick mode: 2; its tail is only 4 epochs).
@@ -25,7 +32,6 @@ Exit code 1 when an invariant fails; the table says which.
 from __future__ import annotations
 
 import argparse
-import asyncio
 import contextlib
 import json
 import math
@@ -44,6 +50,10 @@ from pathlib import Path
 from typing import Any
 
 ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT / "benchmarks"))
+import chaos_hosts  # noqa: E402
+from chaos_hosts import Control, Cut  # noqa: E402
+
 CLI = [sys.executable, "-m", "kinswarm.actors.cli"]
 AGENTS = ("a1", "a2", "a3", "a4")
 PROCESS = ("kill", "freeze", "restart")
@@ -53,7 +63,10 @@ KINDS = (*PROCESS, *MODEL, *LINK, "crash")
 # quick mode: a fault-free epoch of 150 steps on a quiet 2-core machine; a slower machine (its fault-free run's
 # median epoch) stretches the schedule's seconds by as much, so that it gets as many faults a step as a quiet one
 QUICK_EPOCH_S = 0.5
+SPLIT = ("cut",)  # only with --hosts
+START_S = 60.0  # an actor not alive this long after its start is given up on (actors/supervisor/core.py)
 EPOCH_S_PER_STEP = 0.008  # process placement, chain4, 2-core machine, under chaos (0.009 --beside): sizes --minutes
+SPLIT_S_PER_STEP = 0.011  # the same split over two hosts: through the hosts' routers, ~0.74 the rate (docs/deploy.md)
 # events the supervisor records itself (at the sim's clock): in file order they never go back, but at a resume
 SUPERVISOR = {"fault", "refused", "exited", "restart", "lost", "alive", "thaw", "restored", "stall", "stall_end"}
 
@@ -85,9 +98,17 @@ class Chaos:
     exit_codes: list[int] = field(default_factory=list)
     order: list[str] = field(default_factory=list)
     last_crash: float = -math.inf
-    loop: asyncio.AbstractEventLoop = field(default_factory=asyncio.new_event_loop)
-    client: Any = None  # kinswarm.actors.cli.control.Client, entered
+    control: Any = None  # chaos_hosts.Control, or with --hosts its RemoteControl in the leader's namespace
+    split: chaos_hosts.Split | None = None  # --hosts: the run's two hosts
+    cuts: list[Cut] = field(default_factory=list)
+    cut_open: Cut | None = None
+    last_mend: float = -math.inf
+    ended: float = math.inf  # wall clock: when the chaos run's (last) process ended
     pace: float = 1.0  # the schedule's seconds stretched by this (quick mode on a slow machine)
+
+    def __post_init__(self) -> None:
+        if self.control is None:
+            self.control = Control(self.out)
 
     # -- the run -------------------------------------------------------------------------------------------
     def argv(self, run_id: str, out: Path) -> list[str]:
@@ -100,6 +121,16 @@ class Chaos:
         with open(self.log, "a") as f:
             self.proc = subprocess.Popen(argv, stdout=f, stderr=subprocess.STDOUT, start_new_session=True)
         self.note({self.proc.pid})
+
+    def launch(self) -> None:
+        """The chaos run: one `kinswarm run`, or with --hosts `kinswarm up` on both hosts."""
+        a = self.a
+        if self.split is None:
+            self.start(self.argv(a.run_id, self.out))
+            return
+        leader = ["--run-id", a.run_id, "--deadline-ms", str(a.deadline_ms)]
+        self.proc = self.split.start(self.out.parent, a.epochs, a.steps, a.seed, leader)
+        self.note({p.pid for p in self.split.hosts.procs})
 
     def epochs_done(self) -> int:
         path = self.out / "metrics.jsonl"
@@ -138,10 +169,9 @@ class Chaos:
 
     def send(self, kind: str, target: str, params: dict[str, float], via_cli: bool) -> tuple[bool, str]:
         """(delivered, the supervisor's error or ''); a run between its crash and its resume is not reached."""
-        from kinswarm.actors.cli.control import Client, ControlError, make_fault, run_config_at, tool_net
-
         if via_cli:
-            args = [*CLI, "fault", self.a.run_id, kind, target, "--run-dir", str(self.out)]
+            where = ["ip", "netns", "exec", self.split.hosts.ns("brain")] if self.split else []
+            args = [*where, *CLI, "fault", self.a.run_id, kind, target, "--run-dir", str(self.out)]
             for name, value in params.items():
                 flag = {"seconds": "--for"}.get(name, "--" + name)
                 args += [flag, f"{value:g}s" if name == "seconds" else f"{value:g}"]
@@ -151,27 +181,10 @@ class Chaos:
             said = (r.stdout + r.stderr).strip().splitlines()
             line = said[-1] if said else f"exit {r.returncode}"
             return ("cannot reach" not in line and "did not answer" not in line and "no supervisor" not in line), line
-
-        async def one() -> tuple[bool, str]:
-            if self.client is None:  # one session for many faults; a new one after a crash (a new endpoint)
-                cfg = run_config_at(self.out)
-                client = Client(cfg, tool_net(self.out, cfg, None))
-                self.client = await client.__aenter__()
-            fault = make_fault(kind, [target], **{k: (int(v) if k == "steps" else v) for k, v in params.items()})
-            reply = await self.client.fault(fault, timeout=5.0)
-            return True, reply.error
-
-        try:
-            return self.loop.run_until_complete(one())
-        except ControlError as e:
-            self.close_client()
-            return False, str(e)
+        return self.control.fault(kind, target, params)
 
     def close_client(self) -> None:
-        if self.client is not None:
-            with contextlib.suppress(Exception):
-                self.loop.run_until_complete(self.client.__aexit__(None, None, None))
-            self.client = None
+        self.control.close()
 
     def note(self, pids: set[int]) -> None:
         """Remember processes of the run, each with its start time (one gone already cannot be left running)."""
@@ -180,19 +193,7 @@ class Chaos:
                 self.pids[pid] = st[1]
 
     def status_pids(self) -> dict[str, int]:
-        from kinswarm.actors.cli.control import Client, ControlError, run_config_at, tool_net
-
-        async def one() -> dict[str, int]:
-            cfg = run_config_at(self.out)
-            try:
-                async with Client(cfg, tool_net(self.out, cfg, None)) as c:
-                    async for status, _ in c.statuses(timeout=3.0):
-                        return dict(status.pid)
-            except ControlError:
-                pass
-            return {}
-
-        return asyncio.run(one())
+        return self.control.pids()
 
     def crash(self) -> bool:
         """A power cut: the supervisor, the simulator and every agent SIGKILLed at once; then `--resume`."""
@@ -216,14 +217,45 @@ class Chaos:
         self.resumes += 1
         return True
 
+    def ready(self, kind: str, now: float) -> bool:
+        if kind == "crash":  # a crash sets the run back to its last checkpoint and costs a restart of everything:
+            return now - self.last_crash >= self.a.crash_gap  # spaced, or the run would spend its time starting again
+        if kind == "cut":  # one at a time, apart: each partition and rejoin in events.jsonl belongs to one cut
+            return self.cut_open is None and now - self.last_mend >= chaos_hosts.CUT_GAP_S
+        return True
+
+    def cut(self, now: float, undo: list[tuple[float, str, str]]) -> None:
+        """limbs' link down (its cable pulled), mended after a drawn time."""
+        assert self.split is not None
+        seconds = round(self.rng.uniform(*chaos_hosts.CUT_S), 2)
+        self.split.hosts.cut("limbs")
+        self.cut_open = Cut(time.time(), seconds)
+        self.injected.append(Injected("cut", "limbs", {"seconds": seconds}, f"cut limbs {seconds:g}s", now, False))
+        undo.append((now + seconds, "mend", "limbs"))
+
+    def mend(self, now: float) -> None:
+        if self.cut_open is not None and self.split is not None:
+            self.split.hosts.mend("limbs")
+            self.cut_open.mended = time.time()
+            self.cuts.append(self.cut_open)
+            self.cut_open, self.last_mend = None, now
+
     def inject(self, now: float, undo: list[tuple[float, str, str]]) -> None:
         kind = self.next_kind()
-        if kind == "crash" and now - self.last_crash < self.a.crash_gap and len(set(self.a.kinds)) > 1:
-            # a crash sets the run back to its last checkpoint and costs a restart of everything: spaced, or
-            # the run would spend its time starting again
-            self.order.insert(0, kind)
-            while kind == "crash":
-                kind = self.next_kind()
+        if not self.ready(kind, now):
+            if len(set(self.a.kinds)) == 1 and kind == "cut":
+                self.order.append(kind)  # nothing else to send meanwhile
+                return
+            if len(set(self.a.kinds)) > 1:
+                held = kind
+                self.order.insert(0, kind)
+                while kind == held:
+                    kind = self.next_kind()
+        if kind in PROCESS and self.epochs_done() >= self.a.process_until:
+            return  # restarted agents must be back before the measured tail begins: this tick goes without a fault
+        if kind == "cut":
+            self.cut(now, undo)
+            return
         if kind == "crash":
             if not self.crash():
                 self.order.append(kind)  # not up yet: later
@@ -254,15 +286,16 @@ class Chaos:
         """The chaos run, faults injected until its tail; returns its wall seconds."""
         a = self.a
         t0 = time.monotonic()
-        self.start(self.argv(a.run_id, self.out))
+        self.launch()
         undo: list[tuple[float, str, str]] = []
         next_at, next_line, quiet = t0 + a.warmup, t0 + 60.0, False
         while True:
             assert self.proc is not None
             if self.proc.poll() is not None:
+                self.ended = time.time()
                 self.exit_codes.append(self.proc.returncode)
-                self.close_client()
-                self.loop.close()
+                self.mend(time.monotonic() - t0)
+                self.control.shutdown()
                 break
             now = time.monotonic()
             if now >= next_line:
@@ -276,9 +309,13 @@ class Chaos:
                 next_line += 60.0
             for due, what, target in [u for u in undo if u[0] <= now - t0]:  # inject() dates them from t0
                 undo.remove((due, what, target))
-                self.send(what, target, {}, via_cli=False)
+                if what == "mend":
+                    self.mend(now - t0)
+                else:
+                    self.send(what, target, {}, via_cli=False)
             if not quiet and self.epochs_done() >= a.epochs - a.tail - a.settle:
                 quiet = True  # the tail: the swarm left to recover
+                self.mend(now - t0)
                 for what in ("free", "clear"):
                     self.send(what, "all", {}, via_cli=False)
                 undo.clear()
@@ -320,7 +357,7 @@ def segments(events: list[dict[str, Any]]) -> list[list[dict[str, Any]]]:
     """The events of each supervisor's life (a resume starts a new one; its clock `t` starts again)."""
     out: list[list[dict[str, Any]]] = [[]]
     for e in events:
-        if e["event"] == "resume":
+        if e["event"] == "resume" and e["target"] == "swarm":  # not the sim's own resume after a host's cut
             out.append([])
         out[-1].append(e)
     return out
@@ -332,7 +369,7 @@ def check_faults_at_steps(events: list[dict[str, Any]], injected: list[Injected]
     from kinswarm.actors.report.timeline import one_per_command
 
     unplaced = [e for e in events if not (e["epoch"] >= 0 and 0 <= e["step"] <= steps)]
-    wanted = [i for i in injected if i.kind != "crash"]
+    wanted = [i for i in injected if i.kind not in ("crash", "cut")]  # the whole run's, not a supervisor's
     faults = [e for e in events if e["event"] == "fault"]
     missing, far = [], []
     for i in wanted:
@@ -370,9 +407,26 @@ def check_faults_at_steps(events: list[dict[str, Any]], injected: list[Injected]
     return ok, detail
 
 
-def check_restores(events: list[dict[str, Any]]) -> tuple[bool, str]:
+def unanswered(events: list[dict[str, Any]], ended: float = math.inf) -> tuple[int, int]:
+    """(restarts after which their agent neither said what it restored nor exited again (killed or restarted while
+    it was starting: that process restored nothing), of those the ones still starting when the run ended at wall
+    clock `ended`: less than START_S before it). A resume starts every agent anew."""
+    pending: dict[str, list[float]] = {}
+    for e in events:
+        if e["event"] == "resume" and e["target"] == "swarm":
+            pending.clear()
+        elif e["event"] == "restart":
+            pending.setdefault(e["target"], []).append(e.get("wall", -math.inf))
+        elif e["event"] in ("restored", "exited") and pending.get(e["target"]):
+            pending[e["target"]].pop(0)
+    left = [w for ws in pending.values() for w in ws]
+    starting = sum(w > ended - START_S for w in left)
+    return len(left) - starting, starting
+
+
+def check_restores(events: list[dict[str, Any]], ended: float = math.inf) -> tuple[bool, str]:
     """Every restart restored from a checkpoint at least as new as the newest its agent said it saved, the weights
-    hashing as the checkpoint did."""
+    hashing as the checkpoint did; but a restart the run's end (at wall clock `ended`) cut short."""
     restored = [e for e in events if e["event"] == "restored"]
     restarts = [e for e in events if e["event"] == "restart"]
     bad = []
@@ -382,25 +436,28 @@ def check_restores(events: list[dict[str, Any]]) -> tuple[bool, str]:
             continue  # before the first checkpoint: nothing to restore
         if not (m and m.group(1) == m.group(2)) or e.get("checkpoint_epoch", -1) < e.get("newest_saved", -1):
             bad.append(f"{e['target']} at {e['epoch']}/{e['step']}: {e['detail'][:80]}")
-    short = len(restored) < len(restarts)
+    short, starting = unanswered(events, ended)
     detail = f"{len(restarts)} restarts, {len(restored)} restored"
+    if starting:
+        detail += f"; {starting} still starting when the run ended"
     if short:
-        detail += f"; {len(restarts) - len(restored)} restarts never said what they restored"
+        detail += f"; {short} restarts never said what they restored"
     if bad:
         detail += f"; wrong: {len(bad)} ({bad[0]})"
     return not (bad or short), detail
 
 
-def check_standins(events: list[dict[str, Any]]) -> tuple[bool, str]:
+def check_standins(events: list[dict[str, Any]], clock: str = "t") -> tuple[bool, str]:
     """An `adopt X` only while X was down: from its loss (or the fault that caused it, or its exit) to its token's
-    return, give or take a second for the two observers hearing it at different moments."""
+    return, give or take a second for the two observers hearing it at different moments. `clock`: "wall" for the
+    records of two supervisors (each one's `t` starts at its own start)."""
     wrong, adopts = [], 0
     for seg in segments(events):
         for e in (e for e in seg if e["event"] == "adopt"):
             adopts += 1
-            x, t = e["target"], e["t"]
+            x, t = e["target"], e[clock]
             starts = [
-                d["t"]
+                d[clock]
                 for d in seg
                 if d["target"] == x
                 and d["event"] in ("lost", "exited")
@@ -410,7 +467,7 @@ def check_standins(events: list[dict[str, Any]]) -> tuple[bool, str]:
             ]
             ok = False
             for s in starts:
-                back = [b["t"] for b in seg if b["event"] == "alive" and b["target"] == x and b["t"] >= s]
+                back = [b[clock] for b in seg if b["event"] == "alive" and b["target"] == x and b[clock] >= s]
                 if s - 1.0 <= t <= (min(back) if back else math.inf) + 0.25:
                     ok = True
                     break
@@ -453,7 +510,7 @@ def check_nothing_left(pids: dict[int, int], out: Path) -> tuple[bool, str]:
     return not left, f"{len(pids)} processes seen" + (f"; still running: {sorted(set(left))}" if left else "")
 
 
-def main(argv: list[str] | None = None) -> int:
+def parse(argv: list[str] | None) -> argparse.Namespace:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--minutes", type=float, default=60.0, help="how long the chaos run learns (sizes --epochs)")
     p.add_argument("--quick", action="store_true", help="about a minute, a fault every 1-2 s, each kind at least once")
@@ -462,16 +519,27 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--steps", type=int, default=None, help="steps per epoch (default 500; quick 150)")
     p.add_argument("--tail", type=int, default=None, help="last epochs with no new fault, measured (default 20)")
     p.add_argument("--settle", type=int, default=None, help="quiet epochs before the tail (default 0; quick 2)")
-    p.add_argument("--kinds", default=",".join(KINDS), help=f"comma-separated, of: {','.join(KINDS)}")
+    p.add_argument("--kinds", default=None, help=f"comma-separated, of: {','.join(KINDS)} (and with --hosts: cut)")
     p.add_argument("--crash-gap", type=float, default=150.0, help="seconds at least between two crashes (quick: one)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--deadline-ms", type=int, default=100)
     p.add_argument("--beside", action="store_true", help="the fault-free run beside the chaos run, not before it")
+    p.add_argument("--hosts", action="store_true", help="both runs split over two network-namespace hosts (root)")
     p.add_argument("--out", type=Path, default=None, help="keep both runs here (default: a temporary directory)")
     a = p.parse_args(argv)
-    a.kinds = [k.strip() for k in a.kinds.split(",") if k.strip()]
-    if bad := [k for k in a.kinds if k not in KINDS]:
-        p.error(f"--kinds: unknown {', '.join(bad)}; expected some of {', '.join(KINDS)}")
+    known = (*KINDS, *SPLIT) if a.hosts else KINDS
+    a.kinds = [k.strip() for k in (a.kinds or ",".join(known)).split(",") if k.strip()]
+    if bad := [k for k in a.kinds if k not in (*KINDS, *SPLIT)]:
+        p.error(f"--kinds: unknown {', '.join(bad)}; expected some of {', '.join((*KINDS, *SPLIT))}")
+    if not a.hosts and (split := [k for k in a.kinds if k in SPLIT]):
+        p.error(f"--kinds {','.join(split)}: a cut between hosts needs two hosts: add --hosts")
+    if a.hosts:
+        for kind, why in chaos_hosts.LEFT_OUT.items():
+            if kind in a.kinds:
+                a.kinds = [k for k in a.kinds if k != kind]
+                print(f"chaos --hosts: {kind} left out: {why}", flush=True)
+        if not a.kinds:
+            p.error("--kinds: none left that a split run can take")
     if a.quick:  # about 40 s of chaos on the 2-core machine, after a fault-free run of about 30 s
         a.minutes = min(a.minutes, 1.0)
         a.epochs = a.epochs or 40
@@ -481,23 +549,48 @@ def main(argv: list[str] | None = None) -> int:
     a.tail = a.tail if a.tail is not None else (4 if a.quick else 20)
     a.settle = a.settle if a.settle is not None else (2 if a.quick else 0)
     if a.epochs is None:
-        a.epochs = max(a.tail + a.settle + 4, round(a.minutes * 60 / (a.steps * EPOCH_S_PER_STEP)))
+        s_per_step = SPLIT_S_PER_STEP if a.hosts else EPOCH_S_PER_STEP
+        a.epochs = max(a.tail + a.settle + 4, round(a.minutes * 60 / (a.steps * s_per_step)))
     if a.every <= 0 or a.epochs <= a.tail + a.settle or a.steps < 1 or a.settle < 0:
         p.error("--every must be > 0, --epochs more than --tail + --settle, --settle at least 0, --steps at least 1")
+    # a split run's agents restart slowly here (10-17 s at load 15) while epochs of 150 steps with them down pass in
+    # about a second each: in the quick mode the last process faults come 8 epochs before its 4-epoch tail
+    a.process_until = a.epochs - a.tail - 8 if (a.quick and a.hosts) else a.epochs
     a.warmup = 1.0
     a.run_id = "chaos"
-    with tempfile.TemporaryDirectory() as tmp:
+    base = Path(a.out) if a.out else None
+    for d in (base / "fault-free", base / "chaos") if base else ():
+        if d.exists():
+            p.error(f"--out {base}: {d} exists already (a run of its own): give an empty directory")
+    return a
+
+
+def main(argv: list[str] | None = None) -> int:
+    a = parse(argv)
+    with tempfile.TemporaryDirectory() as tmp, contextlib.ExitStack() as stack:
         base = Path(a.out or tmp)
         base.mkdir(parents=True, exist_ok=True)
-        free_out, out = base / "fault-free", base / "chaos"
-        for d in (free_out, out):
-            if d.exists():
-                p.error(f"--out {base}: {d} exists already (a run of its own): give an empty directory")
-        c = Chaos(a, out, random.Random(a.seed), base / "runs.log")
+        split = free_split = None
+        if a.hosts:
+            try:  # two hosts for each run: a cut of the chaos run's limbs must not cut the fault-free run beside it
+                split = stack.enter_context(chaos_hosts.Split())
+                free_split = stack.enter_context(chaos_hosts.Split("f"))
+            except chaos_hosts.NetnsUnavailable as e:
+                print(f"chaos: --hosts: no network namespaces here: {e}", file=sys.stderr)
+                return 2
+        # a split run's directories: the leader's (what is checked) under <run>/brain, the other host's <run>/limbs
+        free_out, out = (base / "fault-free", base / "chaos") if split is None else (
+            base / "fault-free" / "brain", base / "chaos" / "brain")  # fmt: skip
+        control = None if split is None else chaos_hosts.RemoteControl(split.hosts, "brain", out, base / "control.log")
+        c = Chaos(a, out, random.Random(a.seed), base / "runs.log", control=control, split=split)
         t0 = time.monotonic()
-        c.start(c.argv("chaos-free", free_out))
-        assert c.proc is not None
-        free = c.proc
+        if free_split is None:
+            c.start(c.argv("chaos-free", free_out))
+            assert c.proc is not None
+            free = c.proc
+        else:
+            free = free_split.start(free_out.parent, a.epochs, a.steps, a.seed,
+                                    ["--run-id", "chaos-free", "--deadline-ms", str(a.deadline_ms)])  # fmt: skip
         if not a.beside:
             while free.poll() is None:  # a line a minute: alive
                 with contextlib.suppress(subprocess.TimeoutExpired):
@@ -516,48 +609,77 @@ def main(argv: list[str] | None = None) -> int:
                       f"the schedule's seconds stretched x{pace:.1f}, a fault every {a.every:.1f} s")  # fmt: skip
         wall = c.soak()
         free_code = free.wait()
-        summary = free_out / "summary.json"
-        free_s = json.loads(summary.read_text()).get("wall_seconds", 0.0) if summary.exists() else 0.0
-        events, metrics = _rows(out / "events.jsonl"), _rows(out / "metrics.jsonl")
-        free_metrics = _rows(free_out / "metrics.jsonl")
-        s_free, s_chaos = share(free_metrics, a.tail), share(metrics, a.tail)
-        kinds = Counter(i.kind for i in c.injected)
-        rows = [
-            ("every fault in events.jsonl at its exact step", *check_faults_at_steps(events, c.injected, a.steps)),
-            ("every restart restored the newest checkpoint", *check_restores(events)),
-            ("no agent stood in for a live child", *check_standins(events)),
-            ("every epoch once in metrics.jsonl", *check_epochs(metrics, a.epochs)),
-            ("the run finished", *check_finished(out, c.exit_codes, c.crashes)),
-            ("nothing left running", *check_nothing_left(c.pids, out)),
-            (
-                f"still learns: last {a.tail} within 0.5 >= fault-free - 10 points",
-                s_chaos >= s_free - 0.10,
-                f"{s_chaos:.0%} vs fault-free {s_free:.0%} (exit {free_code})",
-            ),
-            (
-                "every kind injected",
-                all(kinds[k] >= 1 for k in a.kinds),
-                ", ".join(f"{k} {kinds[k]}" for k in a.kinds),
-            ),
-        ]
-        n = len(c.injected)
-        print(
-            f"\nchaos soak: {a.epochs} epochs x {a.steps} steps, seed {a.seed}, process placement, deadline "
-            f"{a.deadline_ms} ms; {n} faults in {wall:.0f} s (one every {wall / max(n, 1):.1f} s), "
-            f"{c.crashes} crashes resumed, {len(c.refused)} refused, {sum(c.undelivered.values())} retried "
-            f"(the run was between a crash and its resume); fault-free run {free_s:.0f} s"
-            + (" (beside)" if a.beside else "")
-        )
-        print("| invariant | holds | what was seen |")
-        print("|---|---|---|")
-        for name, ok, detail in rows:
-            print(f"| {name} | {'yes' if ok else 'NO'} | {detail} |")
-        for r in c.refused[:5]:
-            print(f"refused: {r}")
-        failed = [name for name, ok, _ in rows if not ok]
-        if failed and a.out is None:
-            print(f"(the runs' log: {base / 'runs.log'}, kept only with --out)")
-        return 1 if failed else 0
+        return report(a, c, base, free_out, free_code, wall, [s for s in (split, free_split) if s is not None])
+
+
+def report(
+    a: argparse.Namespace,
+    c: Chaos,
+    base: Path,
+    free_out: Path,
+    free_code: int,
+    wall: float,
+    splits: list[chaos_hosts.Split],
+) -> int:
+    """The invariants, checked from what the runs left behind, printed as a table; 1 if one does not hold."""
+    out = c.out
+    summary = free_out / "summary.json"
+    free_s = json.loads(summary.read_text()).get("wall_seconds", 0.0) if summary.exists() else 0.0
+    events, metrics = _rows(out / "events.jsonl"), _rows(out / "metrics.jsonl")
+    free_metrics = _rows(free_out / "metrics.jsonl")
+    s_free, s_chaos = share(free_metrics, a.tail), share(metrics, a.tail)
+    kinds = Counter(i.kind for i in c.injected)
+    if c.split is None:
+        restores, standins = check_restores(events, c.ended), check_standins(events)
+        left = check_nothing_left(c.pids, out)
+    else:  # each host records its own agents' restarts; the leader hears the rest, but not through a cut
+        limbs = _rows(out.parent / "limbs" / "events.jsonl")
+        restores = check_restores(chaos_hosts.own(events, "brain") + chaos_hosts.own(limbs, "limbs"), c.ended)
+        standins = check_standins(chaos_hosts.merged(events, limbs), clock="wall")
+        lingering = [pid for s in splits for pid in s.wait_others(60.0)]  # the other hosts stop by themselves
+        c.note({p.pid for s in splits for p in s.hosts.procs})
+        ok, detail = check_nothing_left(c.pids, out.parent)
+        inside = sorted({pid for s in splits for pid in s.left_inside()})
+        if lingering or inside:
+            detail += f"; still up: {lingering} (a host's `kinswarm up`), in the namespaces: {inside}"
+        left = (ok and not (lingering or inside), detail)
+    rows = [
+        ("every fault in events.jsonl at its exact step", *check_faults_at_steps(events, c.injected, a.steps)),
+        ("every restart restored the newest checkpoint", *restores),
+        ("no agent stood in for a live child", *standins),
+        ("every epoch once in metrics.jsonl", *check_epochs(metrics, a.epochs)),
+        ("the run finished", *check_finished(out, c.exit_codes, c.crashes)),
+        ("nothing left running" + (" (in either host)" if c.split else ""), *left),
+        (
+            f"still learns: last {a.tail} within 0.5 >= fault-free - 10 points",
+            s_chaos >= s_free - 0.10 and free_code == 0,  # a fault-free run that failed measures nothing
+            f"{s_chaos:.0%} vs fault-free {s_free:.0%} (exit {free_code})",
+        ),
+        ("every kind injected", all(kinds[k] >= 1 for k in a.kinds), ", ".join(f"{k} {kinds[k]}" for k in a.kinds)),
+    ]
+    if c.split is not None:
+        limbs = _rows(out.parent / "limbs" / "events.jsonl")
+        rows.insert(5, ("after every cut the run went on", *chaos_hosts.check_cuts(events, limbs, c.cuts)))
+    n = len(c.injected)
+    where = "split over two hosts (brain: sim, a1; limbs: a2-a4)" if c.split else "process placement"
+    print(
+        f"\nchaos soak: {a.epochs} epochs x {a.steps} steps, seed {a.seed}, {where}, deadline "
+        f"{a.deadline_ms} ms; {n} faults in {wall:.0f} s (one every {wall / max(n, 1):.1f} s), "
+        f"{c.crashes} crashes resumed, {len(c.refused)} refused, {sum(c.undelivered.values())} retried "
+        f"(the run was between a crash and its resume); fault-free run {free_s:.0f} s"
+        + (" (beside)" if a.beside else "")
+    )
+    print("| invariant | holds | what was seen |")
+    print("|---|---|---|")
+    for name, ok, detail in rows:
+        print(f"| {name} | {'yes' if ok else 'NO'} | {detail} |")
+    for r in c.refused[:5]:
+        print(f"refused: {r}")
+    failed = [name for name, ok, _ in rows if not ok]
+    if failed and a.out is None:
+        logs = "runs.log" if c.split is None else "{chaos,fault-free}/{b,l}.log (the leader's, limbs'), control.log"
+        print(f"(the runs' logs: {base}/{logs}, kept only with --out)")
+    return 1 if failed else 0
 
 
 if __name__ == "__main__":

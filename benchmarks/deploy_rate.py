@@ -16,6 +16,7 @@ import statistics
 import subprocess
 import sys
 import tempfile
+from collections.abc import Sequence
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -33,9 +34,11 @@ def rate(metrics: Path) -> float:
     return sum(r["steps"] for r in rows) / sum(r["seconds"] for r in rows)
 
 
-def start_split(h: Hosts, tmp: Path, epochs: int, steps: int, seed: int) -> subprocess.Popen:
+def start_split(
+    h: Hosts, tmp: Path, epochs: int, steps: int, seed: int, leader_args: Sequence[str] = ()
+) -> subprocess.Popen:
     """`kinswarm up` on both hosts (the sim and a1 on brain, a2-a4 on limbs), run dirs under `tmp`; returns
-    the leader's process (log: tmp/b.log)."""
+    the leader's process (log: tmp/b.log). `leader_args`: more of the leader's flags (--run-id, --deadline-ms)."""
     plan = tmp / "plan.toml"
     plan.write_text(
         f'[plan]\nname = "bench"\nleader = "brain"\n[run]\nfile = "{ROOT / "examples" / "chain4.toml"}"\n'
@@ -45,7 +48,8 @@ def start_split(h: Hosts, tmp: Path, epochs: int, steps: int, seed: int) -> subp
     )
     h.spawn("limbs", [*KINSWARM, "up", str(plan), "--host", "limbs", "--out", str(tmp / "limbs")], tmp / "l.log")
     return h.spawn(
-        "brain", [*KINSWARM, "up", str(plan), "--host", "brain", "--out", str(tmp / "brain"), "--no-progress"],
+        "brain", [*KINSWARM, "up", str(plan), "--host", "brain", "--out", str(tmp / "brain"), "--no-progress",
+         *leader_args],
         tmp / "b.log",
     )  # fmt: skip
 

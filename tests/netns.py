@@ -26,12 +26,13 @@ def _ip(*args: str, check: bool = True) -> subprocess.CompletedProcess:
 
 
 class Hosts:
-    """Namespaces `<tag>-<name>` on a bridge in `<tag>-sw`; removed (with every process in them) on exit."""
+    """Namespaces `<tag>-<name>` on a bridge in `<tag>-sw`; removed (with every process in them) on exit. `tag`
+    tells apart two sets of hosts of one process (at most 3 characters: interface names are short)."""
 
-    def __init__(self, names: list[str]) -> None:
+    def __init__(self, names: list[str], tag: str = "") -> None:
         self.names = names
         pid = os.getpid()
-        self.tag = f"ks{pid % 100000}"
+        self.tag = f"ks{pid % 100000}{tag}"
         self.net = f"10.{100 + pid % 100}.{(pid // 100) % 250}"
         self.procs: list[subprocess.Popen] = []
         self.made: list[str] = []
