@@ -22,6 +22,7 @@ import argparse
 import asyncio
 import collections
 import cProfile
+import gc
 import os
 import pstats
 import statistics
@@ -34,6 +35,7 @@ import zenoh
 from kinswarm.actors.agent import Agent
 from kinswarm.actors.run.runfile import load_run
 from kinswarm.actors.runtime import NetSpec, Node, open_session
+from kinswarm.actors.runtime.heap import freeze_setup
 from kinswarm.protocol import codec
 from kinswarm.protocol.keys import Keys
 from kinswarm.protocol.messages import Cmd, Obs, Task
@@ -44,7 +46,9 @@ sys.path.insert(0, str(ROOT / "benchmarks"))
 from step_rate import free_port  # noqa: E402
 
 
-async def measure(epochs: int, steps: int, profile: str | None, sink: bool) -> dict[str, list[tuple[int, int]]]:
+async def measure(
+    epochs: int, steps: int, profile: str | None, sink: bool, freeze: bool = True
+) -> dict[str, list[tuple[int, int]]]:
     """Per handler (`<agent>/<kind>`): (thread CPU ns, wall ns) of every call after the first epoch. `sink`: a session
     of its own listens to every key, so each put travels over TCP as in `process`."""
     cfg = load_run(
@@ -119,7 +123,23 @@ async def measure(epochs: int, steps: int, profile: str | None, sink: bool) -> d
         if epoch > 0:
             times[name].append((time.thread_time_ns() - c0, time.perf_counter_ns() - t0))
 
+    collected: dict[int, list[int]] = collections.defaultdict(lambda: [0, 0])  # generation -> [count, CPU ns]
+    started = [0]
+
+    def on_gc(phase: str, info: dict[str, int]) -> None:  # the collections of the measured epochs, and their CPU
+        if phase == "start":
+            started[0] = time.thread_time_ns()
+        elif measuring:
+            c = collected[info["generation"]]
+            c[0] += 1
+            c[1] += time.thread_time_ns() - started[0]
+
+    measuring = False
+    if freeze:  # as an actor's process does once it is built (actors/run/main.py)
+        freeze_setup()
+    gc.callbacks.append(on_gc)
     for epoch in range(epochs):
+        measuring = epoch > 0
         for step in range(steps):
             # the sim's share: the task first, then each joint's obs (its order in sim/actor.py)
             sim_msgs = [(keys.task, Task(epoch=epoch, step=step, goal=tuple(cfg.task["goal"]), tips=tips_of(topo, q)))]
@@ -136,6 +156,9 @@ async def measure(epochs: int, steps: int, profile: str | None, sink: bool) -> d
     if listener is not None:
         heard.undeclare()
         listener.close()
+    gc.callbacks.remove(on_gc)
+    for g, (n, ns) in sorted(collected.items()):
+        print(f"gc generation {g}: {n} collections, {ns / 1e6:.1f} ms of CPU in {(epochs - 1) * steps} steps")
     if prof is not None:
         pstats.Stats(prof).sort_stats("tottime").print_stats(ARGS.top)
     return times
@@ -148,9 +171,10 @@ def main() -> None:
     p.add_argument("--steps", type=int, default=500)
     p.add_argument("--profile", default=None, help="a handler to profile, e.g. a4/down")
     p.add_argument("--top", type=int, default=25)
+    p.add_argument("--no-freeze", action="store_true", help="leave the setup's objects to the collector")
     p.add_argument("--sink", action="store_true", help="puts travel over TCP to a listening session")
     ARGS = p.parse_args()
-    times = asyncio.run(measure(ARGS.epochs, ARGS.steps, ARGS.profile, ARGS.sink))
+    times = asyncio.run(measure(ARGS.epochs, ARGS.steps, ARGS.profile, ARGS.sink, not ARGS.no_freeze))
     print(f"load average {' '.join(f'{x:.1f}' for x in os.getloadavg())}; medians in µs over epochs 1..")
     print(f"{'handler':<10} {'n':>6} {'cpu':>7} {'wall':>7}")
     total = 0.0
