@@ -35,7 +35,6 @@ import zenoh
 from kinswarm.actors.agent import Agent
 from kinswarm.actors.run.runfile import load_run
 from kinswarm.actors.runtime import NetSpec, Node, open_session
-from kinswarm.actors.runtime.heap import freeze_setup
 from kinswarm.protocol import codec
 from kinswarm.protocol.keys import Keys
 from kinswarm.protocol.messages import Cmd, Obs, Task
@@ -135,8 +134,9 @@ async def measure(
             c[1] += time.thread_time_ns() - started[0]
 
     measuring = False
-    if freeze:  # as an actor's process does once it is built (actors/run/main.py)
-        freeze_setup()
+    if freeze:  # as an actor's process does once it is built (actors/runtime/heap.py; inline: older checkouts lack it)
+        gc.collect()
+        gc.freeze()
     gc.callbacks.append(on_gc)
     for epoch in range(epochs):
         measuring = epoch > 0
