@@ -46,10 +46,11 @@ from step_rate import free_port  # noqa: E402
 
 
 async def measure(
-    epochs: int, steps: int, profile: str | None, sink: bool, freeze: bool = True
+    epochs: int, steps: int, profile: str | None, sink: bool, freeze: bool = True, parts: dict | None = None
 ) -> dict[str, list[tuple[int, int]]]:
     """Per handler (`<agent>/<kind>`): (thread CPU ns, wall ns) of every call after the first epoch. `sink`: a session
-    of its own listens to every key, so each put travels over TCP as in `process`."""
+    of its own listens to every key, so each put travels over TCP as in `process`. `parts`: filled with each handler's
+    CPU in each of PARTS."""
     cfg = load_run(
         ROOT / "examples" / "chain4.toml", [f"run.epochs={epochs}", f"run.steps={steps}", "run.record=false"]
     )
@@ -98,6 +99,9 @@ async def measure(
     q = {a: spec.initial for a, spec in topo.agents.items() if spec.has_dof}
     times: dict[str, list[tuple[int, int]]] = collections.defaultdict(list)
     prof = cProfile.Profile(time.thread_time) if profile else None  # CPU: preemption on a shared machine left out
+    now: list[str] = [""]  # the handler running (for --parts)
+    if parts is not None:
+        _time_parts(parts, now)
 
     def deliver(key: str, payload: bytes, epoch: int) -> None:
         below = key[len(keys.root) + 1 :]
@@ -111,7 +115,8 @@ async def measure(
             agent, kind = root, "task"
         else:
             _, agent, kind = below.split("/")
-        name = f"{agent}/{kind}"
+        name = now[0] = f"{agent}/{kind}" if epoch > 0 else ""
+        name = name or f"{agent}/{kind}"
         on = prof is not None and name == profile and epoch > 0
         c0, t0 = time.thread_time_ns(), time.perf_counter_ns()
         if on:
@@ -164,6 +169,44 @@ async def measure(
     return times
 
 
+#: the parts of a handler --parts times: (what, the class and its method)
+PARTS = (
+    ("decode", "kinswarm.actors.runtime.node", "Node", "decode"),
+    ("send (encode, sign, put)", "kinswarm.actors.runtime.node", "Node", "send"),
+    ("begin (frame, task head)", "kinswarm.actors.agent.passes", "AgentStep", "begin"),
+    ("finish (tips, view)", "kinswarm.actors.agent.passes", "AgentStep", "finish"),
+    ("up (task aggregate)", "kinswarm.actors.agent.passes", "AgentStep", "up"),
+    ("decide_from (S_i, reward)", "kinswarm.actors.agent.passes", "AgentStep", "decide_from"),
+    ("learner.decide", "kinswarm.actors.learning.learner", "Learner", "decide"),
+    ("learner.observe", "kinswarm.actors.learning.learner", "Learner", "observe"),
+)
+
+
+def _time_parts(parts: dict, now: list[str]) -> None:
+    """Wrap each of PARTS to add its thread CPU to parts[handler][what] (outermost calls only: send within send)."""
+    import importlib
+
+    depth = [0]
+    for what, module, cls_name, method in PARTS:
+        cls = getattr(importlib.import_module(module), cls_name, None)
+        if cls is None:
+            continue
+        inner = getattr(cls, method)
+
+        def timed(*args: Any, _inner: Any = inner, _what: str = what, **kw: Any) -> Any:
+            if depth[0] or not now[0]:
+                return _inner(*args, **kw)
+            depth[0] += 1
+            c0 = time.thread_time_ns()
+            try:
+                return _inner(*args, **kw)
+            finally:
+                depth[0] -= 1
+                parts.setdefault(now[0], collections.Counter())[_what] += time.thread_time_ns() - c0
+
+        setattr(cls, method, timed)
+
+
 def main() -> None:
     global ARGS
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -171,10 +214,12 @@ def main() -> None:
     p.add_argument("--steps", type=int, default=500)
     p.add_argument("--profile", default=None, help="a handler to profile, e.g. a4/down")
     p.add_argument("--top", type=int, default=25)
+    p.add_argument("--parts", action="store_true", help="the mean CPU of each part of each handler (PARTS)")
     p.add_argument("--no-freeze", action="store_true", help="leave the setup's objects to the collector")
     p.add_argument("--sink", action="store_true", help="puts travel over TCP to a listening session")
     ARGS = p.parse_args()
-    times = asyncio.run(measure(ARGS.epochs, ARGS.steps, ARGS.profile, ARGS.sink, not ARGS.no_freeze))
+    parts: dict | None = {} if ARGS.parts else None
+    times = asyncio.run(measure(ARGS.epochs, ARGS.steps, ARGS.profile, ARGS.sink, not ARGS.no_freeze, parts))
     print(f"load average {' '.join(f'{x:.1f}' for x in os.getloadavg())}; medians in µs over epochs 1..")
     print(f"{'handler':<10} {'n':>6} {'cpu':>7} {'wall':>7}")
     total = 0.0
@@ -185,6 +230,13 @@ def main() -> None:
         total += cpu * len(rows) / (ARGS.epochs - 1) / ARGS.steps
         print(f"{name:<10} {len(rows):>6} {cpu:>7.1f} {wall:>7.1f}")
     print(f"the four agents' handlers a step (cpu, medians x count): {total:.0f} µs")
+    if parts:
+        print("\nparts, mean µs of CPU a call of the handler (the rest: dispatch, the actor's bookkeeping, the timers)")
+        for name in sorted(parts, key=lambda n: (n.split("/")[1], n)):
+            n = len(times[name])
+            mean = statistics.mean(r[0] for r in times[name]) / 1000
+            cells = ", ".join(f"{w} {ns / n / 1000:.1f}" for w, ns in parts[name].most_common())
+            print(f"{name:<10} mean {mean:6.1f}: {cells}")
 
 
 ARGS: argparse.Namespace
