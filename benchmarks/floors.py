@@ -17,6 +17,8 @@ hits every row alike):
                  recorded — what the step costs in computation alone
   fleets         the same run with `run.fleet = B` (B robots through one swarm, actors/simulator/fleet.py), both
                  placements, --fleet-steps steps an epoch: robot-steps/s, and each over B = 1's in the same placement
+  process (baseline)  with `--baseline PYTHON`: the process row run by another checkout's interpreter (its venv's
+                 python, whose kinswarm is that checkout's), in the same repeats: a change's before and after
 `--rows` keeps the rows whose names start with one of the given words (`process,wire`: the process placement
 and both wire floors, alternated). Each repeat prints the load average (1 min) it started at: on a shared machine
 the ratios of alternated rows stay fair, the rates do not. Ratios are each rate over a floor's median. Steps/s of a
@@ -30,6 +32,7 @@ import argparse
 import json
 import os
 import statistics
+import subprocess
 import sys
 import tempfile
 import time
@@ -65,6 +68,18 @@ def floor_rate(epochs: int, steps: int, seed: int) -> float:
     return done / seconds
 
 
+def baseline_rate(python: str, epochs: int, steps: int, seed: int) -> float:
+    """step_rate.swarm_rate("process", ...) run by `python` (another checkout's venv): that checkout's swarm."""
+    code = (
+        f"import sys; sys.path.insert(0, {str(Path(__file__).resolve().parent)!r}); from step_rate import swarm_rate;"
+        f" print(swarm_rate('process', {epochs}, {steps}, seed={seed}))"
+    )
+    out = subprocess.run([python, "-c", code], capture_output=True, text=True, timeout=900)
+    if out.returncode != 0:
+        raise SystemExit(f"--baseline {python}: the process row failed:\n{out.stderr[-2000:]}")
+    return float(out.stdout.split()[-1])
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeats", type=int, default=3)
@@ -75,10 +90,13 @@ def main() -> None:
     ap.add_argument("--fleet-steps", type=int, default=100, help="steps an epoch of the fleet runs")
     ap.add_argument("--rows", default="", help="keep only rows starting with one of these comma-separated words")
     ap.add_argument("--json", type=Path, default=None)
+    ap.add_argument("--baseline", default="", help="another checkout's python: its process row beside this one's")
     a = ap.parse_args()
     fleets = [int(b) for b in a.fleets.split(",") if b.strip()]
     names = ["process", "single", "inprocess", "wire (async)", "wire (block)", "in-process"]
     names += [f"{p} B={b}" for b in fleets for p in ("process", "single")]
+    if a.baseline:
+        names.insert(1, "process (baseline)")
     if a.rows:
         names = [n for n in names if n.startswith(tuple(w.strip() for w in a.rows.split(",") if w.strip()))]
     rows: dict[str, list[float]] = {name: [] for name in names}
@@ -90,6 +108,8 @@ def main() -> None:
             if " B=" in name:
                 placement, b = name.split(" B=")
                 v = swarm_rate(placement, a.epochs, a.fleet_steps, seed=r, fleet=int(b))
+            elif name == "process (baseline)":
+                v = baseline_rate(a.baseline, a.epochs, a.steps, seed=r)
             elif name in ("process", "single", "inprocess"):
                 v = swarm_rate(name, a.epochs, a.steps, seed=r)
             elif name.startswith("wire"):

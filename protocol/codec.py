@@ -22,6 +22,7 @@ import hashlib
 import hmac
 import math
 import re
+import threading
 import types
 import typing
 from functools import cache, lru_cache
@@ -71,13 +72,43 @@ def sign(body: bytes, key: bytes) -> bytes:
 
 
 def encode(msg: Any, run: str, src: str, key: bytes) -> bytes:
-    body = {"v": SCHEMA_VERSION, "kind": msg.KIND, "run": run, "src": src}
-    if type(msg) is messages.Batch:  # each item as the map of its fields, under the batch's one envelope
+    cls = type(msg)
+    if cls is messages.Batch:  # each item as the map of its fields, under the batch's one envelope
+        body = {"v": SCHEMA_VERSION, "kind": msg.KIND, "run": run, "src": src}
         body.update(of=msg.of, robots=list(msg.robots), items=[_item(m) for m in msg.items])
     else:
-        for name in _field_names(type(msg)):
-            body[name] = getattr(msg, name)
-    return sign(msgpack.packb(body, use_bin_type=True), key)
+        body = (_bodies.get(cls) or _body(cls))(msg, run, src)
+    return sign(_pack(body), key)
+
+
+def _pack(body: Any) -> bytes:
+    """msgpack.packb(body, use_bin_type=True), with this thread's Packer rather than a new one a message."""
+    try:
+        packer = _packers.packer
+    except AttributeError:  # this thread's first message
+        packer = _packers.packer = msgpack.Packer(use_bin_type=True)
+    return packer.pack(body)
+
+
+_packers = threading.local()  # a Packer keeps a buffer between its calls: one a thread (handlers run on several)
+_bodies: dict[type, Any] = {}  # message class -> its body builder (_body)
+
+
+def _body(cls: type) -> Any:
+    """The body builder of message class `cls`, generated once: `(msg, run, src) -> {"v": ..., "kind": ..., "run":
+    run, "src": src, "epoch": msg.epoch, ...}`, the envelope then the fields in their order, as one dict display
+    (the same map, so the same bytes, as filling a dict field by field; ~1 us less a message)."""
+    items = [f'"v": {SCHEMA_VERSION!r}', f'"kind": {cls.KIND!r}', '"run": run', '"src": src']  # type: ignore[attr-defined]
+    items += [f"{name!r}: msg.{name}" for name in _field_names(cls)]
+    scope: dict[str, Any] = {}
+    exec(
+        compile(
+            f"def body(msg, run, src):\n    return {{{', '.join(items)}}}\n", f"<codec body of {cls.__name__}>", "exec"
+        ),
+        scope,
+    )
+    _bodies[cls] = scope["body"]
+    return scope["body"]
 
 
 def _item(msg: Any) -> dict[str, Any]:

@@ -65,6 +65,13 @@ class Agent:
         self.spec = topo.agents[agent_id]
         self.keys = node.keys
         self._root_len = len(node.keys.root) + 1
+        # a step's keys and constants, made once (they are built on every step otherwise)
+        self._down_key = {a: node.keys.down(a) for a in topo.agents}  # a stand-in sends to its adopted ones' children
+        self._up_key = node.keys.up(topo.agents[agent_id].parent) if topo.agents[agent_id].parent else ""
+        self._cmd_key = node.keys.cmd(agent_id)
+        self._children = list(topo.agents[agent_id].children)
+        self._waits = frozenset(self._children)
+        self._own_q = [agent_id] if topo.agents[agent_id].has_dof else []
         self.is_root = self.spec.parent is None
         task = task_of(cfg)
         self.learner: JointLearner | None = None
@@ -222,18 +229,22 @@ class Agent:
         head = self.head_in.get(key)
         if head is None:
             return
-        adopted, waiting = self.standin.region()
-        needs_q = [self.id] if self.spec.has_dof else []
-        needs_q += [a for a in adopted if self.topo.agents[a].has_dof]
-        if any(key not in self.q_in.get(a, {}) for a in needs_q):
-            return
-        q = {a: self.q_in[a].pop(key) for a in needs_q}
+        if self.standin.down:  # a descendant is lost: I stand in for the agents between me and the live ones
+            adopted, waiting = self.standin.region()
+            needs_q = self._own_q + [a for a in adopted if self.topo.agents[a].has_dof]
+        else:  # the usual step: my children, my own reading (hoisted: this runs every step)
+            adopted, waiting, needs_q = [], self._children, self._own_q
+        q_in = self.q_in
+        for a in needs_q:
+            if key not in q_in.get(a, ()):
+                return
+        q = {a: q_in[a].pop(key) for a in needs_q}
         del self.head_in[key]
         own = self.sense_in.pop(key, {})
         # drop everything older: newer steps supersede unfinished older ones (mostly nothing is left to look at)
-        for a, readings in self.q_in.items():
+        for a, readings in q_in.items():
             if readings:
-                self.q_in[a] = {kk: v for kk, v in readings.items() if kk > key}
+                q_in[a] = {kk: v for kk, v in readings.items() if kk > key}
         if self.head_in:
             self.head_in = {kk: v for kk, v in self.head_in.items() if kk > key}
         if self.sense_in:
@@ -246,14 +257,19 @@ class Agent:
                 self.learner.start_epoch(self.memory.epochs_before + epoch, t=step)
         elif self.learner is not None and key != (epoch, self.last_finished[1] + 1):
             self.learner.resync(step)  # a missed step: no TD update across the gap
-        self.standin.announce(adopted)
+        if adopted or self.standin.adopted:
+            self.standin.announce(adopted)
 
         begun = self.passes.begin(head, q.get(self.id, 0.0), own)
         tips: dict[str, tuple[float, ...]] = {}
+        send, down, down_key = self.node.send, self.passes.down, self._down_key
         for child, child_base in self.standin.frames_below(self.id, begun.end, q, tips):
-            self.node.send(self.keys.down(child), self.passes.down(begun, child, epoch, step, child_base))
-        self.current = _Step(key, begun, frozenset(waiting), tips, self.ups_early.pop(key, {}))
-        self.ups_early = {kk: v for kk, v in self.ups_early.items() if kk > key}
+            send(down_key[child], down(begun, child, epoch, step, child_base))
+        waits = self._waits if waiting is self._children else frozenset(waiting)
+        ups_early = self.ups_early
+        self.current = _Step(key, begun, waits, tips, ups_early.pop(key, {}) if ups_early else {})
+        if ups_early:
+            self.ups_early = {kk: v for kk, v in ups_early.items() if kk > key}
         self._try_finish()
 
     # -- finish: the bottom-up pass ----------------------------------------------------------------
@@ -283,7 +299,7 @@ class Agent:
         ups = {c: cur.ups[c] for c in cur.waiting}
         tips, view = self.passes.finish(cur.begun, epoch, step, ups, last, cur.tips)
         if not self.is_root:  # first: the parent's state needs only the tips (and the task's aggregate)
-            self.node.send(self.keys.up(self.spec.parent), self.passes.up(view, tips))  # type: ignore[arg-type]
+            self.node.send(self._up_key, self.passes.up(view, tips))
         if self.learner is None:
             self._finished(cur)
         else:  # a fleet's robots' ups leave first, all of them (Node.after_sending): then each robot learns
@@ -310,11 +326,8 @@ class Agent:
         else:
             self.learner.observe([], learn=self.cfg.learn)
         if step == self.cfg.steps - 1 and not self.is_root:  # the closing `up`, before the epoch can end
-            self.node.send(
-                self.keys.up(self.spec.parent),  # type: ignore[arg-type]
-                Up(epoch=epoch, step=self.cfg.steps, tips=tips, action=action),
-            )
-        self.node.send(self.keys.cmd(self.id), Cmd(epoch=epoch, step=step, delta=self.passes.delta(action, scale)))
+            self.node.send(self._up_key, Up(epoch=epoch, step=self.cfg.steps, tips=tips, action=action))
+        self.node.send(self._cmd_key, Cmd(epoch=epoch, step=step, delta=self.passes.delta(action, scale)))
         self._finished(cur)
 
     def _finished(self, cur: _Step) -> None:

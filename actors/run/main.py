@@ -35,6 +35,7 @@ from typing import Any, Protocol  # noqa: E402
 
 from kinswarm.actors.run.config import RunConfig, load_run_config  # noqa: E402
 from kinswarm.actors.runtime import NetSpec, Node, open_session, setup_logging  # noqa: E402
+from kinswarm.actors.runtime.heap import freeze_setup  # noqa: E402
 from kinswarm.protocol.keys import Keys  # noqa: E402
 from kinswarm.protocol.topology import Topology  # noqa: E402
 
@@ -112,6 +113,7 @@ async def _serve(
     watch = session.liveliness().declare_subscriber(node.keys.alive("supervisor", supervisor), on_supervisor)
     try:
         actor = build_actor(role, ident, cfg, topo, node, restore)
+        freeze_setup()  # this process runs this one actor: its setup's objects leave the collector's walks
         async with asyncio.TaskGroup() as tg:
             run = tg.create_task(actor.run())
             gone = tg.create_task(supervisor_gone())

@@ -31,6 +31,7 @@ LOGGED_KEYS = 100
 M = TypeVar("M")
 
 
+_NOBODY: tuple[tuple, tuple] = ((), ())  # no Node and no tap of this session listens
 FAILED = "__failed__"  # the mailbox item that wakes the loop when an inline step handler raised (no Zenoh key)
 
 
@@ -128,8 +129,16 @@ class Node(LinkFaults, Gathering):
                     self._loop.call_later(delay, self._put_late, key, p)
                 else:
                     self._emit(key, p)
-        else:
+            return
+        nodes, taps = self._bus.route(key) if self._bus else _NOBODY
+        if nodes:  # a Node of this session listens (the `single` placement): the message as it is, bytes if needed
             self._emit(key, Local(msg, self.keys.run, self.ident, self.key))
+            return
+        # only other sessions (the `process` placement): what _emit does then, without its hand-over object
+        p = codec.encode(msg, self.keys.run, self.ident, self.key)
+        (self._pubs.get(key) or self.publisher(key)).put(p)
+        for tap in taps:
+            tap(key, p)
 
     def _emit(self, key: str, payload: bytes | Local) -> None:
         """A step message: to this session's Nodes and taps listening on `key` (the local bus), and on Zenoh to the
