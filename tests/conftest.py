@@ -3,10 +3,12 @@
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import dataclasses
 import logging
 import os
 import shutil
+import signal
 import socket
 import tempfile
 from collections.abc import Sequence
@@ -20,6 +22,21 @@ from kinswarm.actors.run.config import RunConfig
 from kinswarm.actors.run.runfile import load_run
 from kinswarm.actors.runtime import Mailbox
 from kinswarm.protocol.keys import Keys
+
+# Swarms a test started as child processes (a `kinswarm run`, in a session of its own): whatever the test's outcome,
+# each is stopped when the test ends, the supervisor and the actors it spawned, so a failed assertion leaves no swarm
+LIVE: list[Any] = []
+
+
+@pytest.fixture(autouse=True)
+def _stop_live_swarms() -> Any:
+    yield
+    while LIVE:
+        proc = LIVE.pop()
+        with contextlib.suppress(ProcessLookupError):  # the session's leader may be gone, an actor of it not
+            os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait(timeout=30)
+
 
 # Hypothesis draws the same way with and without CI set: CI=true alone would load its "ci" profile, which draws fixed
 # examples (derandomize), so CI would never see what a user's run can draw. No example database either: nothing is

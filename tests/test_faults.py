@@ -11,7 +11,7 @@ import time
 from pathlib import Path
 
 import pytest
-from conftest import free_port, swarm_pids
+from conftest import LIVE, free_port, swarm_pids
 
 pytestmark = pytest.mark.timeout(240)
 
@@ -26,7 +26,10 @@ class Run:
         self.run_id = run_id
         self.endpoint = f"tcp/127.0.0.1:{free_port()}"
         argv = [*CLI, "run", str(topo), "--run-id", run_id, "--out", str(self.out), "--listen", self.endpoint]
-        self.proc = subprocess.Popen([*argv, "--no-progress", *args], stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
+        self.proc = subprocess.Popen(
+            [*argv, "--no-progress", *args], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, start_new_session=True
+        )
+        LIVE.append(self.proc)  # stopped with its actors when the test ends, whatever its outcome (conftest)
 
     def wait_epochs(self, n: int, timeout: float = 90.0) -> None:
         deadline = time.monotonic() + timeout
