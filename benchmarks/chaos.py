@@ -380,11 +380,13 @@ def check_faults_at_steps(events: list[dict[str, Any]], injected: list[Injected]
         faults.remove(match)
         if i.kind in MODEL:
             targets = AGENTS if i.target == "all" else (i.target,)
+            # an epoch's last step (`steps`) is where the next one starts (its step 0): a fault sent as an epoch
+            # ends acts at the next one's first step
+            at = match["epoch"] * steps + match["step"]
             applied = [
                 e
                 for e in events
-                if e["event"] == i.kind and e["target"] in targets and e["epoch"] == match["epoch"]
-                and abs(e["step"] - match["step"]) <= 2
+                if e["event"] == i.kind and e["target"] in targets and abs(e["epoch"] * steps + e["step"] - at) <= 2
             ]  # fmt: skip
             if not applied:
                 far.append(f"{i.describe} at {match['epoch']}/{match['step']}")

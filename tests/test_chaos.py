@@ -80,6 +80,10 @@ def test_the_invariants_catch_what_they_are_for():
     stale = [_ev("fault", "a2", 3, 262, "lock a2"), _ev("lock", "a2", 3, 373, "")]  # the old stale step
     ok, detail = chaos.check_faults_at_steps(stale, [inj], 500)
     assert not ok and "not at its step" in detail
+    ended = [_ev("fault", "a2", 3, 500, "lock a2"), _ev("lock", "a2", 4, 0, "")]  # sent as epoch 3 ended
+    assert chaos.check_faults_at_steps(ended, [inj], 500)[0]
+    early = [_ev("fault", "a2", 3, 116, "lock a2"), _ev("lock", "a2", 3, 107, "")]  # stamped after it acted
+    assert not chaos.check_faults_at_steps(early, [inj], 500)[0]
     back = [_ev("restored", "a1", 5, 10), _ev("restored", "a2", 4, 0)]  # a restore carrying its checkpoint's epoch
     assert not chaos.check_faults_at_steps(back, [], 500)[0]
     thawed = [

@@ -181,7 +181,10 @@ def test_a_motor_reversed_live_is_applied_shown_and_freed(tmp_path, chain4):
     assert r.returncode == 0 and "reverse a2" in r.stdout, r.stdout + r.stderr
     assert run.fault("scale", "a3", "--factor", "3").returncode == 0
     assert run.fault("offset", "a4", "--degrees", "-5").returncode == 0  # a negative value is not an option
-    run.wait_event("reverse", "a2")
+    effect = run.wait_event("reverse", "a2")
+    request = next(e for e in run.events() if e["event"] == "fault" and e["detail"].startswith("reverse a2"))
+    # the request is stamped at the step it went out, the effect at the step the sim applied it: never before
+    assert (request["epoch"], request["step"]) <= (effect["epoch"], effect["step"]), (request, effect)
     assert run.wait_event("scale", "a3")["detail"] == "scale a3 factor=3"
     assert run.wait_event("offset", "a4")["detail"] == "offset a4 degrees=-5"
     deadline = time.monotonic() + 20

@@ -111,9 +111,10 @@ class Agent:
         self.closing: dict[Key, dict[str, int]] = {}
 
     # -- wiring ----------------------------------------------------------------------------------
-    def subscriptions(self) -> list[str]:
+    def step_keys(self) -> list[str]:
+        """What this agent hears during a step (handled where it arrives)."""
         k = self.keys
-        subs = [k.ctl_all, k.task if self.is_root else k.down(self.id)]
+        subs = [k.task if self.is_root else k.down(self.id)]
         if self.spec.has_dof:
             subs.append(k.obs(self.id))
         if self.spec.children:
@@ -131,7 +132,8 @@ class Agent:
     # -- the loop ----------------------------------------------------------------------------------
     async def run(self) -> None:
         node, k = self.node, self.keys
-        for s in self.subscriptions():
+        node.listen(k.ctl_all)  # control waits for the loop
+        for s in self.step_keys():
             node.listen(s, inline=self._on_step)
         watch = self.standin.watch()
         try:

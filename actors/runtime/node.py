@@ -160,14 +160,24 @@ class Node(LinkFaults, Gathering):
 
     # -- receiving -------------------------------------------------------------------------------
     def listen(self, key_expr: str, inline: Callable[[str, bytes], None] | None = None) -> None:
-        """Subscribe `key_expr` into the mailbox. `inline`: a step key's handler, run on Zenoh's delivery thread
-        itself, under `lock`, when the actor serves inline, nothing waits in the mailbox (order is kept) and no link
-        fault is active; otherwise the message waits in the mailbox and the loop hands it to the same dispatch."""
+        """Subscribe `key_expr` into the mailbox. `inline`: a handler run on Zenoh's delivery thread itself, under
+        `lock`, when the actor serves inline, nothing waits in the mailbox (order is kept) and no link fault is
+        active; otherwise the message waits in the mailbox and the loop hands it to the same dispatch. Step keys
+        have one; a control key may (the sim's faults: applied at the step they reach it, not when the loop wakes)."""
         push = self.mailbox.push
         step = key_expr.startswith(self._step_prefixes)
         handler = inline if step else None
 
-        if handler is not None:
+        if inline is not None and not step:
+
+            def on_sample(s: Any) -> None:  # zenoh thread
+                key, payload = str(s.key_expr), s.payload.to_bytes()
+                if self._link_faults:
+                    push(key, payload)
+                else:
+                    self._handle(key, payload, inline, push)
+
+        elif handler is not None:
 
             def on_sample(s: Any) -> None:  # zenoh thread
                 key, payload = str(s.key_expr), s.payload.to_bytes()

@@ -112,7 +112,7 @@ class SimActor:
 
     async def run(self) -> None:
         node, k = self.node, self.keys
-        node.listen(k.ctl_all)
+        node.listen(k.ctl_all, inline=self._on_ctl_sample)
         if self.hosts:
             node.listen(k.host("*"))
         node.listen(k.cmd_all, inline=self._on_cmd_sample)
@@ -229,6 +229,15 @@ class SimActor:
             self.held = True
             return
         self._publish_step()
+
+    def _on_ctl_sample(self, key: str, payload: bytes) -> None:  # Zenoh's thread (inline)
+        """A joint fault takes effect at the step it reaches the sim (a busy machine's loop woke steps later); every
+        other control message waits for the loop."""
+        if key == self.keys.ctl("fault"):
+            if (f := self.node.decode(key, payload, Fault)) is not None:
+                self.apply_fault(f)
+        else:
+            self.node.mailbox.push(key, payload)
 
     def _on_cmd_sample(self, key: str, payload: bytes) -> None:  # Zenoh's thread (inline) or the loop
         if (m := self.node.decode(key, payload, Cmd)) is not None:

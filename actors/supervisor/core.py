@@ -381,8 +381,9 @@ class Supervisor:
             return max(self.epoch, first), 0
         return at
 
-    def event(self, event: str, target: str, detail: str, **extra: object) -> None:
-        self.recorder.event(*self.now(), event, target, detail, **extra)
+    def event(self, event: str, target: str, detail: str, at: tuple[int, int] | None = None, **extra: object) -> None:
+        """Record an event at `at` (epoch, step), or at the sim's step now."""
+        self.recorder.event(*(at or self.now()), event, target, detail, **extra)
 
     def _publish_status(self, now: float) -> None:
         assert self.node is not None

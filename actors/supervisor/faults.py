@@ -56,6 +56,9 @@ class FaultRouter:
             if compound:
                 error = f"{f.fault}: {', '.join(compound)} has no joint (a compound agent)"
         detail = ""
+        # The step the request goes out at, read before it goes: read after, a supervisor descheduled in between
+        # (a busy machine) stamped it steps after the sim had already applied it.
+        at = sup.now()
         if not error:
             pool = sup.agents if f.fault not in JOINT_FAULTS else list(sup.topo.dof_agents)
             try:
@@ -64,9 +67,9 @@ class FaultRouter:
                 error = str(e)
         if error:  # on the run's record too: a refused fault is something that did not happen, and why
             log.warning("fault refused: %s", error)
-            sup.event("refused", ",".join(f.targets) or "-", f"{describe(f)}: {error}")
+            sup.event("refused", ",".join(f.targets) or "-", f"{describe(f)}: {error}", at=at)
         else:
-            sup.event("fault", ",".join(f.targets), describe(f) + (f" ({detail})" if detail else ""))
+            sup.event("fault", ",".join(f.targets), describe(f) + (f" ({detail})" if detail else ""), at=at)
         try:
             check_id("fault id", f.id)
         except ValueError:
