@@ -105,6 +105,8 @@ class Chaos:
     last_mend: float = -math.inf
     ended: float = math.inf  # wall clock: when the chaos run's (last) process ended
     pace: float = 1.0  # the schedule's seconds stretched by this (quick mode on a slow machine)
+    wall: float = 0.0  # seconds the chaos ran
+    free: subprocess.Popen | None = None  # the fault-free run
 
     def __post_init__(self) -> None:
         if self.control is None:
@@ -497,18 +499,42 @@ def check_finished(out: Path, codes: list[int], crashes: int) -> tuple[bool, str
     return ok, f"exit codes {codes} ({crashes} crashes, each SIGKILLed)" + (f"; {s['error']}" if s.get("error") else "")
 
 
+def naming(marker: Path) -> list[int]:
+    """Live processes (not this one) whose command line names `marker`: a run's actors name its directory."""
+    found = []
+    for d in os.listdir("/proc"):
+        if d.isdigit() and int(d) != os.getpid() and _alive(int(d)):
+            try:
+                if str(marker).encode() in Path(f"/proc/{d}/cmdline").read_bytes():
+                    found.append(int(d))
+            except OSError:
+                pass
+    return found
+
+
+def stop_everything(base: Path, procs: list[subprocess.Popen | None], pids: dict[int, int]) -> int:
+    """Interrupted (Ctrl-C, SIGTERM): both runs stopped, with their actors. They run in sessions of their own (a
+    crash must not take this process with it), so the signal that stopped this one never reached them."""
+    doomed = {p.pid for p in procs if p is not None and p.poll() is None}
+    for pid in doomed:
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(pid, signal.SIGKILL)
+    doomed |= {pid for pid, start in pids.items() if _alive(pid, start)} | set(naming(base))
+    for pid in doomed:
+        with contextlib.suppress(ProcessLookupError):
+            os.kill(pid, signal.SIGKILL)
+    for p in procs:
+        if p is not None:
+            with contextlib.suppress(subprocess.TimeoutExpired):
+                p.wait(timeout=10.0)
+    return len(doomed)
+
+
 def check_nothing_left(pids: dict[int, int], out: Path) -> tuple[bool, str]:
     deadline = time.monotonic() + 10.0
     while (left := sorted(p for p, start in pids.items() if _alive(p, start))) and time.monotonic() < deadline:
         time.sleep(0.1)
-    marker = str(out)
-    for d in os.listdir("/proc"):  # anything else that still names the run's directory
-        if d.isdigit() and int(d) != os.getpid() and _alive(int(d)):
-            try:
-                if marker.encode() in Path(f"/proc/{d}/cmdline").read_bytes():
-                    left.append(int(d))
-            except OSError:
-                pass
+    left += naming(out)  # anything else that still names the run's directory
     return not left, f"{len(pids)} processes seen" + (f"; still running: {sorted(set(left))}" if left else "")
 
 
@@ -585,33 +611,51 @@ def main(argv: list[str] | None = None) -> int:
             base / "fault-free" / "brain", base / "chaos" / "brain")  # fmt: skip
         control = None if split is None else chaos_hosts.RemoteControl(split.hosts, "brain", out, base / "control.log")
         c = Chaos(a, out, random.Random(a.seed), base / "runs.log", control=control, split=split)
-        t0 = time.monotonic()
-        if free_split is None:
-            c.start(c.argv("chaos-free", free_out))
-            assert c.proc is not None
-            free = c.proc
-        else:
-            free = free_split.start(free_out.parent, a.epochs, a.steps, a.seed,
-                                    ["--run-id", "chaos-free", "--deadline-ms", str(a.deadline_ms)])  # fmt: skip
-        if not a.beside:
-            while free.poll() is None:  # a line a minute: alive
-                with contextlib.suppress(subprocess.TimeoutExpired):
-                    free.wait(timeout=60.0)
-                if free.poll() is None:
-                    done = len(_rows(free_out / "metrics.jsonl"))
-                    print(f"chaos: the fault-free run first: {(time.monotonic() - t0) / 60:.0f} min, "
-                          f"epoch {done}/{a.epochs}", flush=True)  # fmt: skip
-            print(
-                f"chaos: the fault-free run took {time.monotonic() - t0:.0f} s (exit {free.returncode}); now the chaos"
-            )
-            epoch_s = [r["seconds"] for r in _rows(free_out / "metrics.jsonl")]
-            if a.quick and epoch_s and (pace := statistics.median(epoch_s) / QUICK_EPOCH_S) > 1.0:
-                c.pace, a.every = pace, a.every * pace
-                print(f"chaos: a fault-free epoch took {statistics.median(epoch_s):.2f} s (quiet: {QUICK_EPOCH_S}): "
-                      f"the schedule's seconds stretched x{pace:.1f}, a fault every {a.every:.1f} s")  # fmt: skip
-        wall = c.soak()
-        free_code = free.wait()
-        return report(a, c, base, free_out, free_code, wall, [s for s in (split, free_split) if s is not None])
+        try:
+            signal.signal(signal.SIGTERM, _interrupt)
+            free = _both(a, c, base, free_out, free_split)
+        except KeyboardInterrupt:
+            n = stop_everything(base, [c.proc, c.free], c.pids)
+            print(f"chaos: interrupted: both runs stopped ({n} processes killed); their files are in {base}",
+                  file=sys.stderr)  # fmt: skip
+            return 130
+        return report(a, c, base, free_out, free.returncode, c.wall, [s for s in (split, free_split) if s is not None])
+
+
+def _interrupt(signum: int, frame: Any) -> None:
+    raise KeyboardInterrupt
+
+
+def _both(
+    a: argparse.Namespace, c: Chaos, base: Path, free_out: Path, free_split: chaos_hosts.Split | None
+) -> subprocess.Popen:
+    """The fault-free run (first, or beside) and the chaos run; returns the fault-free run, ended."""
+    t0 = time.monotonic()
+    if free_split is None:
+        c.start(c.argv("chaos-free", free_out))
+        assert c.proc is not None
+        free = c.proc
+    else:
+        free = free_split.start(free_out.parent, a.epochs, a.steps, a.seed,
+                                ["--run-id", "chaos-free", "--deadline-ms", str(a.deadline_ms)])  # fmt: skip
+    c.free = free
+    if not a.beside:
+        while free.poll() is None:  # a line a minute: alive
+            with contextlib.suppress(subprocess.TimeoutExpired):
+                free.wait(timeout=60.0)
+            if free.poll() is None:
+                done = len(_rows(free_out / "metrics.jsonl"))
+                print(f"chaos: the fault-free run first: {(time.monotonic() - t0) / 60:.0f} min, "
+                      f"epoch {done}/{a.epochs}", flush=True)  # fmt: skip
+        print(f"chaos: the fault-free run took {time.monotonic() - t0:.0f} s (exit {free.returncode}); now the chaos")
+        epoch_s = [r["seconds"] for r in _rows(free_out / "metrics.jsonl")]
+        if a.quick and epoch_s and (pace := statistics.median(epoch_s) / QUICK_EPOCH_S) > 1.0:
+            c.pace, a.every = pace, a.every * pace
+            print(f"chaos: a fault-free epoch took {statistics.median(epoch_s):.2f} s (quiet: {QUICK_EPOCH_S}): "
+                  f"the schedule's seconds stretched x{pace:.1f}, a fault every {a.every:.1f} s")  # fmt: skip
+    c.wall = c.soak()
+    free.wait()
+    return free
 
 
 def report(

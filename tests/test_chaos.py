@@ -7,6 +7,8 @@ from __future__ import annotations
 import importlib.util
 import os
 import shutil
+import signal
+import subprocess
 import sys
 import time
 from pathlib import Path
@@ -174,6 +176,33 @@ def test_quick_chaos_holds_every_invariant(tmp_path, capsys):
     assert code == 0, out
     held = _model_faults_held(_chaos()._rows(tmp_path / "chaos" / "events.jsonl"))  # they were freed at once
     assert held and held[len(held) // 2] >= 1.0, held
+
+
+@pytest.mark.timeout(180)
+def test_an_interrupted_soak_stops_both_runs(tmp_path):
+    """Ctrl-C (or SIGTERM) to the soak stops both runs and their actors: they run in sessions of their own, which
+    the signal never reached, and had gone on learning without it."""
+    proc = subprocess.Popen(
+        [sys.executable, str(ROOT / "benchmarks" / "chaos.py"), "--quick", "--beside", "--out", str(tmp_path)],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
+    )  # fmt: skip
+    try:
+        deadline = time.monotonic() + 120
+        rows = _chaos()._rows
+        while not all(rows(tmp_path / run / "metrics.jsonl") for run in ("chaos", "fault-free")):  # both learning
+            assert proc.poll() is None and time.monotonic() < deadline, proc.communicate(timeout=30)
+            time.sleep(0.2)
+        proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=60)
+        assert proc.returncode == 130, err
+        assert "interrupted: both runs stopped" in err, err
+        assert _chaos().naming(tmp_path) == []  # nothing of either run is left
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
+        for pid in _chaos().naming(tmp_path):
+            os.kill(pid, signal.SIGKILL)
 
 
 def _hosts_unavailable() -> str:
