@@ -130,7 +130,12 @@ class SimActor:
             node.publisher(key)  # declared now, so the first put does not wait on the declaration
         self._status = asyncio.get_running_loop().call_later(STATUS_S, push, STATUS, b"")
         try:
-            await node.wait_matched(self.outputs(), timeout=30.0)
+            while True:  # agents still starting (a saturated machine, their first compile) are waited for: whether
+                try:  # the swarm came up in time is the supervisor's to judge (it gives up, and stops this, itself)
+                    await node.wait_matched(self.outputs(), timeout=30.0)
+                    break
+                except TimeoutError as e:
+                    node.log.warning("%s; still waiting", e)
             node.declare_alive()
             node.serve_inline()
             while True:
