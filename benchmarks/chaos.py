@@ -52,6 +52,7 @@ from typing import Any
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT / "benchmarks"))
 import chaos_hosts  # noqa: E402
+import chaos_picture  # noqa: E402
 from chaos_hosts import Control, Cut  # noqa: E402
 
 CLI = [sys.executable, "-m", "kinswarm.actors.cli"]
@@ -721,6 +722,9 @@ def report(
         print(f"| {name} | {'yes' if ok else 'NO'} | {detail} |")
     for r in c.refused[:5]:
         print(f"refused: {r}")
+    if a.out is not None:  # a temporary directory's picture would go with it
+        title = f"chaos soak: {a.epochs} epochs x {a.steps} steps, seed {a.seed}, {where}, {n} faults in {wall:.0f} s"
+        print(f"picture: {chaos_picture.write(base / 'chaos.png', free_metrics, metrics, events, a.kinds, title)}")
     failed = [name for name, ok, _ in rows if not ok]
     if failed and a.out is None:
         logs = "runs.log" if c.split is None else "{chaos,fault-free}/{b,l}.log (the leader's, limbs'), control.log"

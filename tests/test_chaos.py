@@ -265,3 +265,18 @@ def test_quick_chaos_across_two_hosts_holds_every_invariant(tmp_path, capsys):
     assert code == 0, out
     held = _model_faults_held(_chaos()._rows(tmp_path / "chaos" / "brain" / "events.jsonl"))
     assert held and held[len(held) // 2] >= 1.0, held
+
+
+def test_the_soaks_picture_counts_what_went_in(tmp_path):
+    picture = _chaos().chaos_picture
+    assert picture.rolling_share([0.1, 2.0, 0.2, 3.0], window=2) == [1.0, 0.5, 0.5, 0.5]
+    events = [
+        _ev("fault", "a2", 3, 10, "lock a2"),
+        _ev("fault", "a2", 4, 10, "free a2"),  # not a kind of the schedule
+        _ev("resume", "swarm", 7, 0, "after a crash"),
+        _ev("lock", "a2", 3, 11, "lock a2"),  # the sim's effect: the request is what is drawn
+    ]
+    assert picture.faults_by_kind(events, ["lock", "crash"]) == {"lock": [3], "crash": [7]}
+    rows = [{"epoch": e, "final_error": 0.1 * e} for e in range(10)]
+    path = picture.write(tmp_path / "chaos.png", rows, rows, events, ["lock", "crash"], "test")
+    assert path.stat().st_size > 10_000
