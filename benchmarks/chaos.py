@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import dataclasses
 import json
 import math
 import os
@@ -366,16 +367,20 @@ def segments(events: list[dict[str, Any]]) -> list[list[dict[str, Any]]]:
     return out
 
 
-def check_faults_at_steps(events: list[dict[str, Any]], injected: list[Injected], steps: int) -> tuple[bool, str]:
-    """Every fault sent is a `fault` event at a real (epoch, step); a joint fault's effect (the sim's own event,
-    exact) within 2 steps of it; the supervisor's own events never go back in (epoch, step) but at a resume."""
-    from kinswarm.actors.report.timeline import one_per_command
+NEAR = 25  # steps: a request and its effect further apart are drawn as two commands (actors/report/timeline.py)
+PROMPT = 2  # steps: how soon after its request a joint fault acts
 
-    unplaced = [e for e in events if not (e["epoch"] >= 0 and 0 <= e["step"] <= steps)]
-    wanted = [i for i in injected if i.kind not in ("crash", "cut")]  # the whole run's, not a supervisor's
+
+def effects(events: list[dict[str, Any]], injected: list[Injected], steps: int) -> tuple[list[str], list[tuple]]:
+    """Each fault sent matched with its `fault` event (the request, at the step it went out): the names of those
+    never recorded, and for each joint fault (what, request's step, its effect's step or None), the effect being the
+    sim's own event (exact) nearest the request within NEAR steps. Steps count across epochs: an epoch's last step
+    (`steps`) is where the next one starts (its step 0), so a fault sent as an epoch ends acts at the next one's."""
     faults = [e for e in events if e["event"] == "fault"]
-    missing, far = [], []
-    for i in wanted:
+    missing, pairs = [], []
+    for i in injected:
+        if i.kind in ("crash", "cut"):  # the whole run's, not a supervisor's
+            continue
         match = next((e for e in faults if e["detail"].startswith(i.describe)), None)
         if match is None:
             missing.append(i.describe)
@@ -383,16 +388,28 @@ def check_faults_at_steps(events: list[dict[str, Any]], injected: list[Injected]
         faults.remove(match)
         if i.kind in MODEL:
             targets = AGENTS if i.target == "all" else (i.target,)
-            # an epoch's last step (`steps`) is where the next one starts (its step 0): a fault sent as an epoch
-            # ends acts at the next one's first step
-            at = match["epoch"] * steps + match["step"]
-            applied = [
-                e
+            asked = match["epoch"] * steps + match["step"]
+            near = [
+                at
                 for e in events
-                if e["event"] == i.kind and e["target"] in targets and abs(e["epoch"] * steps + e["step"] - at) <= 2
+                if e["event"] == i.kind and e["target"] in targets
+                and abs((at := e["epoch"] * steps + e["step"]) - asked) <= NEAR
             ]  # fmt: skip
-            if not applied:
-                far.append(f"{i.describe} at {match['epoch']}/{match['step']}")
+            done = min(near, key=lambda at: abs(at - asked)) if near else None
+            pairs.append((f"{i.describe} at {match['epoch']}/{match['step']}", asked, done))
+    return missing, pairs
+
+
+def check_faults_at_steps(events: list[dict[str, Any]], injected: list[Injected], steps: int) -> tuple[bool, str]:
+    """Every fault sent is a `fault` event at a real (epoch, step), stamped where it went out: never after its effect
+    (the sim's own event, exact), which is no further than a plot draws as one command; the supervisor's own events
+    never go back in (epoch, step) but at a resume."""
+    from kinswarm.actors.report.timeline import one_per_command
+
+    unplaced = [e for e in events if not (e["epoch"] >= 0 and 0 <= e["step"] <= steps)]
+    missing, pairs = effects(events, injected, steps)
+    lost = [what for what, _, done in pairs if done is None]
+    early = [what for what, asked, done in pairs if done is not None and done < asked]
     backwards = []
     for seg in segments(events):
         last = (-1, -1)
@@ -403,13 +420,26 @@ def check_faults_at_steps(events: list[dict[str, Any]], injected: list[Injected]
                     backwards.append(f"{e['event']} {e['target']} at {at} after {last}")
                 last = max(last, at)
     lines = len(one_per_command(events))
-    ok = not (unplaced or missing or far or backwards)
-    detail = f"{len(wanted)} faults, {len(events)} events ({lines} plotted)"
-    for name, bad in (("unplaced", unplaced), ("missing", missing), ("effect not at its step", far),
-                      ("going back", backwards)):  # fmt: skip
+    ok = not (unplaced or missing or lost or early or backwards)
+    sent = sum(i.kind not in ("crash", "cut") for i in injected)
+    detail = f"{sent} faults, {len(events)} events ({lines} plotted)"
+    for name, bad in (("unplaced", unplaced), ("missing", missing), (f"no effect within {NEAR} steps", lost),
+                      ("stamped after its effect", early), ("going back", backwards)):  # fmt: skip
         if bad:
             detail += f"; {name}: {len(bad)} ({bad[0]})"
     return ok, detail
+
+
+def check_prompt(events: list[dict[str, Any]], injected: list[Injected], steps: int) -> tuple[bool, str]:
+    """A joint fault acts within PROMPT steps of its request: the time from the supervisor's put to the sim's
+    Zenoh thread (the sim applies it there, actors/simulator/actor.py)."""
+    _, pairs = effects(events, injected, steps)
+    lags = Counter(done - asked for _, asked, done in pairs if done is not None)
+    late = [(what, done - asked) for what, asked, done in pairs if done is not None and done - asked > PROMPT]
+    detail = ", ".join(f"{n} after {lag}" for lag, n in sorted(lags.items())) or "no joint fault"
+    if late:
+        detail += f"; later than {PROMPT}: {len(late)} ({late[0][0]}: {late[0][1]} steps)"
+    return not late, detail + " (steps from request to effect)"
 
 
 def unanswered(events: list[dict[str, Any]], ended: float = math.inf) -> tuple[int, int]:
@@ -670,6 +700,8 @@ def report(
 ) -> int:
     """The invariants, checked from what the runs left behind, printed as a table; 1 if one does not hold."""
     out = c.out
+    with open(base / "faults.jsonl", "w") as f:  # the schedule as sent: the invariants can be checked again from files
+        f.writelines(json.dumps(dataclasses.asdict(i)) + "\n" for i in c.injected)
     summary = free_out / "summary.json"
     free_s = json.loads(summary.read_text()).get("wall_seconds", 0.0) if summary.exists() else 0.0
     events, metrics = _rows(out / "events.jsonl"), _rows(out / "metrics.jsonl")
@@ -692,6 +724,7 @@ def report(
         left = (ok and not (lingering or inside), detail)
     rows = [
         ("every fault in events.jsonl at its exact step", *check_faults_at_steps(events, c.injected, a.steps)),
+        (f"a joint fault acts within {PROMPT} steps of its request", *check_prompt(events, c.injected, a.steps)),
         ("every restart restored the newest checkpoint", *restores),
         ("no agent stood in for a live child", *standins),
         ("every epoch once in metrics.jsonl", *check_epochs(metrics, a.epochs)),
