@@ -8,6 +8,9 @@ nor explores). Writes OUT/any_pose_seeds.json after each batch and prints per se
 spread and the worst seeds.
 
     python -m kinswarm.experiments.generalisation.any_pose_seeds --seeds 20 --jobs 2 --runs /tmp/runs --out /tmp/out
+
+`--g-perp SETS,HALF_RANGE` trains and tests the same rows with g_perp's sets changed (a variant to compare on the
+same seeds; default the recipe's 7 over ±1.5).
 """
 
 from __future__ import annotations
@@ -19,11 +22,21 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from kinswarm.actors.learning.settings import StateVariable
 
 from ..common import Context, run_specs
 from ..goals import TEST_SIZE, halton
 from ..swarm import Spec
-from .protocol import ANY_POSE, EVAL_STEPS, FREE_JOINTS, FREE_REFERENCES, any_pose, stats, train_and_test
+from .protocol import (
+    ANY_POSE,
+    EVAL_STEPS,
+    FREE_JOINTS,
+    FREE_LEARNER,
+    FREE_REFERENCES,
+    any_pose,
+    stats,
+    train_and_test,
+)
 
 ROWS = {"from the start pose": ANY_POSE, "successive": f"{ANY_POSE}, successive test goals"}
 
@@ -76,16 +89,22 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--test-set", type=int, default=0, help="K: tested on K and K+1")
     ap.add_argument("--runs", type=Path, required=True)
     ap.add_argument("--out", type=Path, required=True)
+    ap.add_argument("--g-perp", default="", help="SETS,HALF_RANGE: g_perp's sets in a variant of the learner")
     a = ap.parse_args(argv)
+    learner = FREE_LEARNER
+    if a.g_perp:
+        sets, half = a.g_perp.split(",")
+        g_perp = (StateVariable("g_perp", int(sets), (-float(half), float(half))),)
+        learner = tuple(sorted({**dict(FREE_LEARNER), "extra_state": g_perp}.items()))
     a.out.mkdir(parents=True, exist_ok=True)
     k = a.test_set
     ctx = Context("generalisation", a.out, a.runs, seeds=1, quick=False, jobs=a.jobs, test_set=k)
     rule = rule_free(ctx, [k, k + 1])
     for n in range(min(a.batch, a.seeds), a.seeds + a.batch, a.batch):
         ctx.seeds = min(n, a.seeds)
-        t = train_and_test(ctx, any_pose(), second_level=3, with_scratch=False)
+        t = train_and_test(ctx, any_pose(learner=learner), second_level=3, with_scratch=False)
         seeds = t.seeds_of(t.trainings[0])
-        res: dict[str, Any] = {"test_set": k, "seeds": seeds, "rule_successive": {}}
+        res: dict[str, Any] = {"g_perp": a.g_perp or "7,1.5", "test_set": k, "seeds": seeds, "rule_successive": {}}
         res["train_last64_within_0_5"] = {
             str(s): float(np.mean(np.asarray(t.trained[(ANY_POSE, s)].final_errors[-64:]) < 0.5)) for s in seeds
         }
@@ -94,7 +113,7 @@ def main(argv: list[str] | None = None) -> None:
             for name, label in ROWS.items():
                 entry = t.per[label][f"test_set_{b}"]
                 res.setdefault(name, {})[f"test_set_{b}"] = summary(entry["per_seed"], seeds)
-        (a.out / "any_pose_seeds.json").write_text(json.dumps(res, indent=1))
+        (a.out / f"any_pose_seeds{'-g' + a.g_perp if a.g_perp else ''}.json").write_text(json.dumps(res, indent=1))
         print(f"seeds 0-{seeds[-1]} ({len(seeds)}):", flush=True)
         for name in ROWS:
             for b in (k, k + 1):

@@ -359,18 +359,18 @@ def controls(level: int, epochs: int, min_seeds: int = 0) -> list[Training]:
 ANY_POSE = "Level-3, random starts, joints free"
 
 
-def any_pose(min_seeds: int = 0) -> list[Training]:
+def any_pose(min_seeds: int = 0, learner: tuple = FREE_LEARNER) -> list[Training]:
     """A skill from any pose: Level-3 trained on the free chain from a random pose each epoch (FREE_LEARNER: q out
     of the state there too), tested frozen from the start configuration and the paper's way, on test sets K and K+1
     (docs/notebook/reaching.md, "A skill from any pose"; the recipe: examples/reach-any-pose.toml)."""
     common = {"min_seeds": min_seeds, "random_starts": 1.0, "robot": FREE_JOINTS}
     return [
-        Training(ANY_POSE, 3, REPS * 4**3, FREE_LEARNER, False, **common),
+        Training(ANY_POSE, 3, REPS * 4**3, learner, False, **common),
         Training(
             f"{ANY_POSE}, successive test goals",
             3,
             REPS * 4**3,
-            FREE_LEARNER,
+            learner,
             False,
             True,
             trained_as=ANY_POSE,
