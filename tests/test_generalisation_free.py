@@ -108,3 +108,7 @@ def test_q_is_out_of_the_state_on_the_free_chain(tmp_path: Path) -> None:
     assert q_memberships_spread(row) < 0.001
     assert q_memberships_spread(recipe) < 0.001
     assert recipe.topo().agents["a1"].limits == row.topo().agents["a1"].limits
+    # the recipe's state is the row's: the same variables, sets and ranges (g_perp's 9 sets over ±0.75 too)
+    grid = [(s.state_sets, s.state_ranges) for s in learner_settings(task_of(row), row.learner).values()]
+    assert [(s.state_sets, s.state_ranges) for s in learner_settings(task_of(recipe), recipe.learner).values()] == grid
+    assert grid[0][0][-1] == 9 and grid[0][1][-1] == (-0.75, 0.75)
