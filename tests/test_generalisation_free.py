@@ -6,13 +6,24 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
+import numpy as np
 import pytest
-from kinswarm.actors.run.runfile import load_run
+from kinswarm.actors.learning.fuzzy import memberships_1d
+from kinswarm.actors.run.config import RunConfig
+from kinswarm.actors.run.runfile import learner_settings, load_run, task_of
 from kinswarm.experiments.common import Context
 from kinswarm.experiments.generalisation import protocol
-from kinswarm.experiments.generalisation.protocol import FREE_JOINTS, LEARNER, Training, train_and_test
+from kinswarm.experiments.generalisation.protocol import (
+    ANY_POSE,
+    FREE_JOINTS,
+    LEARNER,
+    Training,
+    any_pose,
+    train_and_test,
+    training_spec,
+)
 from kinswarm.experiments.goals import halton
-from kinswarm.experiments.swarm import CHAIN4, RunOutcome
+from kinswarm.experiments.swarm import CHAIN4, ROOT, RunOutcome
 
 
 def test_the_free_chain_is_chain4_with_its_limits_out_of_reach() -> None:
@@ -64,14 +75,7 @@ def test_the_any_pose_row_trains_on_the_free_chain_from_random_poses(tmp_path: P
 
     monkeypatch.setattr(protocol, "run_specs", fake_run_specs)
     ctx = Context("generalisation", tmp_path, tmp_path / "runs", seeds=1, quick=False, test_set=0)
-    label = "Level-3, random starts, joints free"
-    rows = [
-        Training(label, 3, 128, LEARNER, False, random_starts=1.0, robot=FREE_JOINTS),
-        Training(
-            f"{label}, successive", 3, 128, LEARNER, False, True, random_starts=1.0, trained_as=label, robot=FREE_JOINTS
-        ),
-    ]
-    tested = train_and_test(ctx, rows, second_level=3, with_scratch=False)
+    tested = train_and_test(ctx, any_pose(), second_level=3, with_scratch=False)  # the experiment's own rows
     (train,) = [s for s in ran if s.learn and s.controller == "agents"]
     assert train.file == FREE_JOINTS and dict(train.task)["start_pose"] == "random"
     tests = [s for s in ran if not s.learn and s.controller == "agents"]
@@ -79,4 +83,32 @@ def test_the_any_pose_row_trains_on_the_free_chain_from_random_poses(tmp_path: P
         (b, tuple(halton(k)[0])) for b in (False, True) for k in (0, 1)
     }
     assert all(s.from_dir == str(tmp_path / train.name) and s.file == FREE_JOINTS for s in tests)
-    assert set(tested.per[f"{label}, successive"]) == {"test_set_0", "test_set_1"}
+    assert set(tested.per[f"{ANY_POSE}, successive test goals"]) == {"test_set_0", "test_set_1"}
+
+
+def q_memberships_spread(cfg: RunConfig) -> float:
+    """How much an agent's memberships in its q sets change over its joint's whole range, at most over agents."""
+    topo, spread = cfg.topo(), 0.0
+    for agent, s in learner_settings(task_of(cfg), cfg.learner).items():
+        (qlo, qhi), m = s.state_ranges[0], s.state_sets[0]
+        mu = [memberships_1d(q, m, qlo, qhi, s.slope) for q in (*topo.agents[agent].limits, 0.0)]
+        spread = max(spread, max(float(np.abs(a - b).max()) for a in mu for b in mu))
+    return spread
+
+
+def test_q_is_out_of_the_state_on_the_free_chain(tmp_path: Path) -> None:
+    """Random poses on the free chain reach ±628 rad: the any-pose row and its recipe must not tell angles apart
+    there (the level sweep's ±1000 rad does: 0.2-0.8), any more than the sweep's learner does on chain4's ±π."""
+    row = training_spec(any_pose()[0], 0, 500).config(tmp_path)
+    recipe = load_run(ROOT / "examples" / "reach-any-pose.toml")
+    sweep_on_chain4 = training_spec(Training("Level-3", 3, 128, LEARNER), 0, 500).config(tmp_path)
+    sweep_on_free = training_spec(Training("x", 3, 128, LEARNER, robot=FREE_JOINTS), 0, 500).config(tmp_path)
+    assert q_memberships_spread(sweep_on_chain4) < 0.01
+    assert q_memberships_spread(sweep_on_free) > 0.5  # the leak this row must not have
+    assert q_memberships_spread(row) < 0.001
+    assert q_memberships_spread(recipe) < 0.001
+    assert recipe.topo().agents["a1"].limits == row.topo().agents["a1"].limits
+    # the recipe's state is the row's: the same variables, sets and ranges (g_perp's 9 sets over ±0.75 too)
+    grid = [(s.state_sets, s.state_ranges) for s in learner_settings(task_of(row), row.learner).values()]
+    assert [(s.state_sets, s.state_ranges) for s in learner_settings(task_of(recipe), recipe.learner).values()] == grid
+    assert grid[0][0][-1] == 9 and grid[0][1][-1] == (-0.75, 0.75)

@@ -23,6 +23,7 @@ from .protocol import (
     DEFAULT_LEARNER,
     EVAL_STEPS,
     FREE_JOINTS,
+    FREE_LEARNER,
     G_PERP_TEXT,
     L3_SEEDS,
     LEARNER,
@@ -36,6 +37,7 @@ from .protocol import (
     SIGNED_G3,
     UNSIGNED_TEXT,
     Training,
+    any_pose,
     controls,
     reps_for,
     run_suffix,
@@ -50,6 +52,7 @@ __all__ = [
     "DEFAULT_LEARNER",
     "EVAL_STEPS",
     "FREE_JOINTS",
+    "FREE_LEARNER",
     "G_PERP_TEXT",
     "L3_SEEDS",
     "LEARNER",
@@ -62,6 +65,7 @@ __all__ = [
     "SIGNED_G3",
     "UNSIGNED_TEXT",
     "Training",
+    "any_pose",
     "cdf",
     "controls",
     "run",
@@ -92,25 +96,8 @@ def run(ctx: Context) -> dict[str, Any]:
             )
         )
         # a skill from any pose: trained on the free chain from a random pose each epoch, tested from the start
-        # configuration and the paper's way (docs/notebook/reaching.md, "A skill from any pose")
-        any_pose = "Level-3, random starts, joints free"
-        trainings.append(
-            Training(any_pose, 3, REPS * 4**3, LEARNER, False, min_seeds=L3_SEEDS, random_starts=1.0, robot=FREE_JOINTS)
-        )
-        trainings.append(
-            Training(
-                f"{any_pose}, successive test goals",
-                3,
-                REPS * 4**3,
-                LEARNER,
-                False,
-                True,
-                min_seeds=L3_SEEDS,
-                random_starts=1.0,
-                trained_as=any_pose,
-                robot=FREE_JOINTS,
-            )
-        )
+        # configuration and the paper's way
+        trainings += any_pose(L3_SEEDS)
         # what JASM and the fuzzy sets buy: the Level-3 row with each taken away
         trainings += controls(3, REPS * 4**3, L3_SEEDS)
     t = train_and_test(ctx, trainings, second_level=1 if q else 3, with_scratch=True, free_joints=not q)
