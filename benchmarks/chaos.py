@@ -39,6 +39,7 @@ import math
 import os
 import random
 import re
+import shutil
 import signal
 import statistics
 import subprocess
@@ -647,9 +648,16 @@ def main(argv: list[str] | None = None) -> int:
             free = _both(a, c, base, free_out, free_split)
         except KeyboardInterrupt:
             n = stop_everything(base, [c.proc, c.free], c.pids)
-            print(f"chaos: interrupted: both runs stopped ({n} processes killed); their files are in {base}",
-                  file=sys.stderr)  # fmt: skip
-            return 130
+            stack.close()  # with --hosts: the namespaces
+            kept = f"their files are in {base}" if a.out is not None else "rerun with --out to keep their files"
+            print(f"chaos: interrupted: both runs stopped ({n} processes killed); {kept}", file=sys.stderr)
+            if a.out is None:
+                shutil.rmtree(tmp, ignore_errors=True)
+            sys.stdout.flush()
+            sys.stderr.flush()
+            # not a return: the control client's Zenoh session, cut mid-request with its peers killed, can hang the
+            # interpreter's exit (seen: 60 s and more after this line was printed)
+            os._exit(130)
         return report(a, c, base, free_out, free.returncode, c.wall, [s for s in (split, free_split) if s is not None])
 
 
