@@ -11,6 +11,9 @@ hits every row alike):
   wire (async)   benchmarks/wire_floor.py --mode async: a bare msgpack relay down and up a chain of 4 processes
                  over Zenoh, asyncio bridge; steps/s = one pass per 2*depth + 2 hops, as a swarm step needs
   wire (block)   the same with a blocking FifoChannel receive: the fastest any step can cross the wire here
+  pattern        benchmarks/pattern_floor.py: the step's own 15 messages between 5 processes (obs and task out,
+                 downs, ups, four cmds back) with bare relays, blocking receives: the fastest handlers doing
+                 nothing can run this step's pattern here
   inprocess      the same run with `--placement inprocess`: the step library in a plain loop, the real PyBullet
                  world, no messages, no processes
   in-process     the floor: the same loop on the planar robot in closed form (sim/kinematics.ModelWorld), nothing
@@ -41,7 +44,9 @@ from pathlib import Path
 from kinswarm.actors.run.runfile import load_run
 from kinswarm.actors.supervisor.inprocess import InProcessRun
 from kinswarm.sim import kinematics
-from step_rate import ROOT, swarm_rate, wire_floor  # benchmarks/ is this script's directory, so first on sys.path
+
+# benchmarks/ is this script's directory, so first on sys.path
+from step_rate import ROOT, free_port, swarm_rate, wire_floor
 
 CHAIN4 = ROOT / "examples" / "chain4.toml"
 
@@ -66,6 +71,17 @@ def floor_rate(epochs: int, steps: int, seed: int) -> float:
         finally:
             run.close()
     return done / seconds
+
+
+def pattern_rate(passes: int, attempts: int = 3) -> float | None:
+    """Steps/s of benchmarks/pattern_floor.py (the step's message pattern, bare relays); None if every attempt
+    failed (it takes 5 consecutive ports from a free one: a clash is unlikely, not impossible)."""
+    for _ in range(attempts):
+        cmd = [sys.executable, str(Path(__file__).with_name("pattern_floor.py")), "--passes", str(passes)]
+        out = subprocess.run([*cmd, "--port", str(free_port())], capture_output=True, text=True, timeout=600).stdout
+        if out.strip().endswith("steps/s"):
+            return float(out.split()[-2])
+    return None
 
 
 def baseline_rate(python: str, epochs: int, steps: int, seed: int) -> float:
@@ -93,7 +109,7 @@ def main() -> None:
     ap.add_argument("--baseline", default="", help="another checkout's python: its process row beside this one's")
     a = ap.parse_args()
     fleets = [int(b) for b in a.fleets.split(",") if b.strip()]
-    names = ["process", "single", "inprocess", "wire (async)", "wire (block)", "in-process"]
+    names = ["process", "single", "inprocess", "wire (async)", "wire (block)", "pattern", "in-process"]
     names += [f"{p} B={b}" for b in fleets for p in ("process", "single")]
     if a.baseline:
         names.insert(1, "process (baseline)")
@@ -116,12 +132,16 @@ def main() -> None:
                 v = wire_floor(name[6:-1], a.passes)
                 if v is None:
                     raise SystemExit(f"benchmarks/wire_floor.py --mode {name[6:-1]} failed")
+            elif name == "pattern":
+                v = pattern_rate(a.passes)
+                if v is None:
+                    raise SystemExit("benchmarks/pattern_floor.py failed")
             else:
                 v = floor_rate(a.epochs, a.steps, seed=r)
             rows[name].append(v)
             print(f"  repeat {r + 1}/{a.repeats}: {name:13} {v:8.0f} steps/s", file=sys.stderr, flush=True)
     med = {k: statistics.median(v) for k, v in rows.items()}
-    floors = tuple(f for f in ("wire (block)", "wire (async)", "in-process") if f in med)
+    floors = tuple(f for f in ("wire (block)", "wire (async)", "pattern", "in-process") if f in med)
     print(f"4-joint chain (examples/chain4.toml), {a.repeats} repeats, swarms {a.epochs} epochs x {a.steps} steps")
     print(f"load average (1 min) at each repeat's start: {', '.join(f'{x:.1f}' for x in loads)}")
     head = f"{'':14}{'median':>9}{'min':>9}{'max':>9}" + "".join(f"{'/ ' + f:>16}" for f in floors)
