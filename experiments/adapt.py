@@ -19,7 +19,9 @@ the pseudo-inverse. At the goal itself a controller that holds still does not fe
 the next goal every one does.
 
 Plasticity (`[learner] plasticity`, actors/learning/plasticity.py): the same trained swarm with "direction" (each agent
-finds which way its own motor turns from its own encoder) as a further controller in every table; each of the 30
+finds which way its own motor turns from its own encoder) and the reach task's `tip = "sensed"` (where the tip the
+agents compute from their encoders disagrees with the sensed one, they aim by the sensed one: actors/tasks/reach.py),
+as examples/reach-generalise.toml runs it, as a further controller in every table; each of the 30
 goals as its own episode started afresh from the trained checkpoint, the fault from step 0 (`kinswarm run --from
 TRAINED --learn on`); a live sequence per fault kind (reversed one joint, two, scale, offset, lock): at a goal intact,
 the fault from the next episode on, then LIVE_SEQUENCE next goals from where it stands, and the same sequence intact
@@ -58,12 +60,16 @@ CONDITIONS: dict[str, list[tuple[str, list[str], dict[str, Any]]]] = {
 }
 QUICK_CONDITIONS = ("intact", "a1 reversed")
 LAWS = {"rule": "rule", "pseudo-inverse": "pinv", "greedy per joint": "greedy"}
-PLASTIC = "trained + direction, learning"
+PLASTIC = "trained + direction + sensed tip, learning"
 CONTROLLERS = ("fresh, learning", "trained, learning", PLASTIC, "trained, frozen", *LAWS)
 FRESH = settings()  # the default learner; the chain's default reward, shaped
 # the recipe's learner with the motor-direction plasticity (actors/learning/plasticity.py); it changes nothing while
 # every motor turns as commanded (tests/test_plasticity.py), so it runs on the checkpoint the recipe trained
 DIRECTION = settings(**dict(LEARNER), plasticity="direction")
+# with it, as the recipe runs, the reach task's `tip = "sensed"` (actors/tasks/reach.py): where the tip the agents
+# compute from their encoders disagrees with the sensed one, they aim by the sensed one; on a sound robot it changes
+# nothing either (tests/test_tip.py)
+SENSED: tuple[tuple[str, Any], ...] = (("tip", "sensed"),)
 # each goal its own episode from the trained checkpoint, the fault from step 0
 AFRESH_CONDITIONS = ("a1 reversed", "a2, a3 reversed", "a1 reads +10°")
 AFRESH = ("trained, learning", PLASTIC)
@@ -158,13 +164,13 @@ def run(ctx: Context) -> dict[str, Any]:
             ]
             specs[(label, PLASTIC, seed)] = [
                 Spec(f"adapt-direction-{slug(label)}", reward="graded", **{**trained_common, "learner": DIRECTION},
-                     **common)
+                     task=SENSED, **common)
             ]  # fmt: skip
             if label in AFRESH_CONDITIONS:
-                for c, learner in zip(AFRESH, (LEARNER, DIRECTION), strict=True):
+                for c, learner, task in zip(AFRESH, (LEARNER, DIRECTION), ((), SENSED), strict=True):
                     specs[(label, f"afresh {c}", seed)] = [
                         Spec(f"adapt-afresh-{slug(c)}-{slug(label)}-g{i}", reward="graded", seed=seed, epochs=1,
-                             goals=(g,), learner=learner, from_dir=t, **common)
+                             goals=(g,), learner=learner, task=task, from_dir=t, **common)
                         for i, g in enumerate(goals)
                     ]  # fmt: skip
             specs[(label, "trained, frozen", seed)] = [
@@ -228,7 +234,9 @@ def run(ctx: Context) -> dict[str, Any]:
                 Spec(f"adapt-seq-trained-{tag}", learner=LEARNER, reward="graded", from_dir=t, **common)
             ]
             seq[(label, PLASTIC, seed)] = [
-                Spec(f"adapt-seq-direction-{tag}", learner=DIRECTION, reward="graded", from_dir=t, **common)
+                Spec(
+                    f"adapt-seq-direction-{tag}", learner=DIRECTION, task=SENSED, reward="graded", from_dir=t, **common
+                )
             ]
             for name, law in (("rule", "rule"), ("pseudo-inverse", "pinv")):
                 seq[(label, name, seed)] = [Spec(f"adapt-seq-{law}-{tag}", controller=law, **{**common, "seed": 0})]
@@ -237,10 +245,14 @@ def run(ctx: Context) -> dict[str, Any]:
     for b in FROZEN_SETS:
         test = tuple(halton(b)[:n_frozen])
         for seed in ctx.seed_list:
-            for c, learner in (("trained, frozen", LEARNER), ("trained + direction, frozen", DIRECTION)):
+            for c, learner, task in (
+                ("trained, frozen", LEARNER, ()),
+                ("trained + direction + sensed tip, frozen", DIRECTION, SENSED),
+            ):
                 frozen[(b, c, seed)] = [
                     Spec(f"adapt-frozen-set{b}-{slug(c)}", seed=seed, epochs=len(test), goals=test, steps=steps,
-                         learner=learner, reward="graded", learn=False, explore=False, from_dir=str(trained[seed].out))
+                         learner=learner, task=task, reward="graded", learn=False, explore=False,
+                         from_dir=str(trained[seed].out))
                 ]  # fmt: skip
 
     flat = [s for group in (*specs.values(), *live.values(), *seq.values(), *frozen.values()) for s in group]
@@ -445,12 +457,17 @@ def _text(rep: Report, ctx: Context, per: dict, live: dict, steps: int, n_goals:
 def _plasticity_text(rep: Report, ctx: Context, per: dict, sequence: dict, frozen: dict, n_seq: int,
                      n_frozen: int) -> None:  # fmt: skip
     rep.text(
-        "## Plasticity: the motor's direction, from the agent's own encoder",
+        "## Plasticity: the motor's direction from the agent's own encoder, the tip as sensed",
         "",
-        f"'{PLASTIC}' is the trained swarm with `[learner] plasticity = \"direction\"`: each agent compares the move "
-        "it meant with the change of its own joint angle; when they keep disagreeing it sends the opposite command "
-        "from then on (actors/learning/plasticity.py). It reads no fault. 'afresh': each goal its own episode from "
-        "the trained checkpoint, the fault from step 0 (`kinswarm run … --from TRAINED --learn on`).",
+        f"'{PLASTIC}' is the trained swarm as examples/reach-generalise.toml runs it: with `[learner] plasticity = "
+        '"direction"` each agent compares the move it meant with the change of its own joint angle; when they keep '
+        "disagreeing it sends the opposite command from then on (actors/learning/plasticity.py). With `[task] tip = "
+        '"sensed"` the root sends the tip as sensed (the one the reward is measured on) down with its context; '
+        "where the tip an agent computes from the encoders differs from it by more than 1e-3, the agent aims at the "
+        "goal moved by the difference, so that its computed tip at the aim is the sensed one at the goal "
+        "(actors/tasks/reach.py). Neither reads a fault; on a sound robot neither changes anything. 'afresh': each "
+        "goal its own episode from the trained checkpoint, the fault from step 0 (`kinswarm run … --from TRAINED "
+        "--learn on`).",
     )
     rows = []
     for label, cs in per.items():

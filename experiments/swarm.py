@@ -131,6 +131,9 @@ class Spec:
         # other kinds keep their identity (and their cache entries)
         if (kind := cfg.learner.get("kind", DEFAULT_KIND)) != DEFAULT_KIND:
             d["learner_kind"] = kind
+        # likewise a reach task's tip as the agents compute it (the default): the runs made before `tip` keep theirs
+        if d["task"].get("tip") == "computed":
+            d["task"] = {k: v for k, v in d["task"].items() if k != "tip"}
         if self.from_dir is not None:
             d["from_dir"] = Path(self.from_dir).name  # itself "<name>-<identity>": portable
         if self.scenario is not None:

@@ -234,6 +234,9 @@ def test_runs_that_need_no_messages_go_inprocess(tmp_path):
     assert said.identity() == plain.identity()
     others = {dataclasses.replace(plain, learner=(("kind", k),)).identity() for k in ("independent", "tabular")}
     assert len(others) == 2 and plain.identity() not in others
+    # likewise the reach task's tip: the default, said or not, keeps the identity runs had before there was `tip`
+    assert dataclasses.replace(plain, task=(("tip", "computed"),)).identity() == plain.identity()
+    assert dataclasses.replace(plain, task=(("tip", "sensed"),)).identity() != plain.identity()
     control = run_spec(dataclasses.replace(plain, learner=(("kind", "independent"),)), tmp_path / "a")
     assert control.out != fast.out and control.placement == "inprocess"
     assert json.loads((control.out / "config.json").read_text())["learner"] == {"kind": "independent"}
@@ -332,22 +335,23 @@ def test_quick_adapt_experiment(tmp_path):
         assert (out / f).is_file(), f
     per = res["per_condition"]
     assert set(per) == {"intact", "a1 reversed"}
-    every = {"fresh, learning", "trained, learning", "trained + direction, learning", "trained, frozen", "rule",
-             "pseudo-inverse", "greedy per joint"}  # fmt: skip
+    every = {"fresh, learning", "trained, learning", "trained + direction + sensed tip, learning", "trained, frozen",
+             "rule", "pseudo-inverse", "greedy per joint"}  # fmt: skip
     assert set(per["intact"]) == every
     # a fault's rows add each goal as its own episode from the trained checkpoint, with and without the plasticity
-    assert set(per["a1 reversed"]) == every | {"afresh trained, learning", "afresh trained + direction, learning"}
+    afresh = {"afresh trained, learning", "afresh trained + direction + sensed tip, learning"}
+    assert set(per["a1 reversed"]) == every | afresh
     for cs in per.values():
         for c in cs.values():
             assert len(c["final_error"][0]) == 4 and 0.0 <= c["within"][0] <= 1.0
     assert per["intact"]["rule"]["within"] == [1.0] and per["a1 reversed"]["rule"]["within"] == [0.0]
-    # on a sound robot the plasticity changes nothing: the same episodes to the bit
-    assert per["intact"]["trained + direction, learning"] == per["intact"]["trained, learning"]
+    # on a sound robot the plasticity (the direction, the sensed tip) changes nothing: the same episodes to the bit
+    assert per["intact"]["trained + direction + sensed tip, learning"] == per["intact"]["trained, learning"]
     assert res["sequence"]["per"] and res["frozen"]["per"]
     # the live sequence's ceiling: the same goals with nothing broken, where the plasticity again changes nothing
     seq = res["sequence"]["per"]
     assert set(seq) == {"intact", "a1 reversed"}
-    assert seq["intact"]["trained + direction, learning"] == seq["intact"]["trained, learning"]
+    assert seq["intact"]["trained + direction + sensed tip, learning"] == seq["intact"]["trained, learning"]
     assert set(res["live"]["per"]) == {"trained, learning", "trained, learning, exploring afresh", "fresh, learning",
                                        "fresh, learning, the trained swarm's learner",
                                        "rule", "pseudo-inverse"}  # fmt: skip

@@ -32,6 +32,7 @@ def test_defaults_are_written_once_and_resolved_in_full():
         "start_pose": "home",
         "start_share": 1.0,
         "start_seed": 0,
+        "tip": "computed",
     }.copy() | {k: cfg.task[k] for k in ("waypoints", "waypoint_radius", "settle_radius")}
     assert cfg.scene == {"kind": "free"} and cfg.learner == {} and cfg.robot["name"] == "chain4"
 

@@ -78,7 +78,7 @@ class AgentStep:
         children: Mapping[str, tuple[Coords, float | None, Readings]]
         if isinstance(head, Task):  # the root: the world's base; its task turns the observation into the reward
             h = self.task.head(head)
-            base, goal, reward, context, children = self.topo.base, h.goal, h.reward, {}, h.children
+            base, goal, reward, context, children = self.topo.base, h.goal, h.reward, h.context, h.children
         else:
             base, goal, reward, context, children = head.base, head.goal, head.reward, head.sense, {}
         frame = self.geom.joint_frame(self.spec, base, q)
@@ -123,11 +123,11 @@ class AgentStep:
     # -- what the learner decides from -------------------------------------------------------------
     def decide_from(self, b: Begun, view: StepView) -> tuple[np.ndarray, float | None, list[int], float]:
         """(S_i, the reward, the moves to leave out, the action's scale)."""
-        tip = view.tip
-        s = self.geom.state(self.spec, b.frame, b.q, tip, b.goal, self.unsigned_g3, self.state_kind)
+        tip, goal = view.tip, self.task.aim(view)  # the goal as its task has the agent aim (the task's, by default)
+        s = self.geom.state(self.spec, b.frame, b.q, tip, goal, self.unsigned_g3, self.state_kind)
         values = self.task.state(view)
         if self.extra_names:  # the learner's own extra variables: from my geometry, else from my readings
-            local = {**b.sense, **self.geom.extras(self.extra_names, b.frame, tip, b.goal)}
+            local = {**b.sense, **self.geom.extras(self.extra_names, b.frame, tip, goal)}
             values += [local.get(n, 0.0) for n in self.extra_names]
         if values:
             s = np.concatenate([s, values])

@@ -7,10 +7,13 @@ A task is a module of this package holding a `TaskDef` subclass (its settings ar
   every agent   `observation(agent)`: what the agent's state S_i holds (its kind, g3, bounds, the task's variables
                 first among the extras); `learner(agent)`: the fuzzy learner's settings over it (the grid's defaults);
                 `agent(agent)`: the agent's `AgentTask`, which the agent calls at each step:
-    root          head(task observation)    -> Head: the goal, the reward r(t-1), what each child is sent;
+    root          head(task observation)    -> Head: the goal, the reward r(t-1), the context every child
+                                               inherits, what differs for each child;
     all           up(view)                  -> readings for the parent's `Up.sense` (a subtree's aggregate);
                   state(view)               -> values of the task's state variables;
                   reward(view, r)           -> r with the agent's local reward terms;
+                  aim(view)                 -> the goal its state S_i is built from (the task's goal, or
+                                               where its computed tip must go for the sensed one to reach it);
                   avoid(view)               -> actions the agent must leave out of this step's choice;
                   scale(view)               -> the factor on the agent's action size (1: as the run says).
 
@@ -37,12 +40,13 @@ Frame = tuple[float, float, float]
 
 @dataclass(frozen=True)
 class Head:
-    """What the root's task makes of a step's task observation: the goal and reward r(t-1) it sends down, and per
-    child what differs from them (a grasp's fingers each get their own goal, reward and context)."""
+    """What the root's task makes of a step's task observation: the goal, reward r(t-1) and context it sends down,
+    and per child what differs from them (a grasp's fingers each get their own goal, reward and context)."""
 
     goal: Vec2
     reward: float | None
     children: Mapping[str, tuple[Vec2, float | None, Readings]] = field(default_factory=dict)
+    context: Readings = field(default_factory=dict)  # what every agent below inherits (Down.sense)
 
 
 @dataclass(frozen=True)
@@ -78,6 +82,10 @@ class AgentTask:
 
     def reward(self, view: StepView, reward: float | None) -> float | None:
         return reward
+
+    def aim(self, view: StepView) -> Vec2:
+        """The goal the agent's state S_i (and its own extra variables) is built from: the task's goal as it is."""
+        return view.goal
 
     def avoid(self, view: StepView) -> list[int]:
         return []
