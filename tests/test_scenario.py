@@ -29,6 +29,7 @@ def test_paper_scenarios(topo):
         "paper-fail-disturb-fail.toml",
         "paper-locked.toml",
         "paper-recovery.toml",
+        "reverse-at-goal.toml",  # the README's second animation
     ]
     assert timeline(SCENARIOS / "paper-recovery.toml", topo) == [
         (None, 0, "lock", ["a1", "a2", "a3"], None),
