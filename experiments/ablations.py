@@ -14,9 +14,9 @@ from typing import Any
 from .common import Context, Report
 from .generalisation import (
     COARSE_TEXT,
+    CONTROL_SEEDS,
     DEFAULT_LEARNER,
     G_PERP_TEXT,
-    L3_SEEDS,
     LEARNER,
     LEARNER_TEXT,
     NO_EPSILON_DECAY,
@@ -34,12 +34,12 @@ from .generalisation import (
 
 LEVEL = 3  # the paper's number and the bar
 # (learner, reward, label suffix, at least this many seeds): from the recommended learner and reward back to the
-# defaults, a part at a time
+# defaults, a part at a time; the first four on generalisation's CONTROL_SEEDS (its Level-3 row's first seeds)
 ROWS = (
-    (LEARNER, REWARD, "", L3_SEEDS),
-    (NO_EPSILON_DECAY, REWARD, ", no ε decay", L3_SEEDS),
-    (NO_EPSILON_DECAY, "shaped", ", shaped reward", L3_SEEDS),  # and no epsilon decay
-    (SIGNED_G3, "shaped", ", signed g3", L3_SEEDS),  # and shaped
+    (LEARNER, REWARD, "", CONTROL_SEEDS),
+    (NO_EPSILON_DECAY, REWARD, ", no ε decay", CONTROL_SEEDS),
+    (NO_EPSILON_DECAY, "shaped", ", shaped reward", CONTROL_SEEDS),  # and no epsilon decay
+    (SIGNED_G3, "shaped", ", signed g3", CONTROL_SEEDS),  # and shaped
     (NO_G_PERP, "shaped", ", without g_perp", 0),  # and g3 signed
     (DEFAULT_LEARNER, "shaped", ", default learner", 0),
 )
