@@ -60,8 +60,10 @@ def test_successive_rows_test_the_level_swarms_on_the_free_chain(
     assert len(swarms) == 2 and all(s.successive and not s.learn and s.from_dir for s in swarms)
     assert {s.from_dir for s in swarms} == {str(tmp_path / s.name) for s in trains}  # the level's own swarms
     rule = [s for s in free if s.controller == "rule"]
-    assert len(rule) == 1 and rule[0].successive
-    assert all(s.goals == tuple(halton(k)[:100]) for s in [*swarms, *rule])  # test set K, as the other rows
+    assert len(rule) == 2 and all(s.successive for s in rule)
+    assert all(s.goals == tuple(halton(k)[:100]) for s in swarms)  # test set K, as the other rows
+    # the rule on test sets K and K+1: beside the any-pose rows' successive tests, which run on both
+    assert {s.goals for s in rule} == {tuple(halton(b)[:100]) for b in (k, k + 1)}
     assert "rule on g_perp, successive test goals, joints free" in tested.references
     assert f"test_set_{k}" in tested.per["Level-3, successive test goals, joints free"]
 
