@@ -5,7 +5,7 @@ epoch, every goal REPS times in a seeded order (Level-4: once each), then evalua
 --learn off --explore off`: no learning, greedy actions) on 100 test goals — block K of the Halton
 sequence in bases 2 and 3 (`--test-set K`; Levels 3 and 4 are also tested on block K+1, a second unseen set).
 Level-3 carries the paper's number: its rows (from the start configuration and successive, the any-pose recipe's
-too) run on at least L3_SEEDS seeds, the learner-kind controls on CONTROL_SEEDS.
+and the learner-kind controls too) run on at least L3_SEEDS seeds.
 Higher levels also train for more epochs; a control trains Level-1's 4 goals for Level-2's epoch budget,
 which separates the number of goals from the amount of training. Two controls take the paper's design choices
 away one at a time on Level-3's training (CONTROLS): independent learners (no JASM) and a plain Q-table (no fuzzy
@@ -22,7 +22,6 @@ from ..common import Context
 from .protocol import (
     BLIND_FREE,
     COARSE_TEXT,
-    CONTROL_SEEDS,
     CONTROLS,
     DEFAULT_LEARNER,
     EVAL_STEPS,
@@ -54,7 +53,6 @@ from .report import cdf, report, table
 __all__ = [
     "BLIND_FREE",
     "COARSE_TEXT",
-    "CONTROL_SEEDS",
     "CONTROLS",
     "DEFAULT_LEARNER",
     "EVAL_STEPS",
@@ -117,6 +115,6 @@ def run(ctx: Context) -> dict[str, Any]:
         # ... and its controls: untrained, and blind to the goal (q only); on --seeds seeds
         trainings += any_pose_controls()
         # what JASM and the fuzzy sets buy: the Level-3 row with each taken away
-        trainings += controls(3, REPS * 4**3, CONTROL_SEEDS)
+        trainings += controls(3, REPS * 4**3, L3_SEEDS)
     t = train_and_test(ctx, trainings, second_level=1 if q else 3, with_scratch=True, free_joints=not q)
     return report(ctx, t, levels)

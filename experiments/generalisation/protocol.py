@@ -35,9 +35,6 @@ LEVELS = (1, 2, 3, 4)  # Level-4 alone is 3 x 256 epochs, a third of this experi
 # down other paths and two ended at 0.646 and 1.399 - the spread over six seeds understated how much seeds vary.
 # Twenty give a standard error over seeds the report can state (report.py: SE, range and worst seeds per row).
 L3_SEEDS = 20
-# The learner-kind controls (CONTROLS) run on fewer: each is 20 more trainings, and their verdict (tabular far
-# worse, independent close) was already plain over 6. The report says how many seeds each row has.
-CONTROL_SEEDS = 6
 # The level sweep's learner: a coarser grid and q_i out of the state. q_i cannot be removed by a setting, so
 # it gets 2 sets over +-1000 rad: its memberships are 0.5 +- 0.002 for every angle, i.e. the learner cannot tell
 # angles apart. Measured on Level-3, seed 0 (2 epochs per goal, 100 test goals): default grid mean 0.94 / 67 %
@@ -282,7 +279,11 @@ def train_and_test(
     for t in trainings:
         label, level = t.label, t.level
         # the sweep's rows, the controls and the rows trained from random poses are tested on a second set too
-        sets = [k, k + 1] if level >= second_level and (t.main or t.control or t.random_starts or t.control_of) else [k]
+        sets = (
+            [k, k + 1]
+            if level >= second_level and (t.main or t.control or t.random_starts or t.successive or t.control_of)
+            else [k]
+        )
         for block in sets:
             for seed in seeds_of(t):
                 eval_specs[(label, block, seed)] = Spec(

@@ -13,7 +13,6 @@ from ..goals import HALF, quadtree
 from ..swarm import RunOutcome
 from .protocol import (
     ANY_POSE,
-    CONTROL_SEEDS,
     CONTROLS,
     L3_SEEDS,
     LEARNER_NAMES,
@@ -79,8 +78,8 @@ def report(ctx: Context, tested: Tested, levels: tuple[int, ...]) -> dict[str, A
         f"Learner: {LEARNER_TEXT} (the configuration the README recommends for generalisation; what each of its "
         "parts buys: `kinswarm experiment ablations`, docs/results/ablations/report.md). Reward `graded` "
         "(`--reward graded`: the shaped reward's gradient inside D_min too; the control rows likewise). "
-        f"Level-3's rows run on at least {L3_SEEDS} seeds, the learner-kind controls on {CONTROL_SEEDS}: with the "
-        "signed-g3 learner, seeds 0-2 gave a mean of 0.233 and seeds 0-5 0.372; the same learner in a plain loop "
+        f"Level-3's rows, the controls' too, run on at least {L3_SEEDS} seeds: with the signed-g3 learner, "
+        "seeds 0-2 gave a mean of 0.233 and seeds 0-5 0.372; the same learner in a plain loop "
         "with the tip in double precision sent 4 of 6 seeds down other paths, two ending at 0.646 and 1.399. "
         "'Successive test goals' tests the Level-3 swarms the "
         'paper\'s way (§5.2: "successive on-line requests"): each test goal from where the last one ended, not '
