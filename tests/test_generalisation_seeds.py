@@ -106,6 +106,9 @@ def test_the_report_says_plainly_whether_the_any_pose_skill_beats_the_rule(full_
         "test set 0: Level-3 frozen 0.195 ± 0.013 SE (20 seeds, 100 % within 0.5), the rule 0.150 (100 %): " in report
     )
     assert "**the rule is better**" in report
+    assert "- Summed up: the learned skill beats the rule plainly in **0 of 8** comparisons above" in report
+    # how firm the paper verdict is: the paper's 0.2366 against Level-3's 0.195 ± 0.013 (SE over 20 seeds)
+    assert "kinswarm 0.195 ± 0.059 over seeds (SE 0.013: the paper's mean 3.1 SE above; STD 0.000)" in report
     assert "- From the start configuration, test set 0: the any-pose recipe 0.195" in report
     assert (
         "Control, Level-3, random starts, joints free, untrained, successive test goals, test set 1 (3 seeds)" in report
@@ -153,8 +156,12 @@ def test_the_verdict_against_the_rule_needs_two_standard_errors_and_no_fewer_goa
             "test_set_0": {"mean": rule[0], "frac_within_0_5": rule[1]}
         }
     }
-    (line,) = _against_the_rule(per, refs, 0)
+    line, summed = _against_the_rule(per, refs, 0)
     assert verdict in line, line
+    who = {"the trained swarm is **better**": "**1 of 1**", "**the rule is better**": "**0 of 1**"}
+    assert who.get(verdict, "**0 of 1**") in summed and ("swarm in 1;" in summed) == (
+        verdict == "**the rule is better**"
+    )
 
 
 def test_spread_of_two_seeds() -> None:

@@ -266,11 +266,14 @@ def _verdict(rep: Report, per: dict, trainings: list, k: int, quick: bool, refer
         e = per[label][f"test_set_{k}"]
         pm_, ps_ = PAPER[level]
         ok = e["mean"] <= pm_
+        n = len(e["per_seed"])
+        # how far the paper's mean lies from ours in standard errors over seeds: "as good" by 0.5 SE is no finding
+        se = e["mean_std_over_seeds"] / math.sqrt(n) if n > 1 else math.nan
         lines.append(
-            f"- {label} ({len(e['per_seed'])} seeds): paper mean {pm_} (STD {ps_}); kinswarm {e['mean']:.3f} ± "
-            f"{e['mean_std_over_seeds']:.3f} "
-            f"(STD {e['std']:.3f}), {100 * e['frac_within_0_5']:.0f} % within 0.5 — "
-            + ("**as good or better**" if ok else "**worse than the paper**")
+            f"- {label} ({n} seeds): paper mean {pm_} (STD {ps_}); kinswarm {e['mean']:.3f} ± "
+            f"{e['mean_std_over_seeds']:.3f} over seeds (SE {se:.3f}: the paper's mean {abs(pm_ - e['mean']) / se:.1f} "
+            f"SE {'above' if pm_ > e['mean'] else 'below'}; STD {e['std']:.3f}), {100 * e['frac_within_0_5']:.0f} % "
+            "within 0.5 — " + ("**as good or better**" if ok else "**worse than the paper**")
         )
     for label, entry in per.items():
         if f"test_set_{k + 1}" in entry:
@@ -318,7 +321,7 @@ def _against_the_rule(per: dict, references: dict, k: int) -> list[str]:
         (f"Level-3, {free}", free, rule_free),
         (f"{ANY_POSE}, successive test goals", f"{free}, trained from random poses", rule_free),
     ]
-    out = []
+    out, verdicts = [], []
     for label, what, r_sets in pairs:
         for b in (k, k + 1):
             swarm, r = per.get(label, {}).get(f"test_set_{b}"), r_sets.get(f"test_set_{b}")
@@ -330,9 +333,12 @@ def _against_the_rule(per: dict, references: dict, k: int) -> list[str]:
             ws, wr = swarm["frac_within_0_5"], r["frac_within_0_5"]
             if d < -2 * se and ws >= wr:
                 verdict = "the trained swarm is **better**"
+                verdicts.append("swarm")
             elif d > 2 * se and ws <= wr:
                 verdict = "**the rule is better**"
+                verdicts.append("rule")
             else:
+                verdicts.append("neither")
                 verdict = (
                     f"**neither beats the other plainly**: the swarm's mean {'lower' if d < 0 else 'higher'} by "
                     f"{abs(d):.3f} ({abs(d) / se if se else math.inf:.1f} SE over seeds), "
@@ -343,6 +349,12 @@ def _against_the_rule(per: dict, references: dict, k: int) -> list[str]:
                 f"Level-3 frozen {swarm['mean']:.3f} ± {se:.3f} SE ({n} seeds, {100 * ws:.0f} % within 0.5), the "
                 f"rule {r['mean']:.3f} ({100 * wr:.0f} %): {verdict}."
             )
+    if verdicts:
+        out.append(
+            f"- Summed up: the learned skill beats the rule plainly in **{verdicts.count('swarm')} of "
+            f"{len(verdicts)}** comparisons above, the rule the swarm in {verdicts.count('rule')}; in the others "
+            "neither plainly."
+        )
     return out
 
 
