@@ -16,7 +16,6 @@ from .generalisation import (
     COARSE_TEXT,
     DEFAULT_LEARNER,
     G_PERP_TEXT,
-    L3_SEEDS,
     LEARNER,
     LEARNER_TEXT,
     NO_EPSILON_DECAY,
@@ -33,13 +32,15 @@ from .generalisation import (
 )
 
 LEVEL = 3  # the paper's number and the bar
+# The rows measured on 6 seeds, as generalisation's Level-3 was then (its L3_SEEDS is now 20): the first 6 of them
+SEEDS = 6
 # (learner, reward, label suffix, at least this many seeds): from the recommended learner and reward back to the
-# defaults, a part at a time
+# defaults, a part at a time; the first four on SEEDS
 ROWS = (
-    (LEARNER, REWARD, "", L3_SEEDS),
-    (NO_EPSILON_DECAY, REWARD, ", no ε decay", L3_SEEDS),
-    (NO_EPSILON_DECAY, "shaped", ", shaped reward", L3_SEEDS),  # and no epsilon decay
-    (SIGNED_G3, "shaped", ", signed g3", L3_SEEDS),  # and shaped
+    (LEARNER, REWARD, "", SEEDS),
+    (NO_EPSILON_DECAY, REWARD, ", no ε decay", SEEDS),
+    (NO_EPSILON_DECAY, "shaped", ", shaped reward", SEEDS),  # and no epsilon decay
+    (SIGNED_G3, "shaped", ", signed g3", SEEDS),  # and shaped
     (NO_G_PERP, "shaped", ", without g_perp", 0),  # and g3 signed
     (DEFAULT_LEARNER, "shaped", ", default learner", 0),
 )

@@ -1,5 +1,5 @@
 """The generalisation experiment's successive rows on the chain with joints that turn freely: the same swarms and
-goals as on chain4, only the robot's limits out of reach; the rule's successive row likewise; --test-set K holds."""
+goals as on chain4, only the robot's limits out of reach, on test sets K and K+1; the rule's successive rows too."""
 
 from __future__ import annotations
 
@@ -57,13 +57,15 @@ def test_successive_rows_test_the_level_swarms_on_the_free_chain(
     assert len(trains) == 2 and all(s.file == str(CHAIN4) for s in trains)  # one training per seed, on chain4
     free = [s for s in ran if s.file == FREE_JOINTS]
     swarms = [s for s in free if s.controller == "agents"]
-    assert len(swarms) == 2 and all(s.successive and not s.learn and s.from_dir for s in swarms)
+    assert len(swarms) == 4 and all(s.successive and not s.learn and s.from_dir for s in swarms)  # 2 seeds x 2 sets
     assert {s.from_dir for s in swarms} == {str(tmp_path / s.name) for s in trains}  # the level's own swarms
     rule = [s for s in free if s.controller == "rule"]
-    assert len(rule) == 1 and rule[0].successive
-    assert all(s.goals == tuple(halton(k)[:100]) for s in [*swarms, *rule])  # test set K, as the other rows
+    assert len(rule) == 2 and all(s.successive for s in rule)
+    # test sets K and K+1, as the level's own rows; the rule on the same two
+    for runs in (swarms, rule):
+        assert {s.goals for s in runs} == {tuple(halton(b)[:100]) for b in (k, k + 1)}
     assert "rule on g_perp, successive test goals, joints free" in tested.references
-    assert f"test_set_{k}" in tested.per["Level-3, successive test goals, joints free"]
+    assert set(tested.per["Level-3, successive test goals, joints free"]) == {f"test_set_{k}", f"test_set_{k + 1}"}
 
 
 def test_the_any_pose_row_trains_on_the_free_chain_from_random_poses(tmp_path: Path, monkeypatch) -> None:
