@@ -351,11 +351,22 @@ def test_quick_adapt_experiment(tmp_path):
     seq = res["sequence"]["per"]
     assert set(seq) == {"intact", "a1 reversed"}
     assert seq["intact"]["trained + direction + sensed tip, learning"] == seq["intact"]["trained, learning"]
+    # ... and on the chain whose joints turn freely: the swarm trained for any pose, with and without the plasticity
+    # (again the same intact), beside the controls on the same goals; the report says per fault whether the bar is met
+    plastic, plain = (
+        "free joints: trained from any pose + direction + sensed tip, learning",
+        "free joints: trained from any pose, learning",
+    )
+    free = {plastic, plain, "free joints: fresh, learning", "free joints: rule", "free joints: pseudo-inverse"}
+    assert free <= set(seq["a1 reversed"]) and free <= set(seq["intact"])
+    assert seq["intact"][plastic] == seq["intact"][plain]
+    assert len(res["trained_any_pose"]["runs"]) == 1
     assert set(res["live"]["per"]) == {"trained, learning", "trained, learning, exploring afresh", "fresh, learning",
                                        "fresh, learning, the trained swarm's learner",
                                        "rule", "pseudo-inverse"}  # fmt: skip
     text = (out / "report.md").read_text()
     assert "## Live: a motor reversed at a trained swarm's goal" in text and "quick" in text
+    assert "The live bar (>= 90 % of the next goals within 0.5), per fault and robot:" in text
 
 
 @pytest.mark.research
