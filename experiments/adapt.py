@@ -35,6 +35,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import re
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -51,7 +52,7 @@ from .generalisation import (
     training_spec,
 )
 from .goals import halton
-from .swarm import Spec
+from .swarm import ROOT, Spec
 
 STEPS = 500
 GOALS = 30  # of test set 0 (experiments/goals.py halton(0)): the generalisation report's first 30 test goals
@@ -375,7 +376,7 @@ def run(ctx: Context) -> dict[str, Any]:
             "trained_any_pose": {
                 "level": level,
                 "epochs": anywhere.epochs,
-                "robot": FREE_JOINTS,
+                "robot": str(Path(FREE_JOINTS).relative_to(ROOT)),  # as the repository names it, not this machine
                 "runs": [str(any_trained[s].out.name) for s in any_trained],
             },  # fmt: skip
             "conditions": {k: [{"fault": f, "targets": t, **p} for f, t, p in v] for k, v in conditions.items()},
