@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 from pathlib import Path
 from typing import Any
 
@@ -37,6 +36,7 @@ from .protocol import (
     stats,
     train_and_test,
 )
+from .report import spread
 
 ROWS = {"from the start pose": ANY_POSE, "successive": f"{ANY_POSE}, successive test goals"}
 
@@ -60,23 +60,13 @@ def rule_free(ctx: Context, blocks: list[int]) -> dict[int, dict[str, float]]:
 
 
 def summary(per_seed: list[dict[str, float]], seeds: list[int]) -> dict[str, Any]:
-    """Mean over seeds of each seed's mean and share within 0.5, their standard errors, spread and worst seeds."""
+    """The report's spread of a row over seeds (report.spread: mean, standard errors, range, worst seeds), with how many
+    seeds meet the issue's bar on their own and every seed's numbers."""
     means = np.array([p["mean"] for p in per_seed])
     within = np.array([p["frac_within_0_5"] for p in per_seed])
-    n = len(means)
-    se = float(means.std(ddof=1) / math.sqrt(n)) if n > 1 else math.nan
-    worst = sorted(zip(means.tolist(), seeds, within.tolist(), strict=True), reverse=True)[:3]
     return {
-        "seeds": n,
-        "mean": float(means.mean()),
-        "mean_se": se,
-        "mean_min": float(means.min()),
-        "mean_max": float(means.max()),
-        "within_0_5": float(within.mean()),
-        "within_se": float(within.std(ddof=1) / math.sqrt(n)) if n > 1 else math.nan,
-        "within_min": float(within.min()),
+        **spread(per_seed, seeds),
         "seeds_within_bar": int(np.sum((means <= 0.3) & (within >= 0.9))),
-        "worst": [{"seed": s, "mean": m, "within_0_5": w} for m, s, w in worst],
         "per_seed": {str(s): p for s, p in zip(seeds, per_seed, strict=True)},
     }
 
