@@ -16,6 +16,7 @@ from kinswarm.actors.run.runfile import load_run
 from kinswarm.actors.supervisor.inprocess import InProcessRun
 from kinswarm.actors.tasks import reach
 from kinswarm.actors.tasks.base import StepView
+from kinswarm.actors.tasks.sensed import TIP_PRECISION, sensed_key
 from kinswarm.protocol.spec import SpecError
 from kinswarm.sim import kinematics
 
@@ -79,7 +80,7 @@ def test_the_mechanism_decides_the_same_whether_or_not_the_fault_was_announced(t
     assert _same(announced, silent)  # the same errors, aims and learning, to the bit
     moved = [math.hypot(*d) for d in announced[1]]
     # every agent aimed elsewhere than the goal at every step: the computed tip is off by 2 r sin 5° (r > 0.5 here)
-    assert min(moved) > reach.TIP_PRECISION
+    assert min(moved) > TIP_PRECISION
     off, _ = _run(tmp_path / "off", "computed", scenario, kinematics.ModelWorld)
     assert off[0] != announced[0]  # aiming by the sensed tip changed what the robot did: not vacuous
     assert not any(math.hypot(*d) for d in off[1])  # off, every agent aims at the goal itself
@@ -100,7 +101,7 @@ def test_aiming_at_the_moved_goal_brings_the_sensed_tip_to_the_goal() -> None:
     """The aim is the goal moved by (computed - sensed): the computed tip at the aim is the sensed one at the goal."""
     agent = reach.ReachAgent(reach.ReachSettings(goal=(4.0, 6.0), tip="sensed"), ("a4",))
     computed, sensed, goal = (5.0, 5.5), (4.2, 5.9), (4.0, 6.0)
-    sense = {reach.sensed_key("a4", "x"): sensed[0], reach.sensed_key("a4", "y"): sensed[1]}
+    sense = {sensed_key("a4", "x"): sensed[0], sensed_key("a4", "y"): sensed[1]}
     view = StepView(0, 0, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), computed, goal, sense, {}, None)
     aim = agent.aim(view)
     assert aim == pytest.approx((goal[0] + 0.8, goal[1] - 0.4))

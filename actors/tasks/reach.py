@@ -18,14 +18,11 @@ start_seed = 0            # random: the draws are a function of (start_seed, epo
 tip = "sensed"            # computed (default) | sensed: aim by the tip as sensed where the computed one disagrees
 ```
 
-`tip`: every agent builds its state from the tip it computes by forward kinematics from the encoders (its subtree's
-leaves' tips, sent up); the reward comes from the tip as sensed (Task.tips, the tip tracker the reward needs anyway).
-An encoder that reads wrong makes them disagree: with a1 reading +10° every agent sees the arm turned 10° about the
-base, brings its computed tip to the goal, and the real one stays 2 r sin 5° away. With `tip = "sensed"` the root
-sends the sensed tips down with its context; where an agent's computed tip and the sensed one (its subtree's) differ
-by more than TIP_PRECISION it aims at the goal moved by that difference (ReachAgent.aim), so that its computed tip
-at the aim is its sensed tip at the goal. Within TIP_PRECISION, as on a sound robot, it aims at the goal itself: the
-same state, the same decisions, bit for bit. It reads no fault: only the two tips it has.
+`tip`: "sensed" aims by the tip as sensed (Task.tips, which the reward is measured on) wherever the tip the agents
+compute from their encoders disagrees with it (actors/tasks/sensed.py, shared with reach3d): with a1 reading +10°
+every agent sees the arm turned 10° about the base, brings its computed tip to the goal, and the real one stays
+2 r sin 5° away; aiming at the goal moved by the difference brings the real one there. On a sound robot: bit for bit
+the same run.
 """
 
 from __future__ import annotations
@@ -37,17 +34,13 @@ import numpy as np
 from kinswarm.actors.learning.observation import Observation
 from kinswarm.protocol.messages import Task
 
+from . import sensed
 from .base import AgentTask, Head, StepView, TaskDef, Vec2, centroid
 
 REWARD_MODES: tuple[str, ...] = ("shaped", "paper", "strict", "graded", "settle")
 #: settle: within this of the goal (at t - 1 and t) the tip has arrived (default: the corridor's success tolerance)
 SETTLE_RADIUS = 0.3
 START_POSES: tuple[str, ...] = ("home", "random")
-#: tip: the tip the agents aim by ("computed" from their encoders; "sensed": the task's observation where they disagree)
-TIPS: tuple[str, ...] = ("computed", "sensed")
-#: tip = "sensed": a disagreement below this is the sensor's precision, not the robot's (on a sound chain4 the two
-#: tips differ by less than 1e-6)
-TIP_PRECISION = 1e-3
 
 
 @dataclass(frozen=True)
@@ -92,8 +85,7 @@ class ReachSettings:
             raise ValueError('start_share, start_seed: only with start_pose = "random"')
         if isinstance(self.start_seed, bool) or not isinstance(self.start_seed, int) or self.start_seed < 0:
             raise ValueError(f"start_seed: must be an integer >= 0, got {self.start_seed!r}")
-        if self.tip not in TIPS:
-            raise ValueError(f"tip: {self.tip!r} is not one of {', '.join(TIPS)}")
+        sensed.check_tip(self.tip)
 
 
 class ReachTask(TaskDef):
@@ -135,18 +127,13 @@ class ReachTask(TaskDef):
         return ReachAgent(self.settings, self.topo.subtree_leaves(agent))
 
 
-def sensed_key(leaf: str, axis: str) -> str:
-    """The context's reading of a leaf's sensed tip (tip = "sensed")."""
-    return f"tip.{leaf}.{axis}"
-
-
 class ReachAgent(AgentTask):
     """The root measures D_goal(t) from the task observation and pays R(D(t), D(t-1)) (Eq. 10); with tip = "sensed"
     it sends the sensed tips down, and every agent aims by them where its computed tip disagrees."""
 
     def __init__(self, settings: ReachSettings, leaves: tuple[str, ...]) -> None:
         self.s, self.leaves = settings, leaves
-        self._sensed_keys = [(sensed_key(leaf, "x"), sensed_key(leaf, "y")) for leaf in leaves]
+        self._sensed_keys = sensed.keys(leaves, "xy")
         self.D_prev: float | None = None  # D_goal(t-1)
         self.waypoint = 0  # the current sub-goal of `waypoints` in this epoch
 
@@ -166,23 +153,16 @@ class ReachAgent(AgentTask):
         self.D_prev = D
         if s.tip != "sensed":
             return Head(goal, reward)
-        context = {sensed_key(leaf, a): float(p[i]) for leaf, p in obs.tips.items() for i, a in enumerate("xy")}
-        return Head(goal, reward, context=context)
+        return Head(goal, reward, context=sensed.context(obs.tips, "xy"))
 
     def aim(self, view: StepView) -> Vec2:
-        """tip = "sensed": the goal moved by (computed tip - sensed tip) where they differ by more than
-        TIP_PRECISION, so that bringing the computed tip to the aim brings the sensed one to the goal; else the goal."""
+        """tip = "sensed": the goal moved by (computed tip - sensed tip) where they differ by more than the sensor's
+        precision (sensed.TIP_PRECISION), so that bringing the computed tip to the aim brings the sensed one to the
+        goal; else the goal."""
         if self.s.tip != "sensed":
             return view.goal
-        sense = view.sense
-        points = [(sense[kx], sense[ky]) for kx, ky in self._sensed_keys if kx in sense and ky in sense]
-        if len(points) != len(self.leaves):  # a tip not sensed this step: nothing to compare
-            return view.goal
-        sx, sy = centroid(points)
-        dx, dy = view.tip[0] - sx, view.tip[1] - sy
-        if math.hypot(dx, dy) <= TIP_PRECISION:
-            return view.goal
-        return (view.goal[0] + dx, view.goal[1] + dy)
+        moved = sensed.moved_goal(view.goal, view.tip, view.sense, self._sensed_keys)
+        return view.goal if moved is None else (moved[0], moved[1])
 
     def global_reward(self, D: float, D_prev: float, obs: Task) -> float:
         return reach_reward(D, D_prev, self.s.reward, settle_radius=self.s.settle_radius)

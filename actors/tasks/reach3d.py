@@ -15,11 +15,22 @@ reward = "graded"                 # graded | shaped | paper | strict (reach.reac
 d_min = 0.3                       # m: Eq. 10's D_min; outside it a step pays -2 + k (D(t-1) - D(t))
 c = 10.0                          # 1/m: e^(-c D) inside D_min
 k = 200.0                         # 1/m: the shaping gradient
+tip = "sensed"                    # computed (default) | sensed: aim by the tool point as sensed where the computed one
+                                  # disagrees (an encoder that reads wrong)
 ```
 
 For a pose the distance is sqrt(|tip - goal|² + (POSE_WEIGHT x the angle between the tool's orientation and the
 goal's)²) (protocol/frames.py pose_distance: 0.25 m per radian, a 10° turn weighs like 4.4 cm); the metrics' error stays
 the position's.
+
+`tip = "sensed"` (actors/tasks/sensed.py, as the planar reach's): where the tool point the agents compute from their
+encoders differs from the one sensed (Task.tips, which the reward is measured on) by more than 1 mm, every agent aims
+at the goal point moved by that difference, so that its computed tool point at the aim is the sensed one at the goal.
+For a pose only the position moves: the goal's orientation stays as it is. An encoder's offset turns the computed
+tool frame too, by a rotation about that joint's axis, so the sensed orientation differs from the computed one as
+well; but moving the goal's orientation by that rotation is right only if the rotation is about the base's axis
+(a1), and the swarm knows only the two frames, not which encoder reads wrong. On a sound robot the two agree to
+single precision: the run is the same to the bit as with the setting off.
 """
 
 from __future__ import annotations
@@ -35,6 +46,7 @@ from kinswarm.protocol import frames
 from kinswarm.protocol.messages import Task
 from kinswarm.protocol.topology import AgentSpec
 
+from . import sensed
 from .base import AgentTask, Head, StepView, TaskDef
 from .reach import reach_reward
 
@@ -54,6 +66,7 @@ class Reach3dSettings:
     d_min: float = 0.3
     c: float = 10.0
     k: float = 200.0
+    tip: str = "computed"  # "sensed": aim by the sensed tool point where the computed one disagrees (above)
 
     def __post_init__(self) -> None:
         pts = tuple(self.goals) or ((self.goal,) if self.goal is not None else ())  # goals, when given, replace goal
@@ -70,6 +83,7 @@ class Reach3dSettings:
             v = getattr(self, name)
             if not (math.isfinite(v) and v > 0):
                 raise ValueError(f"{name}: must be > 0, got {v}")
+        sensed.check_tip(self.tip)
 
     @property
     def pose(self) -> bool:
@@ -162,14 +176,16 @@ class Reach3dTask(TaskDef):
         return overrides.get("state", "turn" if self.settings.pose else "plane") == "turn"
 
     def agent(self, agent: str, observation: Observation | None) -> AgentTask:
-        return Reach3dAgent(self.settings, self.topo.agents[agent])
+        return Reach3dAgent(self.settings, self.topo.agents[agent], self.topo.subtree_leaves(agent))
 
 
 class Reach3dAgent(AgentTask):
-    """The root pays the reward on D_goal; near a pose goal every joint's moves are fine."""
+    """The root pays the reward on D_goal; near a pose goal every joint's moves are fine. With tip = "sensed" the root
+    sends the sensed tool point down, and every agent aims by it where its computed one disagrees."""
 
-    def __init__(self, settings: Reach3dSettings, spec: AgentSpec) -> None:
+    def __init__(self, settings: Reach3dSettings, spec: AgentSpec, leaves: tuple[str, ...] = ()) -> None:
         self.s, self.spec = settings, spec
+        self._sensed_keys = sensed.keys(leaves, "xyz")
         self.D_prev: float | None = None
 
     def start_epoch(self) -> None:
@@ -181,12 +197,22 @@ class Reach3dAgent(AgentTask):
         s = self.s
         reward = None if self.D_prev is None else reach_reward(D, self.D_prev, s.reward, D_min=s.d_min, c=s.c, k=s.k)
         self.D_prev = D
-        return Head(obs.goal, reward)
+        if s.tip != "sensed":
+            return Head(obs.goal, reward)
+        return Head(obs.goal, reward, context=sensed.context(obs.tips, "xyz"))
+
+    def aim(self, view: StepView) -> Coords:
+        """tip = "sensed": the goal's point moved by (computed - sensed tool point) where they differ by more than
+        sensed.TIP_PRECISION (a pose's orientation as it is); else the goal."""
+        if self.s.tip != "sensed":
+            return view.goal
+        moved = sensed.moved_goal(view.goal, view.tip, view.sense, self._sensed_keys)
+        return view.goal if moved is None else moved
 
     def scale(self, view: StepView) -> float:
         """A prismatic joint moves its action size in millimetres (1° -> 1 mm), not as metres of radians (17 mm); near
-        a pose goal a move is fine (frames.move_share)."""
-        return (PRISMATIC_SCALE if self.spec.prismatic else 1.0) * frames.move_share(view.tip, view.goal)
+        a pose goal (the goal it aims at) a move is fine (frames.move_share)."""
+        return (PRISMATIC_SCALE if self.spec.prismatic else 1.0) * frames.move_share(view.tip, self.aim(view))
 
 
 TASK = Reach3dTask
