@@ -1,0 +1,114 @@
+"""reach3d's `tip = "sensed"` on the iiwa with a miscalibrated encoder (research, beside `kinswarm experiment
+reach3d`): the experiment's trained swarm (its points' training, one robot, seed 0: its cached run serves it) on the
+first goals of its test set A, from their start poses, with the shoulder's encoder (a2) reading +10° (a scenario's
+`offset`, from the first step), aiming by the tool point it computes from its encoders ("computed") or by the sensed
+one where they disagree ("sensed"); frozen and still learning; and intact, where the two must be the same to the bit.
+Then other encoders' offsets, frozen, computed vs sensed: is it general, or the shoulder's?
+
+    nice -n 10 python -m kinswarm.experiments.research sensed_tip3d --jobs 1 --out runs/research
+
+Measured: docs/notebook/adapt.md, Study 8.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from kinswarm.experiments import reach3d as r
+from kinswarm.experiments.common import Context, Report, pm, run_specs, settings
+from kinswarm.experiments.swarm import Spec
+from kinswarm.protocol.robots import load_robot
+
+SEEDS = 1
+TEST = 20  # the first goals of test set A
+JOINT, DEGREES = "a2", 10.0
+TIPS = ("computed", "sensed")
+OTHERS = (("a1", 10.0), ("a2", -20.0), ("a4", -20.0), ("a6", 20.0))  # frozen only
+
+
+def _offset(ctx: Context, joint: str = JOINT, degrees: float = DEGREES) -> str:
+    """`joint`'s encoder reading `degrees` off from the first step: a scenario file under the runs (its content is
+    part of each run's identity)."""
+    path = ctx.runs / "scenarios" / f"r3d-offset-{joint}{degrees:+g}.toml"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(
+        f'name = "r3d-offset-{joint}"\n\n[[event]]\nepoch = 0\nstep = 0\nfault = "offset"\ntarget = "{joint}"\n'
+        f"degrees = {degrees}\n"
+    )
+    return str(path)
+
+
+def run(ctx: Context) -> dict[str, Any]:
+    topo = load_robot(r.ROBOT)
+    steps, n_test = (60, 5) if ctx.quick else (r.STEPS, TEST)
+    t_goals, t_starts = r.training_set(topo, False, *r.QUICK_TRAINING if ctx.quick else ())
+    file = str(r.ROBOT)
+    train = [
+        Spec(
+            "r3d-pt-train-state",
+            seed=s,
+            epochs=len(t_goals),
+            steps=steps,
+            file=file,
+            task=r._task(t_goals, t_starts),
+            learner=settings(),
+            checkpoint=True,
+        )  # fmt: skip
+        for s in ctx.seed_list
+    ]
+    trained = dict(zip(ctx.seed_list, run_specs(ctx, train, "train"), strict=True))
+    goals, starts = r.sample(topo, r.SETS["A"], n_test, False)
+    scenario = _offset(ctx)
+    tests: dict[tuple[str, str, str, int], Spec] = {}
+    for s, t in trained.items():
+        for mode, learn in (("frozen", False), ("learning", True)):
+            for robot, scen in (("intact", None), (f"{JOINT} reads {DEGREES:+g}°", scenario)):
+                for tip in TIPS:
+                    tests[(mode, robot, tip, s)] = Spec(
+                        f"r3d-tip-{mode}-{'offset' if scen else 'intact'}-{tip}", seed=s, epochs=n_test,
+                        steps=steps, file=file, task=(*r._task(goals, starts), ("tip", tip)), learner=settings(),
+                        from_dir=str(t.out), learn=learn, explore=learn, scenario=scen,
+                    )  # fmt: skip
+        for joint, deg in OTHERS:
+            for tip in TIPS:
+                tests[("frozen", f"{joint} reads {deg:+g}°", tip, s)] = Spec(
+                    f"r3d-tip-frozen-offset-{tip}", seed=s, epochs=n_test, steps=steps, file=file,
+                    task=(*r._task(goals, starts), ("tip", tip)), learner=settings(), from_dir=str(t.out),
+                    learn=False, explore=False, scenario=_offset(ctx, joint, deg),
+                )  # fmt: skip
+    outs = dict(zip(tests, run_specs(ctx, list(tests.values()), "test"), strict=True))
+    rep = Report(ctx, "The sensed tip on the iiwa (research)", "beyond the paper (3D, adaptation)")
+    rep.text(
+        f"Research, not product. The trained swarm of `kinswarm experiment reach3d` (points, {len(t_goals)} "
+        f"goal-episodes of {steps} steps) on the first {n_test} goals of test set A from their start poses, "
+        f"frozen (learning and exploration off) and still learning, intact and with {JOINT}'s encoder reading "
+        f"+{DEGREES:g}° from the first step; `[task] tip` computed or sensed. Within {r.TOL * 100:.0f} cm.",
+    )
+    results: dict[str, Any] = {}
+    rows = []
+    for key, out in outs.items():
+        mode, robot, tip, s = key
+        err = out.final_errors
+        within = 100.0 * float(np.mean([e <= r.TOL for e in err]))
+        label = f"{mode} | {robot} | {tip}"
+        results.setdefault(label, {"within_pct": [], "mean": [], "final_errors": []})
+        results[label]["within_pct"].append(within)
+        results[label]["mean"].append(float(np.mean(err)))
+        results[label]["final_errors"].append(err)
+    for label, v in results.items():
+        rows.append([*label.split(" | "), pm(v["within_pct"], 1), pm(v["mean"], 3), len(v["mean"])])
+    rep.table(["swarm", "robot", "tip", f"within {r.TOL * 100:.0f} cm (%)", "mean error (m)", "seeds"], rows)
+    same = {
+        mode: all(
+            outs[(mode, "intact", "computed", s)].final_errors == outs[(mode, "intact", "sensed", s)].final_errors
+            and outs[(mode, "intact", "computed", s)].mean_errors == outs[(mode, "intact", "sensed", s)].mean_errors
+            for s in trained
+        )
+        for mode in ("frozen", "learning")
+    }
+    rep.text(f"Intact, computed and sensed give the same final and mean errors to the bit: {same}.")
+    results["intact_identical"] = same
+    rep.results = results
+    rep.write({"steps": steps, "test": n_test, "joint": JOINT, "degrees": DEGREES}, [*trained.values(), *outs.values()])
+    return results
