@@ -3,7 +3,8 @@ reach3d`): the experiment's trained swarm (its points' training, one robot, seed
 first goals of its test set A, from their start poses, with the shoulder's encoder (a2) reading +10° (a scenario's
 `offset`, from the first step), aiming by the tool point it computes from its encoders ("computed") or by the sensed
 one where they disagree ("sensed"); frozen and still learning; and intact, where the two must be the same to the bit.
-Then other encoders' offsets, frozen, computed vs sensed: is it general, or the shoulder's?
+Then other encoders' offsets, frozen, computed vs sensed: is it general, or the shoulder's? And poses (`kinswarm
+experiment pose3d`'s trained swarm, its set A's first poses), frozen: the sensed tip moves only the goal's point.
 
     nice -n 10 python -m kinswarm.experiments.research sensed_tip3d --jobs 1 --out runs/research
 
@@ -15,6 +16,7 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
+from kinswarm.experiments import pose3d
 from kinswarm.experiments import reach3d as r
 from kinswarm.experiments.common import Context, Report, pm, run_specs, settings
 from kinswarm.experiments.swarm import Spec
@@ -78,6 +80,7 @@ def run(ctx: Context) -> dict[str, Any]:
                     learn=False, explore=False, scenario=_offset(ctx, joint, deg),
                 )  # fmt: skip
     outs = dict(zip(tests, run_specs(ctx, list(tests.values()), "test"), strict=True))
+    pose_rows, pose_results, pose_runs = _poses(ctx, steps, n_test, scenario)
     rep = Report(ctx, "The sensed tip on the iiwa (research)", "beyond the paper (3D, adaptation)")
     rep.text(
         f"Research, not product. The trained swarm of `kinswarm experiment reach3d` (points, {len(t_goals)} "
@@ -109,6 +112,69 @@ def run(ctx: Context) -> dict[str, Any]:
     }
     rep.text(f"Intact, computed and sensed give the same final and mean errors to the bit: {same}.")
     results["intact_identical"] = same
+    rep.text(
+        f"## Poses, frozen (pose3d's trained swarm, its set A's first {n_test} poses)",
+        "",
+        "The sensed tip moves the goal's point; its orientation stays the goal's (actors/tasks/reach3d.py).",
+    )
+    head = f"within {r.TOL * 100:.0f} cm and {r.TOL_DEG:.0f}° (%)"
+    rep.table(["robot", "tip", head, f"within {r.TOL * 100:.0f} cm (%)", "mean error (m)", "mean angle (°)"], pose_rows)
+    results["poses"] = pose_results
     rep.results = results
-    rep.write({"steps": steps, "test": n_test, "joint": JOINT, "degrees": DEGREES}, [*trained.values(), *outs.values()])
+    rep.write(
+        {"steps": steps, "test": n_test, "joint": JOINT, "degrees": DEGREES, "others": OTHERS},
+        [*trained.values(), *outs.values(), *pose_runs],
+    )
     return results
+
+
+def _poses(ctx: Context, steps: int, n_test: int, scenario: str) -> tuple[list[list[Any]], dict[str, Any], list]:
+    """pose3d's trained swarm (seed 0), frozen, on its set A's first poses: intact and offset, tip computed, sensed."""
+    topo = load_robot(r.ROBOT)
+    file = str(pose3d.FILE)
+    t_goals, t_starts = r.training_set(topo, True, *r.QUICK_TRAINING if ctx.quick else ())
+    s = ctx.seed_list[0]
+    (trained,) = run_specs(
+        ctx,
+        [
+            Spec(
+                "r3d-pose-train-state",
+                seed=s,
+                epochs=len(t_goals),
+                steps=steps,
+                file=file,
+                task=r._task(t_goals, t_starts),
+                learner=settings(),
+                checkpoint=True,
+            )  # fmt: skip
+        ],
+        "pose train",
+    )
+    goals, starts = r.sample(topo, r.SETS["A"] + 7, n_test, True)
+    keys = [(robot, tip) for robot in ("intact", f"{JOINT} reads {DEGREES:+g}°") for tip in TIPS]
+    specs = [
+        Spec(
+            f"r3d-tip-pose-{'intact' if robot == 'intact' else 'offset'}-{tip}",
+            seed=s,
+            epochs=n_test,
+            steps=steps,
+            file=file,
+            task=(*r._task(goals, starts), ("tip", tip)),
+            learner=settings(),
+            from_dir=str(trained.out),
+            learn=False,
+            explore=False,
+            scenario=None if robot == "intact" else scenario,
+        )  # fmt: skip
+        for robot, tip in keys
+    ]
+    outs = run_specs(ctx, specs, "pose test")
+    rows, results = [], {}
+    for (robot, tip), out in zip(keys, outs, strict=True):
+        err, ang = out.final_errors, r.orientation_errors(topo, out, goals)
+        both = 100.0 * float(np.mean([e <= r.TOL and a <= r.TOL_DEG for e, a in zip(err, ang, strict=True)]))
+        pos = 100.0 * float(np.mean([e <= r.TOL for e in err]))
+        results[f"{robot} | {tip}"] = {"within_pct": both, "within_position_pct": pos, "mean": float(np.mean(err)),
+                                       "mean_angle_deg": float(np.mean(ang))}  # fmt: skip
+        rows.append([robot, tip, f"{both:.0f}", f"{pos:.0f}", f"{np.mean(err):.3f}", f"{np.mean(ang):.1f}"])
+    return rows, results, [trained, *outs]
