@@ -28,9 +28,9 @@ encoders differs from the one sensed (Task.tips, which the reward is measured on
 at the goal point moved by that difference, so that its computed tool point at the aim is the sensed one at the goal.
 For a pose only the position moves: the goal's orientation stays as it is. An encoder's offset turns the computed
 tool frame too, by a rotation about that joint's axis, so the sensed orientation differs from the computed one as
-well; but moving the goal's orientation by that rotation is right only if the rotation is about the base's axis
-(a1), and the swarm knows only the two frames, not which encoder reads wrong. On a sound robot the two agree to
-single precision: the run is the same to the bit as with the setting off.
+well; but moving the goal's orientation by that rotation is right only for a joint turning about the base's own axis
+(the iiwa's a1), and the swarm knows only the two frames, not which encoder reads wrong. On a sound robot the two
+agree to single precision: the run is the same to the bit as with the setting off.
 """
 
 from __future__ import annotations
