@@ -9,7 +9,6 @@ import dataclasses
 import math
 from pathlib import Path
 
-import numpy as np
 import pytest
 from conftest import ROOT
 from kinswarm.actors.run.runfile import load_run
@@ -19,6 +18,7 @@ from kinswarm.actors.tasks.base import StepView
 from kinswarm.actors.tasks.sensed import TIP_PRECISION, sensed_key
 from kinswarm.protocol.spec import SpecError
 from kinswarm.sim import kinematics
+from sensed_runs import same, watched
 
 OFFSET = math.radians(10.0)
 
@@ -39,34 +39,7 @@ def _run(tmp_path: Path, tip: str, scenario: Path | None = None, world_cls: type
     cfg = dataclasses.replace(cfg, out=str(tmp_path), scenario=str(scenario) if scenario else None)
     topo = cfg.topo()
     run = InProcessRun(cfg, topo, world=world_cls(topo) if world_cls else None)
-    aims: list[tuple[float, float]] = []
-    for st in run.agents.values():  # what each agent's task makes of the goal, step by step
-        own = st.task.aim
-
-        def aim(view: StepView, own=own) -> tuple[float, float]:
-            a = own(view)
-            aims.append((a[0] - view.goal[0], a[1] - view.goal[1]))
-            return a
-
-        st.task.aim = aim  # type: ignore[method-assign]
-    events: list = []
-    errors: list = []
-    try:
-        for epoch in range(3):
-            errors.append(run.epoch(epoch, lambda *e: events.append(e)).errors)
-        learned = [(run.learners[a].q.phi.copy(), run.learners[a].counts.copy()) for a in sorted(run.learners)]
-    finally:
-        run.close()
-    return [errors, aims, learned], events
-
-
-def _same(a: list, b: list) -> bool:
-    """The same errors and aims to the bit, and the same Q-values and counts in every agent."""
-    return (
-        a[0] == b[0]
-        and a[1] == b[1]
-        and all(np.array_equal(p, q) and np.array_equal(c, d) for (p, c), (q, d) in zip(a[2], b[2], strict=True))
-    )
+    return watched(run, 3)
 
 
 def test_the_mechanism_decides_the_same_whether_or_not_the_fault_was_announced(tmp_path: Path) -> None:
@@ -77,7 +50,7 @@ def test_the_mechanism_decides_the_same_whether_or_not_the_fault_was_announced(t
     announced, events = _run(tmp_path / "announced", "sensed", scenario, kinematics.ModelWorld)
     silent, none = _run(tmp_path / "silent", "sensed", None, OffsetA1)
     assert events and not none  # one run was told (an event recorded), the other not
-    assert _same(announced, silent)  # the same errors, aims and learning, to the bit
+    assert same(announced, silent)  # the same errors, aims and learning, to the bit
     moved = [math.hypot(*d) for d in announced[1]]
     # every agent aimed elsewhere than the goal at every step: the computed tip is off by 2 r sin 5° (r > 0.5 here)
     assert min(moved) > TIP_PRECISION
@@ -93,7 +66,7 @@ def test_on_a_sound_robot_the_run_is_the_same_to_the_bit_with_it_on_and_off(worl
     sensor's precision, so nothing changes."""
     on, _ = _run(tmp_path / "on", "sensed", None, world_cls)
     off, _ = _run(tmp_path / "off", "computed", None, world_cls)
-    assert _same(on, off)
+    assert same(on, off)
     assert not any(math.hypot(*d) for d in on[1])  # it never moved an aim
 
 

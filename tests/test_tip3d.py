@@ -9,7 +9,6 @@ import dataclasses
 import math
 from pathlib import Path
 
-import numpy as np
 import pytest
 from conftest import ROOT
 from kinswarm.actors.run.runfile import load_run
@@ -18,6 +17,7 @@ from kinswarm.actors.tasks import reach3d, sensed
 from kinswarm.actors.tasks.base import StepView
 from kinswarm.protocol.spec import SpecError
 from kinswarm.sim.world import World
+from sensed_runs import same, watched
 
 OFFSET = math.radians(10.0)
 POINT = "task.goal=[0.45, 0.3, 0.55]"
@@ -40,33 +40,7 @@ def _run(tmp_path: Path, tip: str, goal: str = POINT, scenario: Path | None = No
     cfg = dataclasses.replace(cfg, out=str(tmp_path), scenario=str(scenario) if scenario else None)
     topo = cfg.topo()
     run = InProcessRun(cfg, topo, world=OffsetA2(topo) if silent else None)
-    aims: list[tuple[float, ...]] = []
-    for st in run.agents.values():
-        own = st.task.aim
-
-        def aim(view: StepView, own=own) -> tuple[float, ...]:
-            a = own(view)
-            aims.append(tuple(x - g for x, g in zip(a, view.goal, strict=True)))
-            return a
-
-        st.task.aim = aim  # type: ignore[method-assign]
-    events: list = []
-    errors: list = []
-    try:
-        for epoch in range(2):
-            errors.append(run.epoch(epoch, lambda *e: events.append(e)).errors)
-        learned = [(run.learners[a].q.phi.copy(), run.learners[a].counts.copy()) for a in sorted(run.learners)]
-    finally:
-        run.close()
-    return [errors, aims, learned], events
-
-
-def _same(a: list, b: list) -> bool:
-    return (
-        a[0] == b[0]
-        and a[1] == b[1]
-        and all(np.array_equal(p, q) and np.array_equal(c, d) for (p, c), (q, d) in zip(a[2], b[2], strict=True))
-    )
+    return watched(run, 2)
 
 
 def test_the_mechanism_decides_the_same_whether_or_not_the_offset_was_announced(tmp_path: Path) -> None:
@@ -77,7 +51,7 @@ def test_the_mechanism_decides_the_same_whether_or_not_the_offset_was_announced(
     announced, events = _run(tmp_path / "announced", "sensed", scenario=scenario)
     silent, none = _run(tmp_path / "silent", "sensed", silent=True)
     assert events and not none  # one run was told (an event recorded), the other not
-    assert _same(announced, silent)
+    assert same(announced, silent)
     # every agent aimed elsewhere than the goal at every step: a2's +10° carries the tool ~ 2 r sin 5° (r ~ 0.7 m)
     assert min(math.hypot(*d) for d in announced[1]) > 10 * sensed.TIP_PRECISION
     off, _ = _run(tmp_path / "off", "computed", scenario=scenario)
@@ -89,7 +63,7 @@ def test_the_mechanism_decides_the_same_whether_or_not_the_offset_was_announced(
 def test_on_a_sound_arm_the_run_is_the_same_to_the_bit_with_it_on_and_off(goal: str, tmp_path: Path) -> None:
     on, _ = _run(tmp_path / "on", "sensed", goal)
     off, _ = _run(tmp_path / "off", "computed", goal)
-    assert _same(on, off)
+    assert same(on, off)
     assert not any(any(d) for d in on[1])  # it never moved an aim
 
 
