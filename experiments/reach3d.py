@@ -143,6 +143,25 @@ def _task(goals: list[list[float]], starts: list[list[float]]) -> tuple[tuple[st
     return (("goals", goals), ("starts", starts))
 
 
+def train_spec(
+    ctx: Context,
+    topo: Topology,
+    pose: bool,
+    seed: int,
+    steps: int,
+    file: Path = ROBOT,
+    name: str = "state",
+    learner: tuple = (),
+) -> Spec:
+    """A swarm's training run (the training set's goal-episodes, checkpointed for the frozen tests): `name` "state"
+    the swarm of the protocol, others a control trained alike with `learner` (default: settings())."""
+    t_goals, t_starts = training_set(topo, pose, *QUICK_TRAINING if ctx.quick else ())
+    return Spec(
+        f"r3d-{'pose' if pose else 'pt'}-train-{name}", seed=seed, epochs=len(t_goals), steps=steps, file=str(file),
+        task=_task(t_goals, t_starts), learner=learner or settings(), checkpoint=True,
+    )  # fmt: skip
+
+
 def orientation_errors(topo: Topology, out: RunOutcome, goals: list[list[float]]) -> list[float]:
     """The tool's angle (deg) to each pose goal at the episode's end (from the final joint angles)."""
     errs = []
@@ -234,19 +253,9 @@ def _protocol(
 ) -> tuple[list[list[Any]], dict[str, Any], list[RunOutcome]]:
     """Train (the swarm and the blind one), then test frozen on both sets beside the untrained swarm and the laws."""
     tag = "pose" if pose else "pt"
-    t_goals, t_starts = training_set(topo, pose, *QUICK_TRAINING if ctx.quick else ())
     path = str(file)
     train = {
-        (name, s): Spec(
-            f"r3d-{tag}-train-{name}",
-            seed=s,
-            epochs=len(t_goals),
-            steps=steps,
-            file=path,
-            task=_task(t_goals, t_starts),
-            learner=learner,
-            checkpoint=True,
-        )
+        (name, s): train_spec(ctx, topo, pose, s, steps, file, name, learner)
         for name, learner in (("state", settings()), ("blind", settings(**blind)))
         for s in seeds(ctx, pose, name == "blind")
     }
@@ -363,25 +372,8 @@ def _faulted(
     untrained swarm learning, the rule and the pseudo-inverse. `lost`: the scenario stops LOST's process; the swarms
     run in `process` placement (each run's stand-in checked in its events), the references with LOST locked."""
     goals, starts = sample(topo, SETS["A"], n_test, False)
-    t_goals, t_starts = training_set(topo, False, *QUICK_TRAINING if ctx.quick else ())
     file = str(ROBOT)
-    trained = run_specs(
-        ctx,
-        [
-            Spec(
-                "r3d-pt-train-state",
-                seed=s,
-                epochs=len(t_goals),
-                steps=steps,
-                file=file,
-                task=_task(t_goals, t_starts),
-                learner=settings(),
-                checkpoint=True,
-            )
-            for s in ctx.seed_list
-        ],
-        f"{tag} train",
-    )
+    trained = run_specs(ctx, [train_spec(ctx, topo, False, s, steps) for s in ctx.seed_list], f"{tag} train")
     common: dict[str, Any] = {"epochs": n_test, "steps": steps, "file": file, "task": _task(goals, starts)}
     ref = {**common, "scenario": str(LOCK) if lost else scenario}  # the rule's and pseudo-inverse's
     common.update(scenario=scenario, placement="process" if lost else "single")

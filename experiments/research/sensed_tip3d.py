@@ -44,21 +44,8 @@ def _offset(ctx: Context, joint: str = JOINT, degrees: float = DEGREES) -> str:
 def run(ctx: Context) -> dict[str, Any]:
     topo = load_robot(r.ROBOT)
     steps, n_test = (60, 5) if ctx.quick else (r.STEPS, TEST)
-    t_goals, t_starts = r.training_set(topo, False, *r.QUICK_TRAINING if ctx.quick else ())
     file = str(r.ROBOT)
-    train = [
-        Spec(
-            "r3d-pt-train-state",
-            seed=s,
-            epochs=len(t_goals),
-            steps=steps,
-            file=file,
-            task=r._task(t_goals, t_starts),
-            learner=settings(),
-            checkpoint=True,
-        )  # fmt: skip
-        for s in ctx.seed_list
-    ]
+    train = [r.train_spec(ctx, topo, False, s, steps) for s in ctx.seed_list]
     trained = dict(zip(ctx.seed_list, run_specs(ctx, train, "train"), strict=True))
     goals, starts = r.sample(topo, r.SETS["A"], n_test, False)
     scenario = _offset(ctx)
@@ -83,7 +70,7 @@ def run(ctx: Context) -> dict[str, Any]:
     pose_rows, pose_results, pose_runs = _poses(ctx, steps, n_test, scenario)
     rep = Report(ctx, "The sensed tip on the iiwa (research)", "beyond the paper (3D, adaptation)")
     rep.text(
-        f"Research, not product. The trained swarm of `kinswarm experiment reach3d` (points, {len(t_goals)} "
+        f"Research, not product. The trained swarm of `kinswarm experiment reach3d` (points, {train[0].epochs} "
         f"goal-episodes of {steps} steps) on the first {n_test} goals of test set A from their start poses, "
         f"frozen (learning and exploration off) and still learning, intact and with {JOINT}'s encoder reading "
         f"+{DEGREES:g}° from the first step; `[task] tip` computed or sensed. Within {r.TOL * 100:.0f} cm.",
@@ -132,24 +119,8 @@ def _poses(ctx: Context, steps: int, n_test: int, scenario: str) -> tuple[list[l
     """pose3d's trained swarm (seed 0), frozen, on its set A's first poses: intact and offset, tip computed, sensed."""
     topo = load_robot(r.ROBOT)
     file = str(pose3d.FILE)
-    t_goals, t_starts = r.training_set(topo, True, *r.QUICK_TRAINING if ctx.quick else ())
     s = ctx.seed_list[0]
-    (trained,) = run_specs(
-        ctx,
-        [
-            Spec(
-                "r3d-pose-train-state",
-                seed=s,
-                epochs=len(t_goals),
-                steps=steps,
-                file=file,
-                task=r._task(t_goals, t_starts),
-                learner=settings(),
-                checkpoint=True,
-            )  # fmt: skip
-        ],
-        "pose train",
-    )
+    (trained,) = run_specs(ctx, [r.train_spec(ctx, topo, True, s, steps, pose3d.FILE)], "pose train")
     goals, starts = r.sample(topo, r.SETS["A"] + 7, n_test, True)
     keys = [(robot, tip) for robot in ("intact", f"{JOINT} reads {DEGREES:+g}°") for tip in TIPS]
     specs = [
