@@ -1,6 +1,7 @@
 """The actors and everything that runs them, by what each serves:
 
-agent/       the agent actor: one joint's share of the step, standing in for lost children, its checkpoints
+step/        the step as a library (the passes, the geometry, what a learner decides from): no Zenoh, no asyncio
+agent/       the agent actor: the step library on messages, standing in for lost children, its checkpoints
 learning/    the learners (paper §4) and what an agent observes; imports only numpy and numba
 tasks/       one module per task: what the generic agent asks of a task
 simulator/   the simulator's actors: the robot's clock and live faults, a fleet's, the baseline's controller

@@ -4,7 +4,7 @@
 
 Each example: gym_env (MultiDiscrete) and parallel_env, 500-step episodes (the resets inside the timed loop, as a
 training loop has them), this thread's CPU time, so that a shared machine's other work does not count. What it
-costs: the step library's passes (actors/agent/passes.py) over every agent, and the robot's PyBullet move.
+costs: the step library's passes (actors/step/passes.py) over every agent, and the robot's PyBullet move.
 """
 
 from __future__ import annotations

@@ -52,7 +52,7 @@ CHAIN4 = ROOT / "examples" / "chain4.toml"
 
 
 def floor_rate(epochs: int, steps: int, seed: int) -> float:
-    """The run's step as the step library computes it (actors/agent/passes.py: the passes, the task's hooks, each
+    """The run's step as the step library computes it (actors/step/passes.py: the passes, the task's hooks, each
     agent's state, reward and choice; the learners' decide and observe), in the inprocess placement's plain loop, on the
     planar robot in closed form (sim/kinematics.ModelWorld) instead of PyBullet, nothing recorded: what the step costs
     in computation alone."""

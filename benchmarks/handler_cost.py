@@ -32,7 +32,7 @@ from pathlib import Path
 from typing import Any
 
 import zenoh
-from kinswarm.actors.agent import Agent
+from kinswarm.actors.agent.actor import Agent
 from kinswarm.actors.run.runfile import load_run
 from kinswarm.actors.runtime import NetSpec, Node, open_session
 from kinswarm.protocol import codec
@@ -173,10 +173,10 @@ async def measure(
 PARTS = (
     ("decode", "kinswarm.actors.runtime.node", "Node", "decode"),
     ("send (encode, sign, put)", "kinswarm.actors.runtime.node", "Node", "send"),
-    ("begin (frame, task head)", "kinswarm.actors.agent.passes", "AgentStep", "begin"),
-    ("finish (tips, view)", "kinswarm.actors.agent.passes", "AgentStep", "finish"),
-    ("up (task aggregate)", "kinswarm.actors.agent.passes", "AgentStep", "up"),
-    ("decide_from (S_i, reward)", "kinswarm.actors.agent.passes", "AgentStep", "decide_from"),
+    ("begin (frame, task head)", "kinswarm.actors.step.passes", "AgentStep", "begin"),
+    ("finish (tips, view)", "kinswarm.actors.step.passes", "AgentStep", "finish"),
+    ("up (task aggregate)", "kinswarm.actors.step.passes", "AgentStep", "up"),
+    ("decide_from (S_i, reward)", "kinswarm.actors.step.passes", "AgentStep", "decide_from"),
     ("learner.decide", "kinswarm.actors.learning.learner", "Learner", "decide"),
     ("learner.observe", "kinswarm.actors.learning.learner", "Learner", "observe"),
 )

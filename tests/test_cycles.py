@@ -96,5 +96,5 @@ def test_the_check_sees_a_cycle() -> None:
     """A check that finds nothing could not fail: a loop of three and a lazy import are seen."""
     assert cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
     edges = graph()
-    assert "kinswarm.actors.agent.passes" in edges["kinswarm.actors.agent.actor"]
+    assert "kinswarm.actors.step.passes" in edges["kinswarm.actors.agent.actor"]
     assert "kinswarm.sim.robot" in edges["kinswarm.actors.supervisor.inprocess"]

@@ -11,7 +11,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 from conftest import EXAMPLES, LOCKSTEP_ARGS, free_port, run_config, swarm_pids
-from kinswarm.actors.agent.actor import agent_seed
 from kinswarm.actors.cli.commands import main as cli_main
 from kinswarm.actors.learning import jasm
 from kinswarm.actors.learning.fleet import EPISODE, LearnerLane
@@ -22,6 +21,7 @@ from kinswarm.actors.learning.learner import Learner
 from kinswarm.actors.learning.settings import LearnerSettings
 from kinswarm.actors.learning.tabular import TabularLearner
 from kinswarm.actors.run.runfile import learner_settings, task_of
+from kinswarm.actors.step.seed import agent_seed
 from test_faults import Run
 
 pytestmark = pytest.mark.timeout(240)

@@ -9,9 +9,9 @@ import random
 import numpy as np
 import pytest
 from conftest import IIWA, PANDA, XARM6, urdf_robot
-from kinswarm.actors.agent.geometry import Spatial
 from kinswarm.actors.learning.state import goal_along_motion, plane_state
 from kinswarm.actors.run.runfile import load_run, task_of
+from kinswarm.actors.step.geometry import Spatial
 from kinswarm.protocol import codec, frames
 from kinswarm.protocol.messages import Down, EpochStart, Up
 from kinswarm.protocol.robots import parse_robot

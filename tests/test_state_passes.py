@@ -1,4 +1,4 @@
-"""The top-down/bottom-up state passes of the step library (actors/agent/passes.py, what every placement computes),
+"""The top-down/bottom-up state passes of the step library (actors/step/passes.py, what every placement computes),
 against closed-form planar kinematics."""
 
 import math
@@ -6,8 +6,8 @@ import math
 import numpy as np
 import pytest
 from conftest import run_config
-from kinswarm.actors.agent.passes import AgentStep, robot_passes
 from kinswarm.actors.run.runfile import learner_settings, task_of
+from kinswarm.actors.step.passes import AgentStep, robot_passes
 from kinswarm.protocol.messages import Task
 from kinswarm.sim import kinematics
 
@@ -21,7 +21,7 @@ def passes(cfg, angles, goal):
     head = Task(epoch=0, step=0, goal=goal, tips=kinematics.tips(topo, angles), sense={})
     begun, views = robot_passes(agents, topo.order, head, angles, {}, 0, 0, {})
     tips = {a: views[a].tip for a in topo.order}  # the end effector below each agent, as the up pass brought it
-    states = {a: agents[a].decide_from(begun[a], views[a])[0][:6] for a in topo.order}
+    states = {a: agents[a].decide_from(begun[a], views[a]).state[:6] for a in topo.order}
     return {a: b.frame for a, b in begun.items()}, tips, states
 
 

@@ -22,7 +22,6 @@ this file names none.
 from __future__ import annotations
 
 import asyncio
-import zlib
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -30,28 +29,24 @@ from kinswarm.actors.learning.kinds import JointLearner
 from kinswarm.actors.run.config import RunConfig
 from kinswarm.actors.run.runfile import kind_of, learner_settings, task_of
 from kinswarm.actors.runtime import Node
+from kinswarm.actors.step.passes import AgentStep, Begun, visible_actions
+from kinswarm.actors.step.seed import agent_seed
+from kinswarm.actors.step.trace import StepTrace
 from kinswarm.actors.tasks.base import StepView
 from kinswarm.protocol.keys import agent_keys
 from kinswarm.protocol.messages import Bye, Checkpoint, Cmd, Down, Fault, Obs, Readings, Stop, Task, Up
 from kinswarm.protocol.topology import Topology
 
 from .memory import Memory
-from .passes import AgentStep, Begun, visible_actions
 from .standin import StandIn, WakeGuard
-from .trace import StepTrace
 
 Key = tuple[int, int]  # (epoch, step)
-
-
-def agent_seed(seed: int, agent: str) -> list[int]:
-    """Per-agent RNG seed: the same in every placement, independent of spawn order."""
-    return [seed, zlib.crc32(agent.encode())]
 
 
 @dataclass
 class _Step:
     key: Key
-    begun: Begun  # frame, link end, reading, goal, r(t-1), context (passes.py)
+    begun: Begun  # frame, link end, reading, goal, r(t-1), context (actors/step/passes.py)
     waiting: frozenset[str]  # the live agents whose `up` this step needs: children, or adopted ones' children
     tips: dict[str, tuple[float, ...]]  # end effectors of adopted leaves, computed here
     ups: dict[str, Up] = field(default_factory=dict)  # by sender
@@ -312,11 +307,11 @@ class Agent:
         assert self.learner is not None
         epoch, step = view.epoch, view.step
         self._observe(cur)
-        s, reward, avoid, scale = self.passes.decide_from(cur.begun, view)
-        action = self.learner.decide(s, reward, learn=self.cfg.learn, explore=self.cfg.explore, avoid=avoid)
+        d = self.passes.decide_from(cur.begun, view)
+        action = self.learner.decide(d.state, d.reward, learn=self.cfg.learn, explore=self.cfg.explore, avoid=d.avoid)
         self.decided = (cur.key, action)
         if self.trace is not None:
-            self.trace.add(epoch, step, s, action, self.learner)
+            self.trace.add(epoch, step, d.state, action, self.learner)
             if step == self.cfg.steps - 1:
                 self.node.send(self.keys.metrics("agent"), self.trace.take())
         if self.visible:
@@ -329,7 +324,7 @@ class Agent:
             self.learner.observe([], learn=self.cfg.learn)
         if step == self.cfg.steps - 1 and not self.is_root:  # the closing `up`, before the epoch can end
             self.node.send(self._up_key, Up(epoch=epoch, step=self.cfg.steps, tips=tips, action=action))
-        self.node.send(self._cmd_key, Cmd(epoch=epoch, step=step, delta=self.passes.delta(action, scale)))
+        self.node.send(self._cmd_key, Cmd(epoch=epoch, step=step, delta=self.passes.delta(action, d.scale)))
         self._finished(cur)
 
     def _finished(self, cur: _Step) -> None:

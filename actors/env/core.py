@@ -13,18 +13,18 @@ from __future__ import annotations
 import math
 import zlib
 from collections.abc import Iterable, Mapping, Sequence
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import tomli_w
-from kinswarm.actors.agent.passes import AgentStep, Begun, robot_passes
 from kinswarm.actors.learning.kinds import JointLearner, LearnerKind
 from kinswarm.actors.learning.settings import LearnerSettings
 from kinswarm.actors.run.config import RunConfig
 from kinswarm.actors.run.runfile import kind_of, learner_settings, load_run, task_of
-from kinswarm.actors.supervisor.epochs import epoch_start
+from kinswarm.actors.step.epoch import epoch_start
+from kinswarm.actors.step.passes import AgentStep, Begun, Decision, robot_passes
+from kinswarm.actors.step.seed import agent_seed
 from kinswarm.protocol.faults import JOINT_FAULTS, check_fault
 from kinswarm.protocol.messages import Fault
 from kinswarm.protocol.scenario import load_scenario
@@ -57,16 +57,6 @@ def load_config(run_file: str | Path, overrides: Mapping[str, Any], sets: Iterab
     if not Path(run_file).is_file():
         raise ValueError(f"{run_file}: no such run file")
     return load_run(run_file, given)
-
-
-@dataclass
-class Decision:
-    """What an agent with a joint decides from at a step, as its learner would get it."""
-
-    state: np.ndarray  # S_i, as built (not clipped)
-    reward: float | None  # r(t-1) with the task's local terms; None at an episode's first step
-    avoid: list[int]  # the moves its task leaves out of this step's choice
-    scale: float  # the factor on its action size
 
 
 class Stepper:
@@ -118,8 +108,6 @@ class Stepper:
 
     def learners(self) -> dict[str, JointLearner]:
         """The run's learners for each joint, built as the inprocess placement builds them (the same seeds)."""
-        from kinswarm.actors.agent.actor import agent_seed
-
         return {
             a: self.kind.build(
                 self.settings[a],
@@ -236,8 +224,7 @@ class Stepper:
         begun, views = robot_passes(agents, self.order, head, q, sense, epoch, t, self.last)
         self.decisions = {}
         for a in self.deciders:
-            s, reward, avoid, scale = agents[a].decide_from(begun[a], views[a])
-            self.decisions[a] = Decision(s, reward, list(avoid), scale)
+            self.decisions[a] = agents[a].decide_from(begun[a], views[a])
         self.begun = begun
         root = begun[self.topo.root]
         self.root_reward = root.reward

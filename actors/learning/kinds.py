@@ -36,7 +36,7 @@ class JointLearner(Protocol):
     learner with no model of its children ignores them. start_epoch() and resync() drop the pending transition (no
     TD update across a reset or a gap). state_dict() / load_state_dict(): the learned state as named numpy arrays,
     what a checkpoint holds. Diagnostics are optional: a learner that has `E` (expected values, Eq. 9) and `P` (the
-    beliefs about its children, Eq. 7) has them recorded (actors/agent/trace.py)."""
+    beliefs about its children, Eq. 7) has them recorded (actors/step/trace.py)."""
 
     n_actions: int
 

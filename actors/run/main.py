@@ -50,7 +50,7 @@ class Actor(Protocol):
 def build_actor(role: str, ident: str, cfg: RunConfig, topo: Topology, node: Node, restore: bool = False) -> Actor:
     """`restore`: a restart -- resume from this run's newest good checkpoint instead of the start."""
     if role == "agent":
-        from kinswarm.actors.agent import Agent
+        from kinswarm.actors.agent.actor import Agent
         from kinswarm.actors.agent.fleet import FleetAgent
 
         agent = FleetAgent(cfg, topo, ident, node) if cfg.fleet > 1 else Agent(cfg, topo, ident, node)

@@ -1,6 +1,6 @@
 """The `inprocess` placement: the whole run as one plain loop over the step library — no actors, no messages, no
 Zenoh. Each step the robot (sim/robot.py) gives the encoder readings and the root's task observation, the agents'
-top-down and bottom-up passes run in the topology's order (actors/agent/passes.py), every agent with a joint learns
+top-down and bottom-up passes run in the topology's order (actors/step/passes.py), every agent with a joint learns
 and decides, and the robot moves. It computes what the other placements compute, in the same order per agent, so a
 run gives the same `final_error` lists, metrics and records as they do for the same seed; it is the fastest way to
 run an experiment that needs no messages.
@@ -18,20 +18,20 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from kinswarm.actors.agent.actor import agent_seed
-from kinswarm.actors.agent.memory import checkpoint_meta, learned_state, restore_learner
-from kinswarm.actors.agent.passes import AgentStep, robot_passes, visible_actions
-from kinswarm.actors.agent.trace import StepTrace
 from kinswarm.actors.learning.kinds import JointLearner
 from kinswarm.actors.run.checkpoint import save_checkpoint
 from kinswarm.actors.run.config import RunConfig
 from kinswarm.actors.run.runfile import kind_of, learner_settings, task_of
+from kinswarm.actors.step.epoch import checkpoint_due, epoch_start
+from kinswarm.actors.step.learned import checkpoint_meta, learned_state, restore_learner
+from kinswarm.actors.step.passes import AgentStep, robot_passes, visible_actions
+from kinswarm.actors.step.seed import agent_seed
+from kinswarm.actors.step.trace import StepTrace
 from kinswarm.protocol.messages import EpochDone
 from kinswarm.protocol.scenario import load_scenario
 from kinswarm.protocol.topology import Topology
 from kinswarm.sim.robot import Robot
 
-from .epochs import checkpoint_due, epoch_start
 from .recorder import Recorder
 from .result import RunResult
 
@@ -97,13 +97,13 @@ class InProcessRun:
                 st, learner = agents[a], learners[a]
                 if st.visible and t > 0:
                     self._observe(learner, visible_actions(st.visible, last), t)
-                s, reward, avoid, scale = st.decide_from(begun[a], views[a])
-                action = learner.decide(s, reward, learn=learn, explore=explore, avoid=avoid)
+                d = st.decide_from(begun[a], views[a])
+                action = learner.decide(d.state, d.reward, learn=learn, explore=explore, avoid=d.avoid)
                 if a in self.traces:
-                    self.traces[a].add(epoch, t, s, action, learner)
+                    self.traces[a].add(epoch, t, d.state, action, learner)
                 if not st.visible:
                     learner.observe([], learn=learn)
-                cmds[a] = robot.clip(st.delta(action, scale))
+                cmds[a] = robot.clip(st.delta(action, d.scale))
                 now[a] = action
             last = now
             for event in robot.move(cmds):

@@ -1,16 +1,17 @@
 """One agent's share of a step, as plain functions of what it holds: no messages in flight, no Zenoh, no asyncio.
 
-The agent actor (actor.py) calls these as its messages arrive; the in-process placement (actors/supervisor/
-inprocess.py), the benchmarks' in-process floor and the research loops call them in a plain loop. So the step is
-written once:
+The agent actor (actors/agent/actor.py) calls these as its messages arrive; the in-process placement
+(actors/supervisor/inprocess.py), the env faces (actors/env/core.py), the benchmarks' in-process floor and the research
+loops call them in a plain loop. So the step is written once:
 
   begin     the top-down pass: the head of the step (the task observation at the root, which its task turns into the
             goal and the reward r(t-1); a parent's `Down` elsewhere) and the joint's reading give the joint frame, the
             link's end (the children's base), and what each child is sent (goal, r(t-1), the task's context)
   finish    the bottom-up pass: the subtree's tips (a leaf's own, else its children's), the end effector below the agent
             (their centroid), and the `StepView` its task sees; `up` is what the parent gets
-  decide    what the learner decides from: S_i = <q_i, theta_i, d_i, g_i> (geometry.py) plus the task's and the
-            learner's extra variables, the reward with the task's local terms, the moves to leave out, the action scale
+  decide    what the learner decides from (a `Decision`): S_i = <q_i, theta_i, d_i, g_i> (geometry.py) plus the task's
+            and the learner's extra variables, the reward with the task's local terms, the moves to leave out, the
+            action scale
   delta     the chosen action (0, 1, 2: decrease, keep, increase) as the joint's increment
 """
 
@@ -44,6 +45,16 @@ class Begun:
     context: Readings  # what its children inherit unless `children` says otherwise
     children: Mapping[str, tuple[Coords, float | None, Readings]]
     sense: Readings
+
+
+@dataclass(slots=True)
+class Decision:
+    """What an agent with a joint decides from at a step, as its learner gets it."""
+
+    state: np.ndarray  # S_i, as built (not clipped)
+    reward: float | None  # r(t-1) with the task's local terms; None at an epoch's first step
+    avoid: list[int]  # the moves its task leaves out of this step's choice
+    scale: float  # the factor on its action size
 
 
 class AgentStep:
@@ -121,8 +132,8 @@ class AgentStep:
         )
 
     # -- what the learner decides from -------------------------------------------------------------
-    def decide_from(self, b: Begun, view: StepView) -> tuple[np.ndarray, float | None, list[int], float]:
-        """(S_i, the reward, the moves to leave out, the action's scale)."""
+    def decide_from(self, b: Begun, view: StepView) -> Decision:
+        """S_i, the reward, the moves to leave out and the action's scale."""
         tip, goal = view.tip, self.task.aim(view)  # the goal as its task has the agent aim (the task's, by default)
         s = self.geom.state(self.spec, b.frame, b.q, tip, goal, self.unsigned_g3, self.state_kind)
         values = self.task.state(view)
@@ -131,7 +142,7 @@ class AgentStep:
             values += [local.get(n, 0.0) for n in self.extra_names]
         if values:
             s = np.concatenate([s, values])
-        return s, self.task.reward(view, b.reward), self.task.avoid(view), self.task.scale(view)
+        return Decision(s, self.task.reward(view, b.reward), self.task.avoid(view), self.task.scale(view))
 
     def delta(self, action: int, scale: float) -> float:
         """The joint's increment for `action` (radians; metres for a prismatic joint)."""
