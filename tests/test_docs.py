@@ -165,3 +165,56 @@ def test_the_link_check_sees_a_broken_link_and_a_missing_heading(tmp_path: Path,
         "README.md:2: (docs/there.md#nowhere) names no heading of docs/there.md",
         "README.md:2: (../elsewhere.md) leaves the repository",
     ]
+
+
+MAP_FOLDERS = ("protocol", "sim", "actors", "experiments", "benchmarks")
+
+
+def _map_entries(text: str) -> dict[str, str]:
+    """docs/architecture.md's map (the tree under "Where everything lives"): each folder's entry (its lines up to the
+    next folder at its depth or above), by the folder's path."""
+    section = text.split("## Where everything lives", 1)[1].split("\n## ", 1)[0]
+    tree = FENCE.search(section)
+    assert tree is not None, "the map's tree is gone"
+    entries: dict[str, list[str]] = {}
+    stack: list[tuple[int, str]] = []  # (indent, path) of the folders the current line is inside
+    for line in tree.group(0).splitlines()[1:-1]:
+        indent = len(line) - len(line.lstrip())
+        m = re.match(r"([\w.]+)/(?:\s|$)", line.lstrip())
+        if m:
+            while stack and stack[-1][0] >= indent:
+                stack.pop()
+            path = "/".join([*(p for _, p in stack[-1:]), m.group(1)])
+            stack.append((indent, path))
+            entries[path] = []
+        if stack:
+            entries[stack[-1][1]].append(line)
+    return {path: "\n".join(lines) for path, lines in entries.items()}
+
+
+def _unnamed(text: str) -> list[str]:
+    """The modules of the code that the map does not name in their folder's entry (or, for a folder with no entry of
+    its own, in the nearest enclosing one's)."""
+    entries = _map_entries(text)
+    out = []
+    for top in MAP_FOLDERS:
+        for path in _walk(ROOT / top, (".py",)):
+            if path.name == "__init__.py":
+                continue  # the folder itself
+            folder = path.parent.relative_to(ROOT).as_posix()
+            while folder not in entries and "/" in folder:
+                folder = folder.rsplit("/", 1)[0]
+            entry = entries.get(folder, "")
+            if not re.search(rf"(?<![\w]){re.escape(path.stem)}(?![\w])", entry):
+                out.append(str(path.relative_to(ROOT)))
+    return out
+
+
+def test_the_architecture_map_names_every_module() -> None:
+    assert _unnamed((ROOT / "docs" / "architecture.md").read_text(encoding="utf-8")) == []
+
+
+def test_the_map_check_sees_a_module_left_out() -> None:
+    text = (ROOT / "docs" / "architecture.md").read_text(encoding="utf-8")
+    assert "actors/step/passes.py" in _unnamed(text.replace("step/          the step library", "stepx/ the step"))
+    assert "protocol/codec.py" in _unnamed(text.replace("  codec ", "  cadec "))
