@@ -1,10 +1,16 @@
 """No import cycle between the package's modules: a module that needs another never needs it back, directly or round
 a loop. Every import counts, at module level or inside a function (a lazy import is still a dependency); only an
-import for type checking (under `if TYPE_CHECKING:`) does not."""
+import for type checking (under `if TYPE_CHECKING:`) does not. A string registry (`importlib.import_module` of a name
+held in a table: the experiments by name, the learner kinds, the tasks, the scenes) counts too: each module that
+imports by name has its names declared below, read from the registry itself, and a module that imports by name
+without being declared here fails the check."""
 
 from __future__ import annotations
 
 import ast
+import importlib
+import pkgutil
+from collections.abc import Callable
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -27,8 +33,51 @@ def _typing_only(tree: ast.AST) -> set[int]:
     return out
 
 
+def _package_modules(package: str) -> list[str]:
+    """Every module of one of our packages, found as the package finds them (pkgutil over its path)."""
+    path = importlib.import_module(package).__path__
+    return [f"{package}.{m.name}" for m in pkgutil.iter_modules(path)]
+
+
+def _experiments() -> list[str]:
+    from kinswarm.experiments import BY_NAME, EXPERIMENTS
+
+    return [f"kinswarm.experiments.{n}" for n in (*EXPERIMENTS, *BY_NAME)]
+
+
+def _learner_kinds() -> list[str]:
+    from kinswarm.actors.learning.kinds import KINDS
+
+    return [k.module if "." in k.module else f"kinswarm.actors.learning.{k.module}" for k in KINDS.values()]
+
+
+def _compiled() -> list[str]:
+    from kinswarm.actors.learning import _COMPILED
+
+    return [f"kinswarm.actors.learning.{m}" for m in _COMPILED.values()]
+
+
+#: the modules that import by name, and the names they may import (each read from its registry)
+REGISTRIES: dict[str, Callable[[], list[str]]] = {
+    "kinswarm.experiments": _experiments,
+    "kinswarm.experiments.research.__main__": lambda: _package_modules("kinswarm.experiments.research"),
+    "kinswarm.actors.learning": _compiled,
+    "kinswarm.actors.learning.kinds": _learner_kinds,
+    "kinswarm.actors.tasks": lambda: _package_modules("kinswarm.actors.tasks"),
+    "kinswarm.sim.scenes": lambda: _package_modules("kinswarm.sim.scenes"),
+}
+
+
+def _imports_by_name(tree: ast.AST) -> bool:
+    """Whether a module calls `import_module` (or `__import__`): an import the statements do not show."""
+    return any(
+        isinstance(n, ast.Call) and ast.unparse(n.func).rsplit(".", 1)[-1] in ("import_module", "__import__")
+        for n in ast.walk(tree)
+    )
+
+
 def graph() -> dict[str, set[str]]:
-    """Every module of the package and the modules of ours it imports."""
+    """Every module of the package and the modules of ours it imports, by statement or by a registry's name."""
     files = {_module(p): p for pkg in PACKAGES for p in sorted((ROOT / pkg).rglob("*.py"))}
     edges: dict[str, set[str]] = {m: set() for m in files}
     for mod, path in files.items():
@@ -50,6 +99,11 @@ def graph() -> dict[str, set[str]]:
             else:
                 continue
             edges[mod] |= {n for n in names if n in files and n != mod}
+        if _imports_by_name(tree):
+            assert mod in REGISTRIES, f"{mod} imports by name: declare its registry in tests/test_cycles.py"
+            named = REGISTRIES[mod]()
+            assert named and all(n in files for n in named), (mod, [n for n in named if n not in files])
+            edges[mod] |= {n for n in named if n != mod}
     return edges
 
 
@@ -98,3 +152,13 @@ def test_the_check_sees_a_cycle() -> None:
     edges = graph()
     assert "kinswarm.actors.step.passes" in edges["kinswarm.actors.agent.actor"]
     assert "kinswarm.sim.robot" in edges["kinswarm.actors.supervisor.inprocess"]
+    # and a registry's names: the CLI reaches each experiment through `kinswarm.experiments`' table of names
+    assert "kinswarm.experiments.peers" in edges["kinswarm.experiments"]
+    assert "kinswarm.actors.policies.onnx" in edges["kinswarm.actors.learning.kinds"]
+    assert "kinswarm.sim.scenes.walls" in edges["kinswarm.sim.scenes"]
+
+
+def test_the_check_sees_an_import_by_name() -> None:
+    assert _imports_by_name(ast.parse("import importlib\nm = importlib.import_module(f'pkg.{name}')"))
+    assert _imports_by_name(ast.parse("from importlib import import_module\ndef f(n):\n    return import_module(n)"))
+    assert not _imports_by_name(ast.parse("import importlib\nimport pkg.mod"))

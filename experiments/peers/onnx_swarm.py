@@ -12,8 +12,7 @@ angle; so every epoch after the landing one is the env's episode with a2 locked 
 
 from __future__ import annotations
 
-import contextlib
-import io
+import asyncio
 import json
 import subprocess
 import sys
@@ -21,11 +20,15 @@ import time
 import tomllib
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from kinswarm.actors.env import parallel_env
 from kinswarm.actors.learning.settings import OBSERVATION_FIELDS
+from kinswarm.env import parallel_env
+
+if TYPE_CHECKING:
+    from kinswarm.actors.run.config import RunConfig
+    from kinswarm.protocol.messages import Fault, FaultReply
 
 ROOT = Path(__file__).resolve().parents[2]
 RECIPE = ROOT / "examples" / "reach-generalise.toml"  # the observation and reward the peers were trained on
@@ -99,15 +102,28 @@ def _cli(*args: str) -> list[str]:
     return [sys.executable, "-m", "kinswarm.actors.cli", *args]
 
 
-def _fault(run_dir: Path, *words: str) -> dict[str, Any]:
-    """`kinswarm fault RUN-DIR WORDS...`, the CLI's own code, in this process (its imports already paid for: a new
-    interpreter would cost seconds of a loaded machine, and a short run may end before the fault is sent)."""
-    from kinswarm.actors.cli.commands import main
+def _fault(run_dir: Path, kind: str, *targets: str) -> dict[str, Any]:
+    """`kinswarm fault RUN-DIR KIND TARGETS...` as the CLI sends it, through its fault client (actors/cli/control.py),
+    in this process: its imports already paid for (a new interpreter would cost seconds of a loaded machine, and a
+    short run may end before the fault is sent). Not through the CLI's `main`: the CLI reaches this module by the
+    experiments' table of names, and a call back into it would close that loop (tests/test_cycles.py)."""
+    from kinswarm.actors.cli.control import Client, ControlError, make_fault, run_config_at, tool_net
+    from kinswarm.protocol.faults import describe
 
-    said = io.StringIO()
-    with contextlib.redirect_stdout(said), contextlib.redirect_stderr(said):
-        code = main(["fault", str(run_dir), *words])
-    return {"returncode": code, "said": said.getvalue().strip()}
+    async def send(cfg: RunConfig, f: Fault) -> FaultReply:
+        async with Client(cfg, tool_net(run_dir, cfg, None)) as c:
+            return await c.fault(f)
+
+    try:
+        cfg = run_config_at(run_dir)
+        f = make_fault(kind, list(targets))
+        reply = asyncio.run(send(cfg, f))
+    except (ControlError, ValueError) as e:  # what `kinswarm fault` says in one line, exit 2
+        return {"returncode": 2, "said": f"kinswarm: {e}"}
+    if reply.error:
+        return {"returncode": 2, "said": f"kinswarm: fault refused: {reply.error}"}
+    said = f"{cfg.run_id}: {describe(f)}: applied" + (f" ({reply.detail})" if reply.detail else "")
+    return {"returncode": 0, "said": said}
 
 
 def _rows(run_dir: Path) -> list[dict[str, Any]]:
