@@ -104,17 +104,14 @@ async def measure(
         _time_parts(parts, now)
 
     def deliver(key: str, payload: bytes, epoch: int) -> None:
-        below = key[len(keys.root) + 1 :]
-        if below.startswith("sim/cmd/"):
+        step = keys.parse_step(key)
+        assert step is not None, key
+        if step.kind == "cmd":
             m = codec.decode(payload, Cmd, keys.run, cfg.key)
-            q[below[8:]] += m.delta
+            q[step.agent] += m.delta
             return
-        if below.startswith("sim/obs/"):
-            agent, kind = below[8:], "obs"
-        elif below == "sim/task":
-            agent, kind = root, "task"
-        else:
-            _, agent, kind = below.split("/")
+        kind = step.kind
+        agent = root if kind == "task" else step.agent  # the task is the root's; obs, down, up name their addressee
         name = now[0] = f"{agent}/{kind}" if epoch > 0 else ""
         name = name or f"{agent}/{kind}"
         on = prof is not None and name == profile and epoch > 0

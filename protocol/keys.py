@@ -12,17 +12,71 @@ alive/<role>/<id>                  liveliness tokens, declared once an actor is 
 ```
 
 `a/<x>/up` is what agent x *receives* from its children; `a/<x>/down` what x receives from its parent.
+
+The step's keys are declared once (`STEP`: each kind's shape and who publishes it): the keys an actor sends on and
+listens to are made from it, a received key is parsed by it (`Keys.parse_step`, never sliced), and a deploy plan's
+access control (actors/deploy/plan.py) denies the agents and the sim from it (`agent_denied`, `sim_denied`).
 """
 
 from __future__ import annotations
 
 import re
 from dataclasses import dataclass
+from functools import lru_cache
+from typing import NamedTuple
 
 from .topology import Topology
 
 PREFIX = "ks"
 _CHUNK = re.compile(r"^[A-Za-z0-9_-]{1,64}$")
+
+AGENT, SIM = "agent", "sim"  # who publishes a step key: an agent, or the robot's simulator
+#: the step's keys below a run's root, by kind: the shape (`{}` where the agent's id goes) and who publishes it
+STEP: dict[str, tuple[str, str]] = {
+    "down": ("a/{}/down", AGENT),  # parent -> child, addressed by the child
+    "up": ("a/{}/up", AGENT),  # child -> parent, addressed by the parent
+    "cmd": ("sim/cmd/{}", AGENT),  # agent -> the robot: the agent's joint
+    "obs": ("sim/obs/{}", SIM),  # the robot -> agent: the agent's joint
+    "task": ("sim/task", SIM),  # the robot -> root
+}
+
+
+class StepKey(NamedTuple):
+    """A step key, parsed: its kind (a key of `STEP`) and the agent it names ("" for the task)."""
+
+    kind: str
+    agent: str
+
+
+def step_key(kind: str, agent: str = "") -> str:
+    """A step key below the run's root: `step_key("down", "a2")` is `a/a2/down`."""
+    return STEP[kind][0].format(agent)
+
+
+def _family(kind: str) -> str:
+    """Every key of a kind whoever it names, as a key expression below the root: the shape up to the agent's id, then
+    `**` (`a/**`, `sim/cmd/**`); a kind that names no agent is its one key."""
+    head, named, _ = STEP[kind][0].partition("{}")
+    return f"{head}**" if named else head
+
+
+# (kind, the shape's text before the agent's id, after it; None for a kind that names no agent)
+_SHAPES = tuple(
+    (kind, *shape.split("{}")) if "{}" in shape else (kind, shape, None) for kind, (shape, _) in STEP.items()
+)
+
+
+@lru_cache(maxsize=1024)  # a run's step keys are a few per agent: parsed once each, then looked up
+def _parse_step(below: str) -> StepKey | None:
+    for kind, head, tail in _SHAPES:
+        if tail is None:
+            if below == head:
+                return StepKey(kind, "")
+        elif below.startswith(head) and below.endswith(tail):
+            agent = below[len(head) : len(below) - len(tail)]
+            if _CHUNK.match(agent):  # an id (check_id), no '/' or wildcard
+                return StepKey(kind, agent)
+    return None
 
 
 def check_id(kind: str, value: str) -> str:
@@ -47,25 +101,36 @@ class Keys:
     def everything(self) -> str:
         return f"{self.root}/**"
 
+    def step(self, kind: str, agent: str = "") -> str:
+        """A step key of this run (`STEP`'s kinds)."""
+        return f"{self.root}/{step_key(kind, agent)}"
+
     def down(self, agent: str) -> str:
-        return f"{self.root}/a/{agent}/down"
+        return self.step("down", agent)
 
     def up(self, agent: str) -> str:
-        return f"{self.root}/a/{agent}/up"
+        return self.step("up", agent)
 
     def cmd(self, agent: str) -> str:
-        return f"{self.root}/sim/cmd/{agent}"
+        return self.step("cmd", agent)
 
     @property
     def cmd_all(self) -> str:
-        return f"{self.root}/sim/cmd/*"
+        return self.step("cmd", "*")
 
     def obs(self, agent: str) -> str:
-        return f"{self.root}/sim/obs/{agent}"
+        return self.step("obs", agent)
 
     @property
     def task(self) -> str:
-        return f"{self.root}/sim/task"
+        return self.step("task")
+
+    def parse_step(self, key: str) -> StepKey | None:
+        """A step key of this run -> (kind, agent); None for any other key (another run's, a control key, ...)."""
+        root = self.root
+        if len(key) > len(root) and key[len(root)] == "/" and key.startswith(root):
+            return _parse_step(key[len(root) + 1 :])
+        return None
 
     def ctl(self, verb: str) -> str:
         return f"{self.root}/ctl/{verb}"
@@ -119,16 +184,29 @@ def agent_keys(topo: Topology, agent: str) -> tuple[tuple[str, ...], tuple[str, 
     first (actors/agent/actor.py), a deploy plan's access control allows both and denies the rest of the step's keys
     (actors/deploy/plan.py)."""
     spec = topo.agents[agent]
-    step = [f"a/{c}/down" for c in spec.children]
+    step = [step_key("down", c) for c in spec.children]
     if spec.parent is not None:
-        step.append(f"a/{spec.parent}/up")
+        step.append(step_key("up", spec.parent))
     if spec.has_dof:
-        step.append(f"sim/cmd/{agent}")
-    stand_in = tuple(f"a/{d}/down" for d in topo.subtree(agent)[1:] if d not in spec.children)
+        step.append(step_key("cmd", agent))
+    stand_in = tuple(step_key("down", d) for d in topo.subtree(agent)[1:] if d not in spec.children)
     return tuple(step), stand_in
 
 
 def step_keys(topo: Topology) -> tuple[str, ...]:
-    """Every key of the step's messages, below the run's root (the robot's as patterns)."""
-    return (*(f"a/{b}/{way}" for b in topo.order for way in ("down", "up")), *(f"sim/cmd/{b}" for b in topo.order),
-            "sim/obs/**", "sim/task")  # fmt: skip
+    """Every key of the step's messages, below the run's root: the agents' kinds for every agent (each agent may send
+    on some of them only), the robot's kinds as families (all of them are the sim's)."""
+    ours = [step_key(kind, b) for b in topo.order for kind, (_, by) in STEP.items() if by == AGENT]
+    return (*ours, *(_family(kind) for kind, (_, by) in STEP.items() if by == SIM))
+
+
+def agent_denied(topo: Topology, agent: str) -> tuple[str, ...]:
+    """The step keys `agent` may not publish: every one but its own (`agent_keys`, its stand-in's included)."""
+    step, stand_in = agent_keys(topo, agent)
+    own = {*step, *stand_in}
+    return tuple(k for k in step_keys(topo) if k not in own)
+
+
+def sim_denied() -> tuple[str, ...]:
+    """The step keys the sim may not publish: every key of the kinds the agents publish."""
+    return tuple(dict.fromkeys(_family(kind) for kind, (_, by) in STEP.items() if by == AGENT))

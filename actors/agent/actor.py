@@ -33,7 +33,7 @@ from kinswarm.actors.step.passes import AgentStep, Begun, visible_actions
 from kinswarm.actors.step.seed import agent_seed
 from kinswarm.actors.step.trace import StepTrace
 from kinswarm.actors.tasks.base import StepView
-from kinswarm.protocol.keys import agent_keys
+from kinswarm.protocol.keys import StepKey, agent_keys
 from kinswarm.protocol.messages import Bye, Checkpoint, Cmd, Down, Fault, Obs, Readings, Stop, Task, Up
 from kinswarm.protocol.topology import Topology
 
@@ -59,7 +59,6 @@ class Agent:
         self.cfg, self.topo, self.node, self.id = cfg, topo, node, agent_id
         self.spec = topo.agents[agent_id]
         self.keys = node.keys
-        self._root_len = len(node.keys.root) + 1
         # a step's keys and constants, made once (they are built on every step otherwise)
         self._down_key = {a: node.keys.down(a) for a in topo.agents}  # a stand-in sends to its adopted ones' children
         self._up_key = node.keys.up(topo.agents[agent_id].parent) if topo.agents[agent_id].parent else ""
@@ -68,6 +67,10 @@ class Agent:
         self._waits = frozenset(self._children)
         self._own_q = [agent_id] if topo.agents[agent_id].has_dof else []
         self.is_root = self.spec.parent is None
+        # the message each kind of step key it hears carries: the root hears the task, the others their parent's down
+        head: dict[str, type] = {"task": Task} if self.is_root else {"down": Down}
+        self._carries: dict[str, type] = {"obs": Obs, "up": Up, **head}
+        self._ctl = {node.keys.ctl(verb): verb for verb in ("fault", "checkpoint", "stop")}
         task = task_of(cfg)
         self.learner: JointLearner | None = None
         obs = None  # what S_i holds (the task's)
@@ -160,17 +163,17 @@ class Agent:
             async with node.next() as (key, payload):
                 if self._on_step(key, payload):
                     continue
-                kind = key[len(k.root) + 1 :]
+                verb = self._ctl.get(key)
                 if key == "__alive__":
                     if (change := self.waking.token(payload.decode())) is not None:
                         self._on_token(change)
-                elif kind == "ctl/fault":
+                elif verb == "fault":
                     if (f := node.decode(key, payload, Fault)) is not None:
                         node.apply_fault(f)
-                elif kind == "ctl/checkpoint":
+                elif verb == "checkpoint":
                     if (m4 := node.decode(key, payload, Checkpoint)) is not None:
                         await asyncio.to_thread(self.memory.save, m4)  # the lock held: no step meanwhile
-                elif kind == "ctl/stop":
+                elif verb == "stop":
                     if node.decode(key, payload, Stop) is not None:
                         node.serve_inline(False)  # no step after the stop
                         node.send(k.rep("bye", self.id), Bye(steps=self.steps_done, rejected=node.rejected))
@@ -182,35 +185,30 @@ class Agent:
 
     def _on_step(self, key: str, payload: bytes) -> bool:
         """One step message (obs, task, down, up) handled; False if `key` is not one."""
-        kind = key[self._root_len :]
-        of = self._kind(kind)
-        if of is None:
+        step = self._step_of(key)
+        if step is None:
             return False
-        if (m := self.node.decode(key, payload, of)) is not None:
-            self._take(kind, m)
+        if (m := self.node.decode(key, payload, self._carries[step.kind])) is not None:
+            self._take(step, m)
         return True
 
-    def _kind(self, kind: str) -> type | None:
-        """The message a step key carries (`kind`: the key below the run's root); None for any other key."""
-        if kind.startswith("sim/obs/"):
-            return Obs
-        if kind.endswith("/down") or kind == "sim/task":
-            return Task if self.is_root else Down
-        if kind.endswith("/up"):
-            return Up
-        return None
+    def _step_of(self, key: str) -> StepKey | None:
+        """The step key an agent hears (obs, task, down, up), parsed; None for any other key."""
+        step = self.keys.parse_step(key)
+        return step if step is not None and step.kind in self._carries else None
 
-    def _take(self, kind: str, m: Any) -> None:
-        """A step message, decoded: an encoder reading, the head of the step (task or down), or a child's up."""
+    def _take(self, step: StepKey, m: Any) -> None:
+        """A step message, decoded: an encoder reading, the head of the step (task or down), or a child's up. `step`:
+        its key (an obs names its joint, an up its addressee)."""
         if type(m) is Obs:
-            agent = kind[8:]  # len("sim/obs/")
+            agent = step.agent
             if agent in self.q_in:
                 self.q_in[agent][(m.epoch, m.step)] = m.q
                 if m.sense and agent == self.id:
                     self.sense_in[(m.epoch, m.step)] = m.sense
                 self._try_begin((m.epoch, m.step))
         elif type(m) is Up:
-            self._on_up(m, kind[2:-3])
+            self._on_up(m, step.agent)
         else:
             self.head_in[(m.epoch, m.step)] = m
             self._try_begin((m.epoch, m.step))

@@ -41,14 +41,13 @@ class FleetAgent(Agent):
             lane.standin.on_token(change)
 
     def _on_step(self, key: str, payload: Any) -> bool:
-        kind = key[self._root_len :]
-        of = self._kind(kind)
-        if of is None:
+        step = self._step_of(key)
+        if step is None:
             return False
         node = self.fleet_node
-        if (batch := node.decode_batch(key, payload, of)) is not None:
+        if (batch := node.decode_batch(key, payload, self._carries[step.kind])) is not None:
             lanes = self.lanes
             with node.gathering():
                 for robot, m in zip(batch.robots, batch.items, strict=True):
-                    lanes[robot]._take(kind, m)
+                    lanes[robot]._take(step, m)
         return True

@@ -32,7 +32,7 @@ from typing import Any
 
 from kinswarm.actors.run.config import AUTO_LISTEN, LEASE_RANGE_MS
 from kinswarm.actors.runtime import LEASE_MS, NetSpec
-from kinswarm.protocol.keys import agent_keys, check_id, step_keys
+from kinswarm.protocol.keys import agent_denied, check_id, sim_denied
 from kinswarm.protocol.topology import Topology
 
 MODES = ("peer", "client")
@@ -202,10 +202,9 @@ def acl(plan: Plan, topo: Topology) -> dict[str, Any]:
 
     supervisor_only = ["ctl/**", "fault/**"]
     # the sim asks for a scenario's process and message faults on fault/request, as a user's `kinswarm fault` does
-    deny("sim", ["ctl/**", "a/**", "sim/cmd/**"])
-    for a in topo.order:  # every step key but those the agent publishes (protocol/keys.py: declared there once)
-        step, stand_in = agent_keys(topo, a)
-        deny(f"agent-{a}", [*supervisor_only, *(k for k in step_keys(topo) if k not in {*step, *stand_in})])
+    deny("sim", ["ctl/**", *sim_denied()])  # the step keys: declared once, with who publishes each (protocol/keys.py)
+    for a in topo.order:
+        deny(f"agent-{a}", [*supervisor_only, *agent_denied(topo, a)])
     return {"enabled": True, "default_permission": "allow", "rules": rules, "subjects": subjects, "policies": policies}
 
 
