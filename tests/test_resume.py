@@ -165,6 +165,24 @@ def test_what_cannot_be_resumed_is_one_line_and_changes_nothing(tmp_path, capsys
     assert not (tmp_path / "nowhere").exists()
 
 
+@pytest.mark.timeout(120)
+def test_a_file_or_a_corrupt_config_is_named_for_what_it_is(tmp_path, capsys, ended):
+    """`--resume FILE` says it is a file; a config.json torn or overwritten says it is corrupt (not that the kinswarm
+    that wrote it recorded no version); the directory is left as it was."""
+    file = tmp_path / "notes.txt"
+    file.write_text("mine\n")
+    assert cli(["run", "--resume", str(file), "--no-progress"]) == 2
+    one_line(capsys, "a file, not a run directory")
+    for name, text in (("torn", None), ("garbage", "\x00\xff{"), ("list", "[1, 2]")):
+        d = killed_copy(ended, tmp_path / name)
+        whole = (d / "config.json").read_text()
+        (d / "config.json").write_text(text if text is not None else whole[: len(whole) // 2])
+        before = snapshot(d)
+        assert cli(["run", "--resume", str(d), "--no-progress"]) == 2
+        one_line(capsys, f"{d / 'config.json'} is corrupt", "cannot be resumed")
+        assert snapshot(d) == before
+
+
 @pytest.mark.timeout(60)
 def test_resume_takes_nothing_that_would_change_the_run(tmp_path, capsys, ended):
     before = snapshot(ended)
@@ -214,3 +232,66 @@ def test_a_run_whose_agents_hold_no_common_epoch_resumes_after_the_oldest_not_fr
     (resume,) = resumes(out / "events.jsonl")
     assert resume["epoch"] == 2 and "no epoch every agent holds" in resume["detail"], resume
     assert "metrics rows dropped past it: 2" in resume["detail"], resume
+
+
+# -- a run directory moved or copied ----------------------------------------------------------------------------------
+
+
+def resumed(run_dir: Path) -> subprocess.Popen:
+    return subprocess.Popen(
+        [*KINSWARM, "run", "--resume", str(run_dir), "--no-progress"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        start_new_session=True,
+    )
+
+
+def finished(p: subprocess.Popen) -> None:
+    out = p.communicate(timeout=400)[0].decode()
+    assert p.returncode == 0, out
+    assert "Traceback" not in out, out
+
+
+@pytest.mark.timeout(900)
+def test_a_moved_or_copied_run_resumes_as_a_run_of_its_own_and_leaves_the_original_alone(tmp_path):
+    """Process placement, its agents in processes of their own: they find their checkpoints in the directory they were
+    handed, not at the path config.json recorded when the run began. Two copies of a killed run resumed at once each
+    end as the uninterrupted run, with their own run ids and secrets, and the original's files are unchanged (byte for
+    byte); the original, then moved, resumes to the same result and nothing is written where it was."""
+    ref, run = tmp_path / "ref", tmp_path / "run"
+    assert cli(run_args("ref", ref, "process", 100)) == 0
+    want = json.loads((ref / "summary.json").read_text())["final_error"]
+    killed_in_epoch(run, run_args("run", run, "process", 100), k=3, whole_tree=True)
+    copies = [tmp_path / "copy1", tmp_path / "copy2"]
+    for c in copies:
+        subprocess.run(["cp", "-a", str(run), str(c)], check=True, timeout=60)
+    original = snapshot(run)
+    secret = json.loads((run / "config.json").read_text())["secret"]
+
+    procs = [resumed(c) for c in copies]  # at once
+    for p in procs:
+        finished(p)
+    assert snapshot(run) == original, "resuming a copy wrote into the original"
+    configs = [json.loads((c / "config.json").read_text()) for c in copies]
+    assert [c["run_id"] for c in configs] == ["copy1", "copy2"]  # named by their directories, as the original was
+    assert len({secret, *(c["secret"] for c in configs)}) == 3
+    for c, config in zip(copies, configs, strict=True):
+        summary = json.loads((c / "summary.json").read_text())
+        assert summary["final_error"] == want, c
+        assert summary["run_id"] == config["run_id"] and config["out"] == str(c.resolve())
+        assert [r["epoch"] for r in rows(c / "metrics.jsonl")] == list(range(EPOCHS))
+        (resume,) = resumes(c / "events.jsonl")
+        assert f"a copy of run run in {run}" in resume["detail"], resume
+        assert oct((c / "config.json").stat().st_mode & 0o777) == "0o600"
+
+    moved = tmp_path / "moved"
+    run.rename(moved)
+    finished(resumed(moved))
+    assert not run.exists(), "the moved run wrote at its old path"
+    summary = json.loads((moved / "summary.json").read_text())
+    assert summary["final_error"] == want and summary["run_id"] == "moved"
+    (resume,) = resumes(moved / "events.jsonl")
+    assert f"run run moved from {run}, now run moved" in resume["detail"], resume
+    restored = [r for r in rows(moved / "events.jsonl") if r["event"] == "restored"]
+    assert sorted(r["target"] for r in restored) == ["a1", "a2", "a3", "a4"]  # from its checkpoints, not from scratch
+    assert all(r["checkpoint_epoch"] == resume["epoch"] - 1 for r in restored), restored

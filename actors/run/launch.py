@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import dataclasses
 import logging
 import os
 import signal
@@ -18,7 +19,7 @@ from typing import TYPE_CHECKING
 from kinswarm.actors.deploy.plan import Plan, PlanError, local_plan
 from kinswarm.actors.run.config import AUTO_LISTEN, ENDPOINT, ConfigError, RunConfig
 from kinswarm.actors.run.resolved import write_resolved
-from kinswarm.actors.run.resume import Resume, prepare_resume
+from kinswarm.actors.run.resume import Resume, prepare_resume, settle
 from kinswarm.actors.run.rundir import Claim, claim, reclaim
 from kinswarm.actors.runtime import NetSpec, open_session
 from kinswarm.actors.runtime.net import zenoh_reason
@@ -273,7 +274,10 @@ def resume_swarm(cfg: RunConfig, topo: Topology, progress: bool = False, view: s
     check_start(plan, topo)
     out = Path(cfg.out)
     with reclaim(out) as claimed:
+        cfg, moved = settle(out, cfg)
         resume = prepare_resume(out, cfg)
+        if moved:
+            resume = dataclasses.replace(resume, detail=f"{moved}; {resume.detail}")
         return asyncio.run(_supervise(cfg, topo, progress, plan, plan.leader, claimed, view=view, resume=resume))
 
 

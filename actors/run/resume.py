@@ -23,12 +23,14 @@ import contextlib
 import dataclasses
 import json
 import os
+import secrets
 from dataclasses import dataclass
 from pathlib import Path
 
 from kinswarm.actors.run.checkpoint import CheckpointError, load_checkpoint, previous
 from kinswarm.actors.run.config import ConfigError, RunConfig, load_run_config, recorded_version, writer_version
 from kinswarm.actors.run.rundir import failed_start, lock_held, run_state
+from kinswarm.protocol.keys import check_id
 
 FLAG = "--resume"
 
@@ -44,16 +46,22 @@ def check_resume(run_dir: Path) -> RunConfig:
     """The run in `run_dir` as config.json resolved it, or one line (ConfigError) naming why it cannot be resumed.
     Reads only: nothing in the directory changes."""
     where = f"{FLAG} {run_dir}"
+    if run_dir.exists() and not run_dir.is_dir():
+        raise ConfigError(f"{where}: a file, not a run directory (give the directory that holds config.json)")
     if not run_dir.is_dir():
         raise ConfigError(f"{where}: no such directory")
     config = run_dir / "config.json"
     if not config.is_file():
         raise ConfigError(f"{where}: holds no run (no config.json)")
+    _check_whole(config, where)
     written, mine = recorded_version(config), writer_version()
     if written != mine:
         made = f"kinswarm {written}" if written else "a kinswarm that recorded no version"
         raise ConfigError(f"{where}: a run made by {made}, not this one ({mine}): resume it with that version")
-    cfg = load_run_config(config)
+    try:
+        cfg = load_run_config(config)
+    except ConfigError as e:
+        raise ConfigError(f"{where}: {e}") from None
     if lock_held(run_dir):
         raise ConfigError(f"{where}: run {cfg.run_id} is still running (a process holds its lock): nothing to resume")
     state = run_state(run_dir)
@@ -65,8 +73,68 @@ def check_resume(run_dir: Path) -> RunConfig:
         raise ConfigError(f"{where}: run {cfg.run_id} ran in the inprocess placement, which cannot be resumed")
     if len(cfg.hosts) > 1:
         raise ConfigError(f"{where}: run {cfg.run_id} ran on several hosts; resume runs on one (start it again)")
-    here = str(run_dir.resolve())
-    return cfg if cfg.out == here else dataclasses.replace(cfg, out=here)  # moved since: its files are here
+    return cfg.located(run_dir)  # moved or copied since: its files are here (settle makes it so under the lock)
+
+
+def _check_whole(config: Path, where: str) -> None:
+    """config.json is a JSON object, or one line saying it is corrupt (not that a version is missing: a torn or
+    overwritten file records nothing, whoever wrote it)."""
+    try:
+        data = json.loads(config.read_bytes())
+    except OSError as e:
+        raise ConfigError(f"{where}: cannot read {config} ({e.strerror or e})") from None
+    except ValueError as e:  # UnicodeDecodeError included
+        raise ConfigError(f"{where}: {config} is corrupt (not JSON: {e}); the run cannot be resumed") from None
+    if not isinstance(data, dict):
+        raise ConfigError(f"{where}: {config} is corrupt (not a JSON object); the run cannot be resumed")
+
+
+def settle(out: Path, cfg: RunConfig) -> tuple[RunConfig, str]:
+    """Under the run's lock, before anything is spawned: a run directory moved or copied since config.json was written
+    becomes the run at its place, and config.json says so. It takes a secret of its own: a copy is a run of its own,
+    and two copies (of a run since moved, even) can never take each other's messages. Its run id follows the
+    directory's name when the run was named by its directory (`runs/<run-id>`); a copy whose original is still where
+    it was never keeps the original's id. `cfg`: check_resume's (`--listen` may differ from the recorded); returns it
+    settled, and a note for events.jsonl ("" when the run is where it was)."""
+    config = out / "config.json"
+    recorded = load_run_config(config)
+    here, old = out.resolve(), Path(recorded.out)
+    if _same_dir(here, old):
+        return cfg, ""
+    copy = _holds(old, recorded)
+    run_id = recorded.run_id
+    if recorded.run_id == old.name and _valid_id(here.name):
+        run_id = here.name
+    if copy and run_id == recorded.run_id:
+        run_id = f"{recorded.run_id[:59]}-{secrets.token_hex(2)}"
+    mine = {"out": str(here), "run_id": run_id, "secret": secrets.token_hex(16)}
+    what = f"a copy of run {recorded.run_id} in {old}" if copy else f"run {recorded.run_id} moved from {old}"
+    named = f", now run {run_id}" if run_id != recorded.run_id else ""
+    dataclasses.replace(recorded, **mine).write(config)
+    return dataclasses.replace(cfg, **mine), f"{what}{named}, with a secret of its own"
+
+
+def _same_dir(a: Path, b: Path) -> bool:
+    try:
+        return a == b or os.path.samefile(a, b)
+    except OSError:
+        return False
+
+
+def _holds(old: Path, run: RunConfig) -> bool:
+    """Whether `old` still holds `run` (its config.json, with the run's secret)."""
+    try:
+        return load_run_config(old / "config.json").secret == run.secret
+    except (ConfigError, OSError):
+        return False
+
+
+def _valid_id(name: str) -> bool:
+    try:
+        check_id("run id", name)
+    except ValueError:
+        return False
+    return True
 
 
 def _whole_epochs(path: Path) -> list[int]:
