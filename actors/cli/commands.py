@@ -25,6 +25,7 @@ from kinswarm.actors.run.rundir import check_dir, failed_start, reading_note, ru
 from kinswarm.actors.run.runfile import load_run
 from kinswarm.actors.runtime import setup_logging
 from kinswarm.actors.runtime.net import zenoh_reason
+from kinswarm.actors.supervisor.result import RecordError
 from kinswarm.protocol.faults import describe
 from kinswarm.protocol.spec import SpecError
 from kinswarm.protocol.topology import Topology
@@ -234,6 +235,12 @@ def _epoch_list(text: str | None) -> list[int] | None:
     return out
 
 
+def os_error(e: OSError) -> str:
+    """An OSError as a line: the file (both, for a rename) and the cause."""
+    where = f"{e.filename} -> {e.filename2}" if e.filename2 else e.filename
+    return f"{where}: {e.strerror or e}" if where else str(e.strerror or e)
+
+
 def _main(argv: list[str] | None) -> int:
     from kinswarm.actors.cli.control import ControlError
     from kinswarm.actors.deploy.hosts import DeployError
@@ -298,6 +305,12 @@ def _main(argv: list[str] | None) -> int:
     except zenoh.ZError as e:  # a session a tool opens (router, down, a follower's fetch): Zenoh's words, one line
         print(f"kinswarm: error: {zenoh_reason(e)}", file=sys.stderr)
         return 2
+    except RecordError as e:  # a record the run could not open (its directory full or read-only): the run is kept
+        print(f"kinswarm: error: {e}", file=sys.stderr)
+        return 1
+    except OSError as e:  # the disk refused (full, read-only, forbidden): the path and the cause, one line
+        print(f"kinswarm: error: {os_error(e)}", file=sys.stderr)
+        return 1
     except KeyboardInterrupt:
         print("kinswarm: interrupted", file=sys.stderr)
         return 130
@@ -322,7 +335,8 @@ def _main(argv: list[str] | None) -> int:
             file=sys.stderr,
         )
     if summary.get("error"):
-        print(f"kinswarm: the run failed: {summary['error']}", file=sys.stderr)
+        again = f"`kinswarm run --resume {cfg.out}` goes on from its last checkpoint"
+        print(f"kinswarm: the run failed: {summary['error']}; {again}", file=sys.stderr)
         return 1
     if summary.get("interrupted"):
         return 130

@@ -182,24 +182,37 @@ def _watchers(cfg: RunConfig, progress: bool, view: str | None) -> tuple[OnEpoch
 
 
 def _finish(cfg: RunConfig, result: RunResult, progress: bool) -> dict:
-    """The run's summary, plots and records, from what the leader gathered."""
+    """The run's summary, plots and records, from what the leader gathered. What the disk refuses (full, read-only,
+    forbidden) is one line, never a traceback: a summary that cannot be written fails the run and leaves it as a
+    killed run leaves it, resumable; plots and records that cannot be written are a warning each (`kinswarm report`
+    and `animate` draw them again)."""
     from kinswarm.actors.report import write_plots, write_summary
+    from kinswarm.actors.supervisor.result import cannot_write
 
     out = Path(cfg.out)
-    summary = write_summary(
-        out,
-        {
-            "wall_seconds": result.wall_seconds,
-            "interrupted": result.interrupted,
-            "error": result.error,
-            "rejected_messages": result.rejected,
-            "rejected_by_actor": result.rejected_by,
-            "restarts": result.restarts,
-            "tokens_lost": result.tokens_lost,
-        },
-    )
-    write_plots(out)
-    if cfg.record:
+    extra = {
+        "wall_seconds": result.wall_seconds,
+        "interrupted": result.interrupted,
+        "error": result.error,
+        "rejected_messages": result.rejected,
+        "rejected_by_actor": result.rejected_by,
+        "restarts": result.restarts,
+        "tokens_lost": result.tokens_lost,
+    }
+    try:
+        summary = write_summary(out, extra)
+    except OSError as e:
+        from kinswarm.actors.report import summarize
+
+        summary = summarize(out, extra)
+        unwritten = cannot_write(out / "summary.json", e)
+        summary["error"] = f"{summary['error']}; {unwritten}" if summary["error"] else unwritten
+        return summary
+    try:
+        write_plots(out)
+    except OSError as e:
+        log.warning("plots not written: %s (`kinswarm report %s` draws them)", cannot_write(out, e), out)
+    if cfg.record and summary["epochs"]:  # an interrupted start has no epoch to draw
         write_records(out, progress)
     return summary
 

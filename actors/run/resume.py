@@ -1,5 +1,7 @@
-"""`kinswarm run --resume RUN-DIR`: a run whose supervisor died (SIGKILL, a power cut) continues from its last complete
-checkpoint, in its own directory, as config.json resolved it.
+"""`kinswarm run --resume RUN-DIR`: a run whose supervisor died (SIGKILL, a power cut), was interrupted (Ctrl-C,
+SIGTERM) or failed (a full disk, a read-only directory, an actor that kept dying) continues from its last complete
+checkpoint, in its own directory, as config.json resolved it. Only a run that finished is not resumed. A run directory
+moved or copied since resumes where it is now (`settle`): a copy as a run of its own.
 
 The last complete checkpoint is the newest epoch every learning agent holds a good checkpoint of (`<id>.npz` or,
 when the supervisor died between two agents' saves, `<id>.prev.npz`), and that metrics.jsonl holds whole rows up
@@ -65,7 +67,7 @@ def check_resume(run_dir: Path) -> RunConfig:
     if lock_held(run_dir):
         raise ConfigError(f"{where}: run {cfg.run_id} is still running (a process holds its lock): nothing to resume")
     state = run_state(run_dir)
-    if state.summary is not None:
+    if state.summary is not None and not _ended_early(state.summary):
         raise ConfigError(f"{where}: run {cfg.run_id} {state.how} at {state.when} (summary.json): nothing to resume")
     if failed_start(run_dir):
         raise ConfigError(f"{where}: run {cfg.run_id} never began (no epoch): start it again with `kinswarm run`")
@@ -74,6 +76,11 @@ def check_resume(run_dir: Path) -> RunConfig:
     if len(cfg.hosts) > 1:
         raise ConfigError(f"{where}: run {cfg.run_id} ran on several hosts; resume runs on one (start it again)")
     return cfg.located(run_dir)  # moved or copied since: its files are here (settle makes it so under the lock)
+
+
+def _ended_early(summary: dict) -> bool:
+    """A summary of a run that failed or was interrupted: the run goes on from its checkpoints, as a killed one."""
+    return bool(summary.get("error") or summary.get("interrupted"))
 
 
 def _check_whole(config: Path, where: str) -> None:
@@ -185,7 +192,11 @@ def _keep_rows(path: Path, last: int) -> int:
 
 
 def prepare_resume(out: Path, cfg: RunConfig) -> Resume:
-    """Make `out` the run as it was at its last complete checkpoint (the caller holds its lock)."""
+    """Make `out` the run as it was at its last complete checkpoint (the caller holds its lock). The summary of a run
+    that failed or was interrupted goes (what it said is in the resume's detail): the resumed run writes its own."""
+    ended = run_state(out)
+    before = f"after it {ended.how} at {ended.when}; " if ended.summary is not None else ""
+    (out / "summary.json").unlink(missing_ok=True)
     agents = cfg.topo().dof_agents if cfg.controller == "agents" and cfg.learn else []
     whole = _whole_epochs(out / "metrics.jsonl")
     last_row = whole[-1] if whole else -1
@@ -219,5 +230,5 @@ def prepare_resume(out: Path, cfg: RunConfig) -> Resume:
         source = "the start (no checkpoint every agent holds)"
     else:
         source = f"epoch {last + 1} (nothing learns: no checkpoint needed)"
-    detail = f"resumed from {source}; metrics rows dropped past it: {dropped['metrics.jsonl']}"
+    detail = f"{before}resumed from {source}; metrics rows dropped past it: {dropped['metrics.jsonl']}"
     return Resume(epoch=last + 1, restore=last >= 0 and bool(agents), detail=detail)
