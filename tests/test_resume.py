@@ -15,7 +15,7 @@ import time
 from pathlib import Path
 
 import pytest
-from conftest import EXAMPLES, LOCKSTEP_ARGS, swarm_pids
+from conftest import EXAMPLES, LIVE, LOCKSTEP_ARGS, swarm_pids
 from kinswarm.actors.cli.commands import main as cli
 
 CHAIN4 = str(EXAMPLES / "chain4.toml")
@@ -40,7 +40,7 @@ def killed_in_epoch(out: Path, argv: list[str], k: int, whole_tree: bool) -> Non
     p = subprocess.Popen([*KINSWARM, *argv], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, start_new_session=True)
     try:
         metrics = out / "metrics.jsonl"
-        while not (metrics.exists() and len(metrics.read_text().splitlines()) >= k):
+        while not (metrics.exists() and metrics.read_text().count("\n") >= k):  # whole rows: a row may be mid-write
             assert p.poll() is None, p.communicate()[0].decode()
             time.sleep(0.02)
     finally:
@@ -54,7 +54,7 @@ def killed_in_epoch(out: Path, argv: list[str], k: int, whole_tree: bool) -> Non
         assert time.monotonic() < deadline, "actors of the killed supervisor still run"
         time.sleep(0.1)
     assert not (out / "summary.json").exists()
-    assert len(rows(out / "metrics.jsonl")) < EPOCHS, "the run ended before it was killed"
+    assert (out / "metrics.jsonl").read_text().count("\n") < EPOCHS, "the run ended before it was killed"
 
 
 def resumes(events: Path) -> list[dict]:
@@ -295,3 +295,65 @@ def test_a_moved_or_copied_run_resumes_as_a_run_of_its_own_and_leaves_the_origin
     restored = [r for r in rows(moved / "events.jsonl") if r["event"] == "restored"]
     assert sorted(r["target"] for r in restored) == ["a1", "a2", "a3", "a4"]  # from its checkpoints, not from scratch
     assert all(r["checkpoint_epoch"] == resume["epoch"] - 1 for r in restored), restored
+
+
+# -- interrupted is not final ---------------------------------------------------------------------------------------
+
+
+def signalled_after(argv: list[str], metrics: Path, k: int, sig: signal.Signals, env: dict | None = None) -> str:
+    """Run `kinswarm ARGV` until metrics.jsonl holds `k` rows (0: until the supervisor has opened events.jsonl), then
+    send `sig` to the command alone, as a terminal's Ctrl-C or a service manager's stop reaches it; its stderr."""
+    p = subprocess.Popen([*KINSWARM, *argv], stderr=subprocess.PIPE, text=True, start_new_session=True, env=env)
+    LIVE.append(p)
+    events = metrics.with_name("events.jsonl")
+    while not (events.exists() if k == 0 else metrics.exists() and metrics.read_text().count("\n") >= k):
+        assert p.poll() is None, p.communicate()[1]
+        time.sleep(0.02)
+    p.send_signal(sig)
+    err = p.communicate(timeout=300)[1]
+    assert p.returncode == 128 + sig, (p.returncode, err)
+    assert "Traceback" not in err, err
+    return err
+
+
+@pytest.mark.timeout(900)
+def test_a_run_stopped_by_sigterm_then_ctrl_c_during_its_resume_resumes_to_the_uninterrupted_result(tmp_path):
+    """SIGTERM mid-run exits 143, Ctrl-C during the `--resume` 130; each leaves the run resumable as a killed one, and
+    the last `--resume` ends with the uninterrupted run's final errors, every epoch once."""
+    ref, out = tmp_path / "ref", tmp_path / "run"
+    assert cli(run_args("ref", ref, "process", 100)) == 0
+    want = json.loads((ref / "summary.json").read_text())["final_error"]
+    metrics = out / "metrics.jsonl"
+    signalled_after(run_args("run", out, "process", 100), metrics, 2, signal.SIGTERM)
+    stopped = json.loads((out / "summary.json").read_text())
+    assert stopped["interrupted"] and stopped["interrupted_by"] == "SIGTERM" and len(stopped["final_error"]) < EPOCHS
+    signalled_after(["run", "--resume", str(out), "--no-progress"], metrics, 5, signal.SIGINT)
+    assert json.loads((out / "summary.json").read_text())["interrupted_by"] == "SIGINT"
+    assert not swarm_pids(str(out / "config.json"))
+    p = subprocess.run([*KINSWARM, "run", "--resume", str(out), "--no-progress"], capture_output=True, text=True)
+    assert p.returncode == 0, p.stderr
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["final_error"] == want and not summary["interrupted"]
+    assert [r["epoch"] for r in rows(metrics)] == list(range(EPOCHS))
+    details = [r["detail"] for r in resumes(out / "events.jsonl")]
+    assert len(details) == 2 and all("after it was interrupted at" in d for d in details), details
+
+
+@pytest.mark.timeout(300)
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["ctrl-c", "sigterm"])
+def test_a_start_interrupted_before_its_first_epoch_leaves_nothing_and_the_retry_runs(tmp_path, sig):
+    """Stopped once its supervisor has begun (events.jsonl open, actors spawning) and long before its first epoch ends:
+    its own exit code, no line about a motion.gif it had no epoch to draw, nothing left that blocks the same
+    --run-id, which then runs."""
+    out = tmp_path / "runs" / "x"
+    argv = [
+        "run", CHAIN4, "--epochs", "1", "--steps", "100000", "--placement", "process", "--run-id", "x",
+        "--out", str(out), "--no-progress",
+    ]  # fmt: skip
+    err = signalled_after(argv, out / "metrics.jsonl", 0, sig, env={**os.environ, "KINSWARM_RECORD": "1"})
+    assert "motion.gif" not in err and "kinswarm: interrupted" in err, err
+    assert not swarm_pids(str(out / "config.json"))
+    assert not out.exists() or set(os.listdir(out)) <= {".lock"}, sorted(os.listdir(out))
+    assert (
+        cli(["run", CHAIN4, "--epochs", "1", "--steps", "30", "--run-id", "x", "--out", str(out), "--no-progress"]) == 0
+    )

@@ -42,27 +42,35 @@ def write_net(path: Path, spec: NetSpec) -> Path:
     return path
 
 
+class Interrupted(KeyboardInterrupt):
+    """A start interrupted (Ctrl-C, SIGTERM) before its first epoch: it leaves nothing; `signum` for the exit code."""
+
+    def __init__(self, signum: int) -> None:
+        super().__init__(signal.Signals(signum).name)
+        self.signum = signum
+
+
 @contextlib.contextmanager
-def _signals_stop_once() -> Iterator[None]:
+def _signals_stop_once() -> Iterator[list[int]]:
     """Ctrl-C or SIGTERM cancels the running task once; the supervisor then stops the swarm and the
     summary is written. More signals until then only say so: a second Ctrl-C cancelling the shutdown
-    would leave the actors without their Stop and the run without its summary."""
+    would leave the actors without their Stop and the run without its summary. Yields the signals caught, in order
+    (the first is the one that stopped the run: its exit code)."""
     task, loop = asyncio.current_task(), asyncio.get_running_loop()
     assert task is not None
-    signals = 0
+    caught: list[int] = []
 
-    def on_signal() -> None:
-        nonlocal signals
-        signals += 1
-        if signals == 1:
+    def on_signal(sig: int) -> None:
+        caught.append(sig)
+        if len(caught) == 1:
             task.cancel()
-        elif signals == 2:
+        elif len(caught) == 2:
             print("kinswarm: stopping the swarm and writing its summary, please wait", file=sys.stderr)
 
     for sig in (signal.SIGINT, signal.SIGTERM):
-        loop.add_signal_handler(sig, on_signal)
+        loop.add_signal_handler(sig, on_signal, int(sig))
     try:
-        yield
+        yield caught
     finally:
         for sig in (signal.SIGINT, signal.SIGTERM):
             loop.remove_signal_handler(sig)
@@ -107,14 +115,25 @@ async def _supervise(
         sup.resumed = resume
         undo.pop_all()
     claimed.begin()  # from here on the run directory is the run's, however it ends
-    with _signals_stop_once():
+    with _signals_stop_once() as caught:
         try:
             result = await sup.run()
         finally:
             close_watchers()
             session.close()
+        if result.interrupted and caught:
+            result.signal = signal.Signals(caught[0]).name
+            if resume is None and not result.epochs:  # stopped while starting: nothing of it blocks a retry
+                claimed.withdraw()
+                raise Interrupted(caught[0])
         if not lead:
-            return {"host": host, "error": result.error, "interrupted": result.interrupted, "restarts": result.restarts}
+            return {
+                "host": host,
+                "error": result.error,
+                "interrupted": result.interrupted,
+                "interrupted_by": result.signal,
+                "restarts": result.restarts,
+            }
         return _finish(cfg, result, progress)
 
 
@@ -193,6 +212,7 @@ def _finish(cfg: RunConfig, result: RunResult, progress: bool) -> dict:
     extra = {
         "wall_seconds": result.wall_seconds,
         "interrupted": result.interrupted,
+        "interrupted_by": result.signal,
         "error": result.error,
         "rejected_messages": result.rejected,
         "rejected_by_actor": result.rejected_by,

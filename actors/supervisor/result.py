@@ -30,6 +30,7 @@ def cannot_write(path: object, e: OSError) -> str:
 class RunResult:
     epochs: list[EpochDone] = field(default_factory=list)
     interrupted: bool = False
+    signal: str = ""  # the signal that interrupted it (SIGINT: Ctrl-C; SIGTERM), when one did
     error: str = ""  # why the run failed (restart budget exhausted, the sim died, ...)
     wall_seconds: float = 0.0
     rejected: int = 0  # messages every actor refused (from their Bye) plus the supervisor's own
