@@ -301,3 +301,78 @@ def test_report_on_a_live_run_says_it_is_in_progress_and_fault_after_its_end_ans
                        timeout=60)  # fmt: skip
     assert r.returncode == 2 and "run lv was interrupted at " in r.stderr and "nothing to fault" in r.stderr, r.stderr
     assert swarm_pids(str(out / "config.json")) == []
+
+
+# -- output that cannot be written ------------------------------------------------------------------------------------
+
+
+def shell(command: str) -> subprocess.CompletedProcess[str]:
+    """`command` in bash, with `kinswarm` this test's; PIPESTATUS says how kinswarm itself exited."""
+    kinswarm = " ".join(KINSWARM)
+    script = f'kinswarm() {{ {kinswarm} "$@"; }}; {command}; echo "exit=${{PIPESTATUS[0]}}" >&2'
+    return subprocess.run(["bash", "-c", script], capture_output=True, text=True, timeout=300)
+
+
+def exit_of(r: subprocess.CompletedProcess[str]) -> int:
+    return int(r.stderr.strip().splitlines()[-1].removeprefix("exit="))
+
+
+def answered(command: str) -> subprocess.CompletedProcess[str]:
+    """`shell(command)`, asked again while the run's supervisor is too busy to answer (a loaded machine): what this
+    file tests is the output, not how fast a status comes."""
+    for _ in range(10):
+        r = shell(command)
+        if "no status from run" not in r.stderr:
+            return r
+    return r
+
+
+@pytest.mark.timeout(600)
+def test_output_to_a_closed_pipe_or_a_full_disk_is_one_line(tmp_path, capsys):
+    """A reader gone before the output (`| true`), or after the lines it wanted (`| head -1`, `status --watch |
+    head -3` of a live run): a quiet end with SIGPIPE's code, no traceback. `status RUN > /dev/full`: one line naming
+    /dev/full and the cause."""
+    ended = tmp_path / "ended"
+    assert cli(["run", CHAIN4, *SMALL, "--run-id", "ended", "--out", str(ended)]) == 0
+    capsys.readouterr()
+    for command in (f"kinswarm status {ended} | true", f"kinswarm report {ended} | true"):
+        gone = shell(command)
+        assert gone.stderr == f"exit={128 + signal.SIGPIPE}\n", (command, gone.stderr)
+    full = shell(f"kinswarm status {ended} > /dev/full")
+    assert full.stderr.splitlines() == [
+        "kinswarm: error: cannot write the output to /dev/full: No space left on device",
+        "exit=1",
+    ], full.stderr
+
+    out = tmp_path / "live"
+    args = ["run", CHAIN4, "--epochs", "200", "--steps", "300", "--no-progress", "--placement", "single"]
+    p = subprocess.Popen([*KINSWARM, *args, "--run-id", "pipe", "--out", str(out)], stderr=subprocess.PIPE, text=True)
+    try:
+        while not ((out / "metrics.jsonl").exists() and (out / "metrics.jsonl").read_text()):
+            assert p.poll() is None, p.communicate()[1]
+            time.sleep(0.05)
+        once = answered(f"kinswarm status {out} | head -1")
+        assert once.stdout.startswith("run pipe  epoch ") and once.stdout.count("\n") == 1, once
+        assert "Traceback" not in once.stderr and exit_of(once) in (0, 128 + signal.SIGPIPE), once
+        watched = answered(f"kinswarm status --watch {out} | head -3")
+        assert watched.stdout.count("\n") == 3 and "Traceback" not in watched.stderr, watched
+        assert exit_of(watched) == 128 + signal.SIGPIPE, watched
+    finally:
+        p.send_signal(signal.SIGINT)
+        p.communicate(timeout=120)
+    assert swarm_pids(str(out / "config.json")) == []
+
+
+@pytest.mark.timeout(300)
+def test_view_saved_into_a_directory_is_one_line(tmp_path, capsys):
+    out = tmp_path / "v"
+    assert cli(["run", CHAIN4, *SMALL, "--run-id", "v", "--out", str(out)]) == 0
+    capsys.readouterr()
+    for given, says in ((f"{tmp_path}/", "a directory; give the recording's file"), (f"{tmp_path}/nowhere/", "a dire")):
+        assert cli(["view", str(out), "--save", given]) == 2
+        err = capsys.readouterr().err.strip()
+        if "kinswarm[viewer]" in err:  # the viewer's extra is not installed: that is the one line then
+            pytest.skip(err)
+        assert err.startswith("kinswarm: error: --save ") and says in err and "\n" not in err, err
+        assert "Traceback" not in err
+    assert not (tmp_path / "nowhere").exists()

@@ -68,7 +68,7 @@ class Memory:
             try:
                 meta = checkpoint_meta(a.id, self.kind, a.topo.name, self.epochs_before, m.epoch, a.cfg.seed)
                 save_checkpoint(path, learned_state(a.learner), meta)
-            except OSError as e:
-                error = f"cannot write {path}: {e}"
+            except OSError as e:  # a full disk, a read-only directory: the line the run fails with
+                error = f"cannot write {path}: {e.strerror or e}"
                 a.node.log.error(error)
         a.node.send(a.keys.rep("agent", a.id), Saved(epoch=m.epoch, path=str(path), error=error))

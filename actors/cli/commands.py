@@ -5,8 +5,10 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import contextlib
 import dataclasses
 import logging
+import os
 import secrets
 import signal
 import sys
@@ -25,6 +27,7 @@ from kinswarm.actors.run.rundir import check_dir, failed_start, reading_note, ru
 from kinswarm.actors.run.runfile import load_run
 from kinswarm.actors.runtime import setup_logging
 from kinswarm.actors.runtime.net import zenoh_reason
+from kinswarm.actors.supervisor.result import RecordError
 from kinswarm.protocol.faults import describe
 from kinswarm.protocol.spec import SpecError
 from kinswarm.protocol.topology import Topology
@@ -183,12 +186,75 @@ def _experiment(a: argparse.Namespace, argv: list[str]) -> int:
 
 def main(argv: list[str] | None = None) -> int:
     """The CLI: every problem a user can cause is one line and an exit code, Ctrl-C at any moment too."""
-    signal.signal(signal.SIGINT, signal.default_int_handler)
-    try:
-        return _main(argv)
-    except KeyboardInterrupt:
+    try:  # the hand-over from entry.py's handler inside the try: a Ctrl-C right after it is caught here too
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+        out = sys.stdout = Output(sys.stdout)
+        try:
+            code = _main(argv)
+            out.flush()  # a full disk or a closed pipe shows here, not as the interpreter's last words
+        finally:
+            sys.stdout = out.inner
+        return code
+    except KeyboardInterrupt as e:
         print("kinswarm: interrupted", file=sys.stderr)
-        return 130
+        return interrupted_code(e)
+    except OutputGone as e:
+        return e.exit()
+
+
+class OutputGone(Exception):
+    """What this command prints cannot be written: a reader that stopped reading (`| head -1`), a full disk."""
+
+    def __init__(self, error: OSError) -> None:
+        super().__init__(str(error))
+        self.error = error
+
+    def exit(self) -> int:
+        """One line (none for a closed pipe: its reader had what it wanted), stdout let go, the exit code."""
+        where = _stdout_name()
+        with contextlib.suppress(OSError):  # what is still buffered would fail again as the interpreter exits
+            devnull = os.open(os.devnull, os.O_WRONLY)
+            os.dup2(devnull, sys.__stdout__.fileno())
+            os.close(devnull)
+        if isinstance(self.error, BrokenPipeError):
+            return 128 + signal.SIGPIPE
+        print(f"kinswarm: error: cannot write the output to {where}: {self.error.strerror}", file=sys.stderr)
+        return 1
+
+
+def _stdout_name() -> str:
+    try:
+        return os.readlink("/proc/self/fd/1")
+    except OSError:
+        return "stdout"
+
+
+class Output:
+    """sys.stdout whose OSErrors are OutputGone: told apart from the OSErrors of the run's own files."""
+
+    def __init__(self, inner: Any) -> None:
+        self.inner = inner
+
+    def write(self, text: str) -> int:
+        try:
+            return self.inner.write(text)
+        except OSError as e:
+            raise OutputGone(e) from None
+
+    def flush(self) -> None:
+        try:
+            self.inner.flush()
+        except OSError as e:
+            raise OutputGone(e) from None
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self.inner, name)
+
+
+def interrupted_code(e: KeyboardInterrupt | None = None, by: str = "") -> int:
+    """The exit code of a run stopped by a signal: 128 + its number (130: Ctrl-C, 143: SIGTERM)."""
+    signum = getattr(e, "signum", 0) or (signal.Signals[by] if by in signal.Signals.__members__ else signal.SIGINT)
+    return 128 + int(signum)
 
 
 def _view(a: argparse.Namespace) -> int:
@@ -198,8 +264,7 @@ def _view(a: argparse.Namespace) -> int:
     note = reading_note(a.run_dir, "recording")
     if not shown_epochs(a.run_dir):  # before a file is written or a viewer opened: never an empty recording
         raise ConfigError(f"{a.run_dir}: no epoch with both its metrics and its poses recorded: nothing to show")
-    if a.save is not None and not a.save.parent.is_dir():
-        raise ConfigError(f"--save {a.save}: no such directory {a.save.parent}")
+    a.save = save_file(a.save) if a.save is not None else None
     _note(note)
     run_id = a.run_dir.resolve().name
     stream = open_stream(run_id, save=a.save, web=a.web)
@@ -213,6 +278,18 @@ def _view(a: argparse.Namespace) -> int:
 
         serve_until_interrupted()
     return 0
+
+
+def save_file(given: str) -> Path:
+    """`view --save FILE.rrd`: a file this command can create, or one line naming why not."""
+    path = Path(given)
+    if given.endswith(("/", os.sep)) or path.is_dir():
+        raise ConfigError(f"--save {given}: a directory; give the recording's file, e.g. {path / 'recording.rrd'}")
+    if not path.parent.is_dir():
+        raise ConfigError(f"--save {given}: no such directory {path.parent}")
+    if not os.access(path.parent, os.W_OK | os.X_OK) or (path.exists() and not os.access(path, os.W_OK)):
+        raise ConfigError(f"--save {given}: not writable")
+    return path
 
 
 def _note(note: str | None) -> None:
@@ -232,6 +309,12 @@ def _epoch_list(text: str | None) -> list[int] | None:
     if not out or min(out) < 0:
         raise ConfigError(f"--epochs: epochs count from 0, got {text!r}")
     return out
+
+
+def os_error(e: OSError) -> str:
+    """An OSError as a line: the file (both, for a rename) and the cause."""
+    where = f"{e.filename} -> {e.filename2}" if e.filename2 else e.filename
+    return f"{where}: {e.strerror or e}" if where else str(e.strerror or e)
 
 
 def _main(argv: list[str] | None) -> int:
@@ -274,7 +357,7 @@ def _main(argv: list[str] | None) -> int:
                     print(f"kinswarm: host {summary['host']} failed: {summary['error']}", file=sys.stderr)
                     return 1
                 print(f"kinswarm: host {summary['host']} done ({cfg.run_id})")
-                return 130 if summary.get("interrupted") else 0
+                return interrupted_code(by=summary.get("interrupted_by", "")) if summary.get("interrupted") else 0
         elif getattr(a, "resume", None) is not None:
             cfg = _resumed(a)
             if a.view:
@@ -298,9 +381,15 @@ def _main(argv: list[str] | None) -> int:
     except zenoh.ZError as e:  # a session a tool opens (router, down, a follower's fetch): Zenoh's words, one line
         print(f"kinswarm: error: {zenoh_reason(e)}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
+    except RecordError as e:  # a record the run could not open (its directory full or read-only): the run is kept
+        print(f"kinswarm: error: {e}", file=sys.stderr)
+        return 1
+    except OSError as e:  # the disk refused (full, read-only, forbidden): the path and the cause, one line
+        print(f"kinswarm: error: {os_error(e)}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt as e:
         print("kinswarm: interrupted", file=sys.stderr)
-        return 130
+        return interrupted_code(e)
     fe = summary["final_error"]
     if fe:
         last = fe[-20:]
@@ -322,8 +411,10 @@ def _main(argv: list[str] | None) -> int:
             file=sys.stderr,
         )
     if summary.get("error"):
-        print(f"kinswarm: the run failed: {summary['error']}", file=sys.stderr)
+        how = "goes on from its last checkpoint" if summary.get("epochs") else "starts it again (no epoch had ended)"
+        again = f"`kinswarm run --resume {cfg.out}` {how}"
+        print(f"kinswarm: the run failed: {summary['error']}; {again}", file=sys.stderr)
         return 1
     if summary.get("interrupted"):
-        return 130
+        return interrupted_code(by=summary.get("interrupted_by", ""))
     return 0

@@ -173,7 +173,8 @@ def build_parser() -> argparse.ArgumentParser:
         "step, epoch and step_in_epoch: scrub back and forth across the faults.",
     )
     view.add_argument("run_dir", type=Path, metavar="RUN-DIR")
-    view.add_argument("--save", type=Path, default=None, metavar="FILE.rrd", help="write the recording, open nothing")
+    # a string: `Path` would drop the trailing "/" that says a directory was meant
+    view.add_argument("--save", type=str, default=None, metavar="FILE.rrd", help="write the recording, open nothing")
     view.add_argument("--web", action="store_true", help="serve the viewer for a browser instead of spawning it")
     anim.add_argument("run_dir", type=Path, metavar="RUN-DIR")
     anim.add_argument("--epochs", default=None, help="which epochs, e.g. 0,5,9 (default: first, last, with events)")

@@ -12,12 +12,15 @@ that never overlap, and a title that says what drove the robot."""
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
+import os
 from pathlib import Path
 from typing import Any
 
 from kinswarm.actors.report.arm import arm_axes, arm_points, draw_axes, floor_shadow, joint_points
+from kinswarm.actors.report.figure import save_figure
 from kinswarm.actors.report.timeline import Span, active_at_end, fault_spans, label_groups, one_per_command
 from kinswarm.actors.run.config import RunConfig, load_run_config
 from kinswarm.protocol import frames
@@ -146,7 +149,7 @@ def write_plots(run_dir: Path, log: bool = False) -> list[Path]:
         ax.set_title(f"{cfg.run_id}: {topo.name}, {_controller(cfg)}, seed {cfg.seed}", fontsize=10)
         _legend_beside(ax)
         fig.tight_layout()
-        fig.savefig(run_dir / "learning_curve.png", dpi=110)
+        save_figure(fig, run_dir / "learning_curve.png", dpi=110)
         plt.close(fig)
         written.append(run_dir / "learning_curve.png")
 
@@ -176,7 +179,7 @@ def write_plots(run_dir: Path, log: bool = False) -> list[Path]:
             _legend_beside(ax)
         ax.set_title(f"{_controller(cfg)}: final error {rows[-1]['final_error']:.3f}", fontsize=10)
         fig.tight_layout()
-        fig.savefig(run_dir / "arm.png", dpi=110)
+        save_figure(fig, run_dir / "arm.png", dpi=110)
         plt.close(fig)
         written.append(run_dir / "arm.png")
 
@@ -197,7 +200,7 @@ def write_plots(run_dir: Path, log: bool = False) -> list[Path]:
         axes[-1, 0].set_xlabel("step (error after the step's joint actions)")
         fig.suptitle(f"{cfg.run_id}: end-effector error within an epoch ({_controller(cfg)})", fontsize=10)
         fig.tight_layout()
-        fig.savefig(run_dir / "tracking.png", dpi=110)
+        save_figure(fig, run_dir / "tracking.png", dpi=110)
         plt.close(fig)
         written.append(run_dir / "tracking.png")
     if scene.object is not None:  # an object to grasp (paper §5.5): the fingers, forces, friction cones
@@ -267,6 +270,25 @@ def _legend_beside(ax: Any) -> None:
 
 
 def write_summary(run_dir: Path, extra: dict[str, Any]) -> dict[str, Any]:
+    """`summary.json`, written whole or not at all (a full disk leaves no torn summary: the run stays resumable)."""
+    summary = summarize(run_dir, extra)
+    path = run_dir / "summary.json"
+    tmp = path.with_name(f".{path.name}.tmp")
+    try:
+        tmp.write_text(json.dumps(summary, indent=2) + "\n")
+        os.replace(tmp, path)
+    except OSError as e:  # named as the user knows it, not as its temporary file
+        with contextlib.suppress(OSError):
+            tmp.unlink(missing_ok=True)
+        raise OSError(e.errno, e.strerror or str(e), str(path)) from None
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+    return summary
+
+
+def summarize(run_dir: Path, extra: dict[str, Any]) -> dict[str, Any]:
+    """What summary.json says of the run in `run_dir` (`extra`: what its run returned), nothing written."""
     cfg = load_run_config(run_dir / "config.json")
     topo, scene = cfg.topo(), cfg.scene_spec
     rows = read_metrics(run_dir)
@@ -299,7 +321,6 @@ def write_summary(run_dir: Path, extra: dict[str, Any]) -> dict[str, Any]:
         from kinswarm.actors.report.grasp import grasp_summary
 
         summary["grasp"] = grasp_summary(rows, topo, scene.object)
-    (run_dir / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
     return summary
 
 

@@ -13,6 +13,7 @@ import math
 from pathlib import Path
 from typing import Any
 
+from kinswarm.actors.report.figure import save_figure
 from kinswarm.protocol.scene import ObjectSpec
 from kinswarm.protocol.topology import Topology
 
@@ -164,6 +165,6 @@ def write_grasp_plots(
 
 
 def _save(fig: Any, plt: Any, path: Path) -> Path:
-    fig.savefig(path, dpi=100)
+    save_figure(fig, path, dpi=100)
     plt.close(fig)
     return path

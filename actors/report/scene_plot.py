@@ -8,6 +8,7 @@ from collections.abc import Sequence
 from typing import Any
 
 from kinswarm.actors.report.arm import arm_points
+from kinswarm.actors.report.figure import save_figure
 from kinswarm.protocol.obstacles import ObstacleSpec
 from kinswarm.protocol.topology import Topology
 
@@ -92,5 +93,5 @@ def write_scene_plot(
     fig, ax = plt.subplots(figsize=(6.5, 6.0))
     plot_scene_epochs(ax, topo, obstacles, goal, rows, title)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    save_figure(fig, path, dpi=110)
     plt.close(fig)

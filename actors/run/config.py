@@ -224,11 +224,27 @@ class RunConfig:
         return self.secret.encode()
 
     def write(self, path: Path) -> None:
-        """Owner-only (0600): the file holds the run's secret."""
-        fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
-        with os.fdopen(fd, "w") as f:
-            f.write(self.to_json() + "\n")
-        os.chmod(path, 0o600)
+        """Owner-only (0600): the file holds the run's secret. Written whole or not at all (a new file renamed into
+        place): a resume rewrites the config.json of a run that must stay resumable, whatever cuts the write short."""
+        path = Path(path)
+        tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+        try:
+            fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
+            with os.fdopen(fd, "w") as f:
+                f.write(self.to_json() + "\n")
+                f.flush()
+                os.fsync(f.fileno())
+            os.chmod(tmp, 0o600)
+            os.replace(tmp, path)
+        except BaseException:
+            tmp.unlink(missing_ok=True)
+            raise
+
+    def located(self, run_dir: str | os.PathLike[str]) -> RunConfig:
+        """This run with its directory where it is now: a run directory may be moved or copied, and every actor finds
+        its files in the directory it was handed, never at the path recorded when the run began."""
+        here = str(Path(run_dir).resolve())
+        return self if self.out == here else dataclasses.replace(self, out=here)
 
 
 def config_from_json(text: str, source: str = "<memory>") -> RunConfig:

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import dataclasses
 import logging
 import os
 import signal
@@ -18,7 +19,7 @@ from typing import TYPE_CHECKING
 from kinswarm.actors.deploy.plan import Plan, PlanError, local_plan
 from kinswarm.actors.run.config import AUTO_LISTEN, ENDPOINT, ConfigError, RunConfig
 from kinswarm.actors.run.resolved import write_resolved
-from kinswarm.actors.run.resume import Resume, prepare_resume
+from kinswarm.actors.run.resume import Resume, prepare_resume, settle
 from kinswarm.actors.run.rundir import Claim, claim, reclaim
 from kinswarm.actors.runtime import NetSpec, open_session
 from kinswarm.actors.runtime.net import zenoh_reason
@@ -41,27 +42,35 @@ def write_net(path: Path, spec: NetSpec) -> Path:
     return path
 
 
+class Interrupted(KeyboardInterrupt):
+    """A start interrupted (Ctrl-C, SIGTERM) before its first epoch: it leaves nothing; `signum` for the exit code."""
+
+    def __init__(self, signum: int) -> None:
+        super().__init__(signal.Signals(signum).name)
+        self.signum = signum
+
+
 @contextlib.contextmanager
-def _signals_stop_once() -> Iterator[None]:
+def _signals_stop_once() -> Iterator[list[int]]:
     """Ctrl-C or SIGTERM cancels the running task once; the supervisor then stops the swarm and the
     summary is written. More signals until then only say so: a second Ctrl-C cancelling the shutdown
-    would leave the actors without their Stop and the run without its summary."""
+    would leave the actors without their Stop and the run without its summary. Yields the signals caught, in order
+    (the first is the one that stopped the run: its exit code)."""
     task, loop = asyncio.current_task(), asyncio.get_running_loop()
     assert task is not None
-    signals = 0
+    caught: list[int] = []
 
-    def on_signal() -> None:
-        nonlocal signals
-        signals += 1
-        if signals == 1:
+    def on_signal(sig: int) -> None:
+        caught.append(sig)
+        if len(caught) == 1:
             task.cancel()
-        elif signals == 2:
+        elif len(caught) == 2:
             print("kinswarm: stopping the swarm and writing its summary, please wait", file=sys.stderr)
 
     for sig in (signal.SIGINT, signal.SIGTERM):
-        loop.add_signal_handler(sig, on_signal)
+        loop.add_signal_handler(sig, on_signal, int(sig))
     try:
-        yield
+        yield caught
     finally:
         for sig in (signal.SIGINT, signal.SIGTERM):
             loop.remove_signal_handler(sig)
@@ -106,14 +115,25 @@ async def _supervise(
         sup.resumed = resume
         undo.pop_all()
     claimed.begin()  # from here on the run directory is the run's, however it ends
-    with _signals_stop_once():
+    with _signals_stop_once() as caught:
         try:
             result = await sup.run()
         finally:
             close_watchers()
             session.close()
+        if result.interrupted and caught:
+            result.signal = signal.Signals(caught[0]).name
+            if resume is None and not result.epochs:  # stopped while starting: nothing of it blocks a retry
+                claimed.withdraw()
+                raise Interrupted(caught[0])
         if not lead:
-            return {"host": host, "error": result.error, "interrupted": result.interrupted, "restarts": result.restarts}
+            return {
+                "host": host,
+                "error": result.error,
+                "interrupted": result.interrupted,
+                "interrupted_by": result.signal,
+                "restarts": result.restarts,
+            }
         return _finish(cfg, result, progress)
 
 
@@ -181,24 +201,38 @@ def _watchers(cfg: RunConfig, progress: bool, view: str | None) -> tuple[OnEpoch
 
 
 def _finish(cfg: RunConfig, result: RunResult, progress: bool) -> dict:
-    """The run's summary, plots and records, from what the leader gathered."""
+    """The run's summary, plots and records, from what the leader gathered. What the disk refuses (full, read-only,
+    forbidden) is one line, never a traceback: a summary that cannot be written fails the run and leaves it as a
+    killed run leaves it, resumable; plots and records that cannot be written are a warning each (`kinswarm report`
+    and `animate` draw them again)."""
     from kinswarm.actors.report import write_plots, write_summary
+    from kinswarm.actors.supervisor.result import cannot_write
 
     out = Path(cfg.out)
-    summary = write_summary(
-        out,
-        {
-            "wall_seconds": result.wall_seconds,
-            "interrupted": result.interrupted,
-            "error": result.error,
-            "rejected_messages": result.rejected,
-            "rejected_by_actor": result.rejected_by,
-            "restarts": result.restarts,
-            "tokens_lost": result.tokens_lost,
-        },
-    )
-    write_plots(out)
-    if cfg.record:
+    extra = {
+        "wall_seconds": result.wall_seconds,
+        "interrupted": result.interrupted,
+        "interrupted_by": result.signal,
+        "error": result.error,
+        "rejected_messages": result.rejected,
+        "rejected_by_actor": result.rejected_by,
+        "restarts": result.restarts,
+        "tokens_lost": result.tokens_lost,
+    }
+    try:
+        summary = write_summary(out, extra)
+    except OSError as e:
+        from kinswarm.actors.report import summarize
+
+        summary = summarize(out, extra)
+        unwritten = cannot_write(out / "summary.json", e)
+        summary["error"] = f"{summary['error']}; {unwritten}" if summary["error"] else unwritten
+        return summary
+    try:
+        write_plots(out)
+    except OSError as e:
+        log.warning("plots not written: %s (`kinswarm report %s` draws them)", cannot_write(out, e), out)
+    if cfg.record and summary["epochs"]:  # an interrupted start has no epoch to draw
         write_records(out, progress)
     return summary
 
@@ -273,7 +307,10 @@ def resume_swarm(cfg: RunConfig, topo: Topology, progress: bool = False, view: s
     check_start(plan, topo)
     out = Path(cfg.out)
     with reclaim(out) as claimed:
+        cfg, moved = settle(out, cfg)
         resume = prepare_resume(out, cfg)
+        if moved:
+            resume = dataclasses.replace(resume, detail=f"{moved}; {resume.detail}")
         return asyncio.run(_supervise(cfg, topo, progress, plan, plan.leader, claimed, view=view, resume=resume))
 
 

@@ -147,7 +147,8 @@ def main(argv: list[str] | None = None) -> int:
     setup_logging(a.log_level)
     sys.setswitchinterval(0.0005)  # zenoh callbacks need the GIL promptly (shared notes: p99 10 -> 3 ms)
     try:
-        cfg = load_run_config(a.config)
+        # its files are in the directory of the config.json it was handed (moved or copied since, perhaps)
+        cfg = load_run_config(a.config).located(a.config.parent)
         net = NetSpec.from_json(a.net.read_text())
         asyncio.run(_serve(a.role, a.ident, cfg, net, parent, a.restore, a.supervisor))
     except Exception as e:  # a clear last word in the actor's log; the supervisor reports it

@@ -95,6 +95,11 @@ class Claim:
     def begin(self) -> None:
         self.begun = True
 
+    def withdraw(self) -> None:
+        """The run ended before its first epoch (interrupted while starting): what it made goes as a failed start's
+        does, once the exception that ends it leaves `claim`, so the same --run-id can be tried again."""
+        self.begun = False
+
 
 def _clear(out: Path, keep: set[str], made_dir: bool) -> None:
     """Remove what a failed start made in `out` (every entry not in `keep`; `out` too if it made it)."""
