@@ -390,7 +390,9 @@ class Supervisor:
         slept = self.waking.slept
         log.warning("the supervisor did not run for %.1f s (stopped or starved): asking again for its replies", slept)
         if self.training:
-            self.event("woke", "supervisor", f"did not run for {slept:.1f} s (stopped or starved)")
+            self.event(
+                "woke", "supervisor", f"did not run for {slept:.1f} s (stopped or starved)", seconds=round(slept, 3)
+            )
         self.stalls.woke(now)
         self.ask_again("the supervisor woke")
 
