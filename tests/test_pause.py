@@ -42,9 +42,11 @@ def _wait(what: str, ready: Any, proc: subprocess.Popen, guard: float = 300.0) -
     raise AssertionError(f"no {what} within the {guard:.0f} s hang guard")
 
 
-@pytest.mark.timeout(600)
-def test_a_supervisor_paused_3_s_finishes_with_the_clean_runs_final_errors(tmp_path, chain4):
-    ref = tmp_path / "ref"
+@pytest.fixture(scope="module")
+def clean_final_errors(tmp_path_factory: pytest.TempPathFactory) -> list[float]:
+    """RUN's final errors undisturbed (the inprocess placement: the same numbers as process, without processes)."""
+    ref = tmp_path_factory.mktemp("clean") / "ref"
+    chain4 = Path(__file__).resolve().parents[1] / "examples" / "chain4.toml"
     clean = subprocess.run(
         [*CLI, "run", str(chain4), *RUN, "--placement", "inprocess", "--out", str(ref), "--no-progress"],
         capture_output=True,
@@ -54,13 +56,23 @@ def test_a_supervisor_paused_3_s_finishes_with_the_clean_runs_final_errors(tmp_p
     assert clean.returncode == 0, clean.stdout + clean.stderr
     want = [r["final_error"] for r in _rows(ref)]
     assert len(want) == 5
+    return want
 
-    out = tmp_path / "paused"
-    argv = [*CLI, "run", str(chain4), *RUN, "--out", str(out), "--listen", f"tcp/127.0.0.1:{free_port()}"]
+
+def _start(out: Path, chain4: Path, *args: str) -> subprocess.Popen:
+    argv = [*CLI, "run", str(chain4), *RUN, "--out", str(out), "--listen", f"tcp/127.0.0.1:{free_port()}", *args]
     proc = subprocess.Popen(
         [*argv, "--no-progress"], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, start_new_session=True
     )
     LIVE.append(proc)  # stopped with its actors whatever the outcome (conftest)
+    return proc
+
+
+@pytest.mark.timeout(600)
+def test_a_supervisor_paused_3_s_finishes_with_the_clean_runs_final_errors(tmp_path, chain4, clean_final_errors):
+    want = clean_final_errors
+    out = tmp_path / "paused"
+    proc = _start(out, chain4)
     _wait("epoch 1's end", lambda: len(_rows(out)) >= 1, proc)
     os.kill(proc.pid, signal.SIGSTOP)  # the supervisor: the swarm steps on without it, its links lapse
     try:
@@ -75,6 +87,30 @@ def test_a_supervisor_paused_3_s_finishes_with_the_clean_runs_final_errors(tmp_p
     assert woke and woke[0]["seconds"] >= 2.0, events  # it saw its own pause, and said how long
     # its pause is no one's fault: no actor counted lost, no stall
     assert not [e for e in events if e["event"] in ("lost", "stall", "failed")], events
+    assert swarm_pids(str(out)) == []
+
+
+@pytest.mark.timeout(600)
+def test_a_run_that_failed_with_good_checkpoints_resumes_saying_what_failed(tmp_path, chain4, clean_final_errors):
+    # No restart allowed: an agent killed after two epochs fails the run (its checkpoints are good)
+    out = tmp_path / "failed"
+    proc = _start(out, chain4, "--max-restarts", "0", "--run-id", "fr")
+    _wait("epoch 1's end", lambda: len(_rows(out)) >= 2, proc)
+    (a2,) = swarm_pids(f"agent a2 {out / 'config.json'}")  # its process, as ROLE ID CONFIG names it
+    os.kill(a2, signal.SIGKILL)  # a crash
+    text, _ = proc.communicate(timeout=300)
+    summary = json.loads((out / "summary.json").read_text())
+    if proc.returncode == 0:  # the kill came after the last epoch's checkpoint: nothing failed, nothing to test
+        pytest.skip("the run ended before the kill landed")
+    assert proc.returncode == 1 and "restart policy: at most 0" in summary["error"], text.decode()
+    resumed = subprocess.run([*CLI, "run", "--resume", str(out), "--no-progress"], capture_output=True, text=True)
+    assert resumed.returncode == 0, resumed.stdout + resumed.stderr
+    assert "had failed (agent a2 exited" in resumed.stderr, resumed.stderr  # it says what failed, and goes on
+    assert [r["final_error"] for r in _rows(out)] == clean_final_errors  # to the bit
+    final = json.loads((out / "summary.json").read_text())
+    assert not final.get("error") and len(final["final_error"]) == 5, final
+    resume = [json.loads(line) for line in (out / "events.jsonl").read_text().splitlines()]
+    assert any(e["event"] == "resume" and "had failed" in e["detail"] for e in resume), resume
     assert swarm_pids(str(out)) == []
 
 

@@ -22,6 +22,7 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import json
+import logging
 import os
 from dataclasses import dataclass
 from pathlib import Path
@@ -29,6 +30,8 @@ from pathlib import Path
 from kinswarm.actors.run.checkpoint import CheckpointError, load_checkpoint, previous
 from kinswarm.actors.run.config import ConfigError, RunConfig, load_run_config, recorded_version, writer_version
 from kinswarm.actors.run.rundir import failed_start, lock_held, run_state
+
+log = logging.getLogger("kinswarm.resume")
 
 FLAG = "--resume"
 
@@ -57,7 +60,7 @@ def check_resume(run_dir: Path) -> RunConfig:
     if lock_held(run_dir):
         raise ConfigError(f"{where}: run {cfg.run_id} is still running (a process holds its lock): nothing to resume")
     state = run_state(run_dir)
-    if state.summary is not None:
+    if state.summary is not None and not state.summary.get("error"):  # a failed run goes on from its checkpoints
         raise ConfigError(f"{where}: run {cfg.run_id} {state.how} at {state.when} (summary.json): nothing to resume")
     if failed_start(run_dir):
         raise ConfigError(f"{where}: run {cfg.run_id} never began (no epoch): start it again with `kinswarm run`")
@@ -117,7 +120,12 @@ def _keep_rows(path: Path, last: int) -> int:
 
 
 def prepare_resume(out: Path, cfg: RunConfig) -> Resume:
-    """Make `out` the run as it was at its last complete checkpoint (the caller holds its lock)."""
+    """Make `out` the run as it was at its last complete checkpoint (the caller holds its lock). A run that failed
+    (a stall, a lost message, a restart budget spent: its summary says so) goes on too, saying what failed; its summary
+    goes, a new one is written when it ends."""
+    failed = ""
+    with contextlib.suppress(OSError, ValueError, AttributeError):
+        failed = json.loads((out / "summary.json").read_text()).get("error") or ""
     agents = cfg.topo().dof_agents if cfg.controller == "agents" and cfg.learn else []
     whole = _whole_epochs(out / "metrics.jsonl")
     last_row = whole[-1] if whole else -1
@@ -152,4 +160,8 @@ def prepare_resume(out: Path, cfg: RunConfig) -> Resume:
     else:
         source = f"epoch {last + 1} (nothing learns: no checkpoint needed)"
     detail = f"resumed from {source}; metrics rows dropped past it: {dropped['metrics.jsonl']}"
+    if failed:
+        (out / "summary.json").unlink(missing_ok=True)
+        detail = f"the run had failed ({failed}); {detail}"
+        log.warning("run %s had failed (%s): going on from %s", cfg.run_id, failed, source)
     return Resume(epoch=last + 1, restore=last >= 0 and bool(agents), detail=detail)
