@@ -9,12 +9,13 @@ from typing import Any
 
 from .spec import SpecError
 from .topology import Topology, parse_planar_robot
-from .urdf_robot import parse_urdf_robot
 
 
 def parse_robot(robot: Any, source: str = "<memory>", where: str = "robot") -> Topology:
     """Validate a `[robot]` table and build the Topology; errors name the source and the field."""
     if isinstance(robot, dict) and "urdf" in robot:
+        from .urdf_robot import parse_urdf_robot  # here: it needs numpy, which reading a run's config does not
+
         return parse_urdf_robot(robot, source, where)
     return parse_planar_robot(robot, source, where)
 

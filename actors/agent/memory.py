@@ -21,6 +21,7 @@ class Memory:
         self.epochs_before = 0  # epochs trained before this run (from --from), for the lr schedule
         self.restored: Event | None = None  # what a restart restored, announced once alive
         self.kind: str = agent.cfg.learner.get("kind", DEFAULT)  # the learner kind its checkpoints hold the state of
+        self.saved: Saved | None = None  # the answer to the last checkpoint request, given again if it comes again
 
     def restore(self, directory: Path) -> None:
         """Start from a previous run's checkpoint (`--from`)."""
@@ -62,6 +63,10 @@ class Memory:
         # Into this agent's own run directory, where a restart restores from: on another host than the
         # leader's, `m.directory` (the leader's) need not exist.
         a = self.agent
+        if self.saved is not None and m.epoch <= self.saved.epoch:  # asked again: its answer was lost on the way
+            if m.epoch == self.saved.epoch:  # (an older request is stale: saving now would label this state wrong)
+                a.node.send(a.keys.rep("agent", a.id), self.saved)
+            return
         path = Path(a.cfg.out) / "agents" / f"{a.id}.npz"
         error = ""
         if a.learner is not None:
@@ -71,4 +76,5 @@ class Memory:
             except OSError as e:  # a full disk, a read-only directory: the line the run fails with
                 error = f"cannot write {path}: {e.strerror or e}"
                 a.node.log.error(error)
-        a.node.send(a.keys.rep("agent", a.id), Saved(epoch=m.epoch, path=str(path), error=error))
+        self.saved = Saved(epoch=m.epoch, path=str(path), error=error)
+        a.node.send(a.keys.rep("agent", a.id), self.saved)

@@ -9,17 +9,13 @@ its children wait for it (each step then ends at the sim's deadline) until the s
 
 from __future__ import annotations
 
-import asyncio
-import math
-import time
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from typing import TYPE_CHECKING, Any
 
+from kinswarm.actors.runtime.wake import WakeGuard  # noqa: F401  (the agent's, kept importable from here)
 from kinswarm.protocol.messages import Event, Up
 
 if TYPE_CHECKING:
-    from kinswarm.actors.runtime import Node
-
     from .actor import Agent
 
 
@@ -132,52 +128,3 @@ class StandIn:
         epoch, step = a.last_begun
         a.node.log.info("%s %s: %s", event, target, detail)
         a.node.send(a.keys.metrics("event"), Event(epoch=epoch, step=step, event=event, target=target, detail=detail))
-
-
-class WakeGuard:
-    """What a descendant's token going means when this agent has itself just woken from a stall (SIGSTOPped by a
-    freeze, or starved past the lease): its own links lapsed while it slept, so as its session reconnects every
-    peer's token goes and comes back. That is not a descendant leaving: a Panda's a4, thawed after 2 s, stood in for
-    its healthy child a5 for one step (adopt, handback). A loss heard within a lease of such a wake is held, and
-    counts only if the token is still gone a lease later; any other loss counts at once, as before."""
-
-    def __init__(self, node: Node, lease_s: float, clock: Callable[[], float] = time.monotonic) -> None:
-        self.node, self.lease, self.clock = node, lease_s, clock
-        self.tick = lease_s / 4
-        self.due = math.inf  # when the ticker should next run (none before watch())
-        self.woke = -math.inf  # when the ticker last found itself late by more than half a lease
-        self.held: set[str] = set()  # descendants whose token went as this agent woke, not back yet
-
-    async def watch(self) -> None:
-        """Tick every quarter lease; a tick late by half a lease means this process did not run meanwhile."""
-        while True:
-            self.due = self.clock() + self.tick
-            await asyncio.sleep(self.tick)
-            if (now := self.clock()) - self.due > self.lease / 2:
-                self.woke = now
-
-    def just_woke(self) -> bool:
-        now = self.clock()  # a tick overdue now: the ticker has not run since the wake
-        return now - self.due > self.lease / 2 or now - self.woke < self.lease
-
-    def token(self, change: str) -> str | None:
-        """The change to act on ('+a5', '-a5'), or None while a loss is held. '?a5': a held loss's lease is up."""
-        sign, agent = change[0], change[1:]
-        if sign == "+":
-            self.held.discard(agent)
-            return change
-        if sign == "?":
-            if agent not in self.held:
-                return None  # it came back
-            self.held.discard(agent)
-            return "-" + agent
-        if not self.just_woke():
-            return change
-        if agent not in self.held:
-            self.held.add(agent)
-            self.node.log.info("%s's token went as this agent woke from a stall: a loss if still gone in %.1f s",
-                               agent, self.lease)  # fmt: skip
-            asyncio.get_running_loop().call_later(
-                self.lease, self.node.mailbox.push_local, "__alive__", b"?" + agent.encode()
-            )
-        return None

@@ -2,6 +2,6 @@
 
 import sys
 
-from kinswarm.actors.cli.commands import main
+from kinswarm.actors.cli.entry import main
 
 sys.exit(main())

@@ -23,7 +23,7 @@ from kinswarm.actors.report import error_line
 from kinswarm.actors.run.checkpoint import CheckpointError
 from kinswarm.actors.run.config import ConfigError, RunConfig, check_endpoint
 from kinswarm.actors.run.launch import resume_swarm, run_swarm
-from kinswarm.actors.run.rundir import check_dir, failed_start, reading_note, run_state
+from kinswarm.actors.run.rundir import check_dir, reading_note
 from kinswarm.actors.run.runfile import load_run
 from kinswarm.actors.runtime import setup_logging
 from kinswarm.actors.runtime.net import zenoh_reason
@@ -116,60 +116,9 @@ def _resumed(a: argparse.Namespace) -> RunConfig:
 
 
 def _control(a: argparse.Namespace) -> int:
-    from kinswarm.actors.cli.control import (
-        Client,
-        ControlError,
-        make_fault,
-        parse_duration,
-        run_config,
-        run_config_at,
-        show_status,
-        tool_net,
-    )
+    from kinswarm.actors.cli.control import run_command
 
-    f = None
-    if a.command == "fault":  # the fault first: what is wrong with it needs no run to say
-        f = make_fault(
-            a.fault,
-            a.targets,
-            seconds=parse_duration(a.duration) if a.duration else None,
-            steps=a.steps,
-            rate=a.rate,
-            ms=a.ms,
-            amplitude_deg=a.amplitude,
-            factor=a.factor,
-            degrees=a.degrees,
-            robot=a.robot,
-        )
-    if a.run_dir is None and "/" in a.run_id:  # a run's directory, not an id (ids have no "/"): its own id
-        a.run_dir = Path(a.run_id)
-        a.run_id = run_config_at(a.run_dir).run_id
-    cfg = run_config(a.run_id, a.run_dir)
-    run_dir = a.run_dir or Path("runs") / a.run_id
-    state = run_state(run_dir)
-    if f is not None and state.summary is not None:  # said at once: no supervisor is there to ask
-        raise ControlError(f"run {a.run_id} {state.how} at {state.when}; nothing to fault")
-    if state.summary is None and not state.live and a.connect is None:  # its lock is free: no process runs it here
-        why = "its start failed" if failed_start(run_dir) else "it was killed"
-        raise ControlError(
-            f"run {a.run_id} is not running ({why}: nothing holds {run_dir / '.lock'} and it has no summary); "
-            "for a run on another host pass --connect ENDPOINT"
-        )
-    connect = tool_net(run_dir, cfg, a.connect)
-    if f is None:
-        asyncio.run(show_status(cfg, connect, a.watch, run_dir))
-        return 0
-
-    async def send() -> int:
-        async with Client(cfg, connect) as c:
-            reply = await c.fault(f)
-        if reply.error:
-            print(f"kinswarm: fault refused: {reply.error}", file=sys.stderr)
-            return 2
-        print(f"{a.run_id}: {describe(f)}: applied" + (f" ({reply.detail})" if reply.detail else ""))
-        return 0
-
-    return asyncio.run(send())
+    return run_command(a)
 
 
 def _experiment(a: argparse.Namespace, argv: list[str]) -> int:

@@ -3,24 +3,36 @@
 The client joins the run through the endpoint the supervisor listens on and signs its messages with
 the run's key, read from the run directory's config.json (owner-only): whoever can read that file may
 inject faults; nobody else on the network can.
+
+A lean path on purpose (`main`, which the console script calls for these two commands): a fault or a status asked on
+a loaded machine is mostly Python's start-up, so this module and what it imports stay off numpy, the learners, the
+report and the launcher: Zenoh, the codec, the keys, the run's config and its directory's state
+(benchmarks/control_latency.py measures it).
 """
 
 from __future__ import annotations
 
+import argparse
+import asyncio
 import math
 import os
 import re
 import secrets
+import signal
 import sys
 import time
 from pathlib import Path
 
 from kinswarm.actors.run.config import ConfigError, RunConfig, load_run_config
-from kinswarm.actors.runtime import NetSpec, Node, open_session
+from kinswarm.actors.run.rundir import failed_start, run_state
+from kinswarm.actors.runtime import NetSpec, Node, open_session, setup_logging
 from kinswarm.actors.runtime.net import zenoh_reason
-from kinswarm.protocol.faults import check_fault
+from kinswarm.protocol.faults import FAULTS, check_fault, describe
 from kinswarm.protocol.keys import Keys
 from kinswarm.protocol.messages import Fault, FaultReply, JointStatus, SwarmStatus
+from kinswarm.protocol.spec import SpecError
+
+COMMANDS = ("fault", "status")
 
 _DURATION = re.compile(r"^\s*([0-9]*\.?[0-9]+)\s*(ms|s|m|min|h)?\s*$")
 _UNIT = {"ms": 0.001, "s": 1.0, None: 1.0, "m": 60.0, "min": 60.0, "h": 3600.0}
@@ -214,3 +226,116 @@ def ended(run_dir: Path, run_id: str) -> str:
     fe = s.get("final_error") or []
     last = f", final error {fe[-1]:.3f}" if fe else ""
     return f"run {run_id} {how} ({len(fe)} epochs{last}; {run_dir / 'summary.json'})"
+
+
+VALUED = ("--for", "--ms", "--rate", "--steps", "--amplitude", "--factor", "--degrees", "--robot")  # fault's options
+
+
+def joined(argv: list[str]) -> list[str]:
+    """`--for -5s` as `--for=-5s`: argparse takes a value that starts with '-' for an option and says only
+    "expected one argument"; joined, the value reaches its own check, which says what is wrong with it."""
+    out: list[str] = []
+    for arg in argv:
+        if out and out[-1] in VALUED and arg.startswith("-"):
+            out[-1] = f"{out[-1]}={arg}"
+        else:
+            out.append(arg)
+    return out
+
+
+# -- the commands ---------------------------------------------------------------------------------------------------
+
+
+def add_control_commands(sub: argparse._SubParsersAction) -> None:
+    """`fault` and `status`, as `kinswarm`'s parser (parser.py) and this module's lean one both offer them."""
+    fault = sub.add_parser(
+        "fault",
+        help="inject a fault into a running swarm",
+        description="lock|free|disturb a joint, or reverse|scale|deadzone|offset|lag its motor or encoder (the robot, "
+        "unknown to the agents; free ends them all); kill|freeze|thaw|restart an agent (its process); "
+        "drop|delay|duplicate|corrupt|clear an agent's messages. TARGET: agent ids or `all`.",
+    )
+    fault.add_argument("run_id", metavar="RUN-ID")
+    fault.add_argument("fault", choices=FAULTS, metavar="FAULT")
+    fault.add_argument("targets", nargs="+", metavar="TARGET")
+    fault.add_argument("--for", dest="duration", default=None, help="freeze or message faults: how long (5s, 500ms)")
+    fault.add_argument("--steps", type=int, default=None, help="disturb: for how many steps; lag: how many behind")
+    fault.add_argument("--rate", type=float, default=None, help="drop/duplicate/corrupt: probability per message")
+    fault.add_argument("--ms", type=float, default=None, help="delay: milliseconds")
+    fault.add_argument("--amplitude", type=float, default=None, help="disturb: degrees per step (default 2)")
+    fault.add_argument("--factor", type=float, default=None, help="scale: the motor moves FACTOR x the command")
+    fault.add_argument("--degrees", type=float, default=None, help="deadzone: smallest move; offset: encoder error")
+    fault.add_argument("--robot", type=int, default=None, help="a fleet's joint faults: on robot N only (default: all)")
+    status = sub.add_parser("status", help="show a running swarm's actors (alive, pid, restarts, faults, joints)")
+    status.add_argument("run_id", metavar="RUN-ID")
+    status.add_argument("--watch", action="store_true", help="refresh live until Ctrl-C")
+    for q in (fault, status):
+        q.add_argument("--run-dir", type=Path, default=None, help="the run's directory (default runs/RUN-ID)")
+        q.add_argument("--connect", default=None, help="the run's endpoint (default: the one it listens on)")
+        q.add_argument("--log-level", default="ERROR")
+
+
+def run_command(a: argparse.Namespace) -> int:
+    """`kinswarm fault ...` or `kinswarm status ...`, parsed."""
+    f = None
+    if a.command == "fault":  # the fault first: what is wrong with it needs no run to say
+        f = make_fault(
+            a.fault,
+            a.targets,
+            seconds=parse_duration(a.duration) if a.duration else None,
+            steps=a.steps,
+            rate=a.rate,
+            ms=a.ms,
+            amplitude_deg=a.amplitude,
+            factor=a.factor,
+            degrees=a.degrees,
+            robot=a.robot,
+        )
+    if a.run_dir is None and "/" in a.run_id:  # a run's directory, not an id (ids have no "/"): its own id
+        a.run_dir = Path(a.run_id)
+        a.run_id = run_config_at(a.run_dir).run_id
+    cfg = run_config(a.run_id, a.run_dir)
+    run_dir = a.run_dir or Path("runs") / a.run_id
+    state = run_state(run_dir)
+    if f is not None and state.summary is not None:  # said at once: no supervisor is there to ask
+        raise ControlError(f"run {a.run_id} {state.how} at {state.when}; nothing to fault")
+    if state.summary is None and not state.live and a.connect is None:  # its lock is free: no process runs it here
+        why = "its start failed" if failed_start(run_dir) else "it was killed"
+        raise ControlError(
+            f"run {a.run_id} is not running ({why}: nothing holds {run_dir / '.lock'} and it has no summary); "
+            "for a run on another host pass --connect ENDPOINT"
+        )
+    connect = tool_net(run_dir, cfg, a.connect)
+    if f is None:
+        asyncio.run(show_status(cfg, connect, a.watch, run_dir))
+        return 0
+
+    async def send() -> int:
+        async with Client(cfg, connect) as c:
+            reply = await c.fault(f)
+        if reply.error:
+            print(f"kinswarm: fault refused: {reply.error}", file=sys.stderr)
+            return 2
+        print(f"{a.run_id}: {describe(f)}: applied" + (f" ({reply.detail})" if reply.detail else ""))
+        return 0
+
+    return asyncio.run(send())
+
+
+def main(argv: list[str]) -> int:
+    """`kinswarm fault|status ...` on the lean path (the console script's entry.py sends these here): the same
+    arguments, one-line errors and exit codes as through the whole CLI (commands.py), without its imports."""
+    signal.signal(signal.SIGINT, signal.default_int_handler)
+    p = argparse.ArgumentParser(prog="kinswarm", description="A swarm of per-joint learning agents over Zenoh.")
+    sub = p.add_subparsers(dest="command", required=True)
+    add_control_commands(sub)
+    try:
+        a = p.parse_args(joined(argv))
+        setup_logging(a.log_level)
+        return run_command(a)
+    except (SpecError, ConfigError, ControlError, ValueError) as e:
+        print(f"kinswarm: error: {e}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("kinswarm: interrupted", file=sys.stderr)
+        return 130

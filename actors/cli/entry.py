@@ -1,6 +1,8 @@
 """The `kinswarm` command's entry point: light on purpose. Ctrl-C during the few tenths of a second the imports take
-is a clean exit (no traceback), then the CLI's own handling takes over (actors/cli/commands.py main). The
-interpreter's own start (~0.05 s, before any of ours runs) is Python's."""
+is a clean exit (no traceback), then the CLI's own handling takes over (actors/cli/commands.py main). `fault` and
+`status` take a lean path of their own (actors/cli/control.py main): they are asked of a live run, often on a loaded
+machine, and need neither the learners nor the report. The interpreter's own start (~0.05 s, before any of ours runs)
+is Python's."""
 
 from __future__ import annotations
 
@@ -17,6 +19,10 @@ signal.signal(signal.SIGINT, _interrupted_while_starting)  # from the moment thi
 
 
 def main() -> int:
+    if sys.argv[1:2] in (["fault"], ["status"]):  # asked of a live run, often on a loaded machine: the lean path
+        from kinswarm.actors.cli.control import main as control
+
+        return control(sys.argv[1:])
     from kinswarm.actors.cli.commands import main as cli
 
     return cli()

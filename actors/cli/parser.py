@@ -8,9 +8,9 @@ import argparse
 import json
 from pathlib import Path
 
+from kinswarm.actors.cli.control import add_control_commands, joined  # noqa: F401  (joined: the CLI's, kept here)
 from kinswarm.actors.run.config import DEFAULT_LISTEN, PLACEMENTS
 from kinswarm.actors.runtime import LEASE_MS
-from kinswarm.protocol.faults import FAULTS
 
 
 def _goal(text: str) -> str:
@@ -179,27 +179,7 @@ def build_parser() -> argparse.ArgumentParser:
     anim.add_argument("run_dir", type=Path, metavar="RUN-DIR")
     anim.add_argument("--epochs", default=None, help="which epochs, e.g. 0,5,9 (default: first, last, with events)")
     anim.add_argument("--out", type=Path, default=None, help="the GIF to write (default RUN-DIR/motion.gif)")
-    fault = sub.add_parser(
-        "fault",
-        help="inject a fault into a running swarm",
-        description="lock|free|disturb a joint, or reverse|scale|deadzone|offset|lag its motor or encoder (the robot, "
-        "unknown to the agents; free ends them all); kill|freeze|thaw|restart an agent (its process); "
-        "drop|delay|duplicate|corrupt|clear an agent's messages. TARGET: agent ids or `all`.",
-    )
-    fault.add_argument("run_id", metavar="RUN-ID")
-    fault.add_argument("fault", choices=FAULTS, metavar="FAULT")
-    fault.add_argument("targets", nargs="+", metavar="TARGET")
-    fault.add_argument("--for", dest="duration", default=None, help="freeze or message faults: how long (5s, 500ms)")
-    fault.add_argument("--steps", type=int, default=None, help="disturb: for how many steps; lag: how many behind")
-    fault.add_argument("--rate", type=float, default=None, help="drop/duplicate/corrupt: probability per message")
-    fault.add_argument("--ms", type=float, default=None, help="delay: milliseconds")
-    fault.add_argument("--amplitude", type=float, default=None, help="disturb: degrees per step (default 2)")
-    fault.add_argument("--factor", type=float, default=None, help="scale: the motor moves FACTOR x the command")
-    fault.add_argument("--degrees", type=float, default=None, help="deadzone: smallest move; offset: encoder error")
-    fault.add_argument("--robot", type=int, default=None, help="a fleet's joint faults: on robot N only (default: all)")
-    status = sub.add_parser("status", help="show a running swarm's actors (alive, pid, restarts, faults, joints)")
-    status.add_argument("run_id", metavar="RUN-ID")
-    status.add_argument("--watch", action="store_true", help="refresh live until Ctrl-C")
+    add_control_commands(sub)  # fault, status: defined beside their lean path (control.py)
     exp = sub.add_parser(
         "experiment",
         help="reproduce one of the paper's experiments (or all): report.md, figures, results.json",
@@ -214,10 +194,6 @@ def build_parser() -> argparse.ArgumentParser:
     exp.add_argument("--jobs", type=int, default=1, help="runs in parallel worker processes (default 1)")
     exp.add_argument("--test-set", type=int, default=0, help="generalisation: the K-th block of 100 Halton goals")
     exp.add_argument("--log-level", default="ERROR")
-    for q in (fault, status):
-        q.add_argument("--run-dir", type=Path, default=None, help="the run's directory (default runs/RUN-ID)")
-        q.add_argument("--connect", default=None, help="the run's endpoint (default: the one it listens on)")
-        q.add_argument("--log-level", default="ERROR")
     up = sub.add_parser(
         "up",
         help="start this host's share of a deploy plan (the leading host trains)",
@@ -251,18 +227,3 @@ def build_parser() -> argparse.ArgumentParser:
     certs.add_argument("--run-file", type=Path, default=None, help="default: the plan's [run] file")
     certs.add_argument("--log-level", default="WARNING")
     return p
-
-
-VALUED = ("--for", "--ms", "--rate", "--steps", "--amplitude", "--factor", "--degrees", "--robot")  # fault's options
-
-
-def joined(argv: list[str]) -> list[str]:
-    """`--for -5s` as `--for=-5s`: argparse takes a value that starts with '-' for an option and says only
-    "expected one argument"; joined, the value reaches its own check, which says what is wrong with it."""
-    out: list[str] = []
-    for arg in argv:
-        if out and out[-1] in VALUED and arg.startswith("-"):
-            out[-1] = f"{out[-1]}={arg}"
-        else:
-            out.append(arg)
-    return out

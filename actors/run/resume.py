@@ -24,6 +24,7 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import json
+import logging
 import os
 import secrets
 from dataclasses import dataclass
@@ -33,6 +34,8 @@ from kinswarm.actors.run.checkpoint import CheckpointError, load_checkpoint, pre
 from kinswarm.actors.run.config import ConfigError, RunConfig, load_run_config, recorded_version, writer_version
 from kinswarm.actors.run.rundir import failed_start, lock_held, run_state
 from kinswarm.protocol.keys import check_id
+
+log = logging.getLogger("kinswarm.resume")
 
 FLAG = "--resume"
 
@@ -231,4 +234,6 @@ def prepare_resume(out: Path, cfg: RunConfig) -> Resume:
     else:
         source = f"epoch {last + 1} (nothing learns: no checkpoint needed)"
     detail = f"{before}resumed from {source}; metrics rows dropped past it: {dropped['metrics.jsonl']}"
+    if before:
+        log.warning("run %s %s at %s: going on from %s", cfg.run_id, ended.how, ended.when, source)
     return Resume(epoch=last + 1, restore=last >= 0 and bool(agents), detail=detail)

@@ -65,6 +65,7 @@ class SimActor:
         self._obs_after = [a for a in self.dof if a != topo.root]
         self.epoch: EpochStart | None = None
         self.last_epoch = -1  # the last accepted EpochStart
+        self._sent_done: EpochDone | None = None  # the last epoch's end, sent again when its start comes again
         # a joint fault applied before the first epoch acts from that epoch's step 0: its events wait to be stamped so
         # (a resumed run's first epoch is not known until its EpochStart)
         self._early: list[tuple[str, str, str]] = []
@@ -209,7 +210,14 @@ class SimActor:
     def _on_epoch(self, e: EpochStart) -> None:
         # A forged or replayed EpochStart must not reset the world mid-run or rewind the epoch count.
         if self.epoch is not None:
-            self.node.log.warning("ignored EpochStart %d: epoch %d is running", e.epoch, self.epoch.epoch)
+            if e.epoch != self.epoch.epoch:  # the running epoch's own start asked again: its end will come
+                self.node.log.warning("ignored EpochStart %d: epoch %d is running", e.epoch, self.epoch.epoch)
+            return
+        if e.epoch == self.last_epoch:  # the supervisor asks again: the end it waits for was lost (a pause, a cut)
+            done = self._sent_done
+            if done is not None and done.epoch == e.epoch:
+                self.node.log.info("epoch %d's start came again: its EpochDone goes out again", e.epoch)
+                self.node.send(self.keys.metrics("epoch"), done)
             return
         # The first start may be any epoch: a resumed run goes on after its checkpoint (actors/run/resume.py)
         if e.epoch != self.last_epoch + 1 and not (self.last_epoch < 0 <= e.epoch < self.cfg.epochs):
@@ -417,6 +425,11 @@ class SimActor:
 
     def _done(self, m: EpochDone) -> None:
         """The epoch is over: its metrics to the observers (a fleet's sim sends every robot's in one)."""
+        self._send_done(m)
+
+    def _send_done(self, m: EpochDone) -> None:
+        """An epoch's end out, kept until the next: the supervisor asks for it again with the epoch's start."""
+        self._sent_done = m
         self.node.send(self.keys.metrics("epoch"), m)
 
     @property

@@ -114,7 +114,7 @@ class FleetSim(SimActor):
             return
         done, self._finished = self._finished, {}
         fleet = [done[robot].final_error for robot in range(len(self.lanes))]
-        self.node.send(self.keys.metrics("epoch"), dataclasses.replace(done[0], fleet=fleet))
+        self._send_done(dataclasses.replace(done[0], fleet=fleet))
 
 
 class _SimLane(SimActor):

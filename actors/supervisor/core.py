@@ -25,6 +25,7 @@ from kinswarm.actors.run.config import RunConfig
 from kinswarm.actors.run.resume import Resume
 from kinswarm.actors.run.runfile import task_of
 from kinswarm.actors.runtime import Node
+from kinswarm.actors.runtime.wake import WakeGuard
 from kinswarm.protocol.clock import ClockReader, clock_path
 from kinswarm.protocol.keys import Keys
 from kinswarm.protocol.messages import (
@@ -111,6 +112,11 @@ class Supervisor:
         self._timers: set[asyncio.TimerHandle] = set()
         self.hostname = {h: h for h in self.plan.hosts} if self.multi else {self.host: socket.gethostname()}
         self.resumed: Resume | None = None  # `--resume`: where the run goes on (actors/run/resume.py)
+        # What a reply the run waits for is asked again with, while it waits (expect's `ask`): a pause of this process
+        # or of the replier, or a cut, lapses the Zenoh links between them, and what was put meanwhile is lost.
+        self.asking: Callable[[], None] | None = None
+        self.resend_s = 2 * cfg.lease_ms / 1000  # how often it is asked again while no reply comes
+        self.waking: WakeGuard | None = None  # this process's own stalls (run())
 
     def host_of(self, actor: ActorId) -> str:
         role, ident = actor
@@ -131,6 +137,7 @@ class Supervisor:
         t0 = time.perf_counter()
         loop = asyncio.get_running_loop()
         self.node = node = Node(self.session, self.keys, "supervisor", "main" if self.lead else self.host, self.cfg.key)
+        self.waking = WakeGuard(node, self.cfg.lease_ms / 1000, later=lambda delay, p: self.later(delay, ALIVE, p))
         k = self.keys
         for key in (k.metrics("epoch"), k.metrics("event"), k.metrics("joints"), k.rep("agent", "*")):
             node.listen(key)
@@ -161,6 +168,7 @@ class Supervisor:
             self.clock.path.unlink(missing_ok=True)
             self.placement.attach(node.mailbox.push_local)
             self.later(self.STATUS_EVERY, STATUS)
+            self.waking.expect(self.STATUS_EVERY)
             if self.multi:
                 self.hosts.start()
             try:
@@ -193,8 +201,7 @@ class Supervisor:
         self.training = False
         try:
             if self.lead:
-                reason = "interrupted" if self.result.interrupted else "failed" if self.result.error else "done"
-                self.node.send(self.keys.ctl("stop"), Stop(reason=reason))
+                self.node.send(self.keys.ctl("stop"), Stop(reason=self._stop_reason()))
             await self._collect_byes(timeout=3.0)
         except Exception:  # the session may be closing
             pass
@@ -211,6 +218,9 @@ class Supervisor:
         self.recorder.close()
         self.clock.close()
 
+    def _stop_reason(self) -> str:
+        return "interrupted" if self.result.interrupted else "failed" if self.result.error else "done"
+
     async def _serve(self) -> None:
         """Another host's share: keep it alive (restarts, forwarded faults, heartbeats) until the leader's Stop."""
         self.training = True
@@ -220,39 +230,68 @@ class Supervisor:
 
     # -- the mailbox -----------------------------------------------------------------------------
     async def expect(
-        self, kind: type, match: Callable[[Any], bool], timeout: float, stretch: bool = True, any_item: bool = False
+        self,
+        kind: type,
+        match: Callable[[Any], bool],
+        timeout: float,
+        stretch: bool = True,
+        any_item: bool = False,
+        ask: Callable[[], None] | None = None,
     ) -> Any:
         """Handle the mailbox until a message of `kind` satisfying `match` (any item at all with `any_item`); a
-        partition stops the deadline's clock."""
+        partition stops the deadline's clock. `ask` sends the request the awaited message answers once more: every
+        `resend_s` while none comes, when an actor's token comes back and when this process wakes from a stall (its
+        answer may have been put while a link was down). Repliers answer a repeated request again, changing nothing."""
         assert self.node is not None
         deadline = time.monotonic() + timeout
         paused0 = self.hosts.paused_seconds(time.monotonic())
-        while True:
-            now = time.monotonic()
-            remaining = deadline - now + (self.hosts.paused_seconds(now) - paused0 if stretch else 0.0)
-            if remaining <= 0:
-                raise NoMessage(f"no {kind.__name__} within {timeout:.0f} s")
-            try:
-                key, payload = await self.node.recv(timeout=None if remaining == float("inf") else remaining)
-            except TimeoutError:
-                continue
-            m = self._route(key, payload)
-            if isinstance(m, Stop) and self.lead and kind is not Stop:
-                raise _Down(f"stop requested ({m.reason})")
-            if isinstance(m, kind) and match(m):
-                return m
-            if any_item:
-                return None
+        asking, self.asking = self.asking, ask
+        next_ask = time.monotonic() + self.resend_s
+        try:
+            while True:
+                now = time.monotonic()
+                remaining = deadline - now + (self.hosts.paused_seconds(now) - paused0 if stretch else 0.0)
+                if remaining <= 0:
+                    raise NoMessage(f"no {kind.__name__} within {timeout:.0f} s")
+                if ask is not None:
+                    if now >= next_ask:
+                        ask()
+                        next_ask = now + self.resend_s
+                    remaining = min(remaining, next_ask - now)
+                try:
+                    key, payload = await self.node.recv(timeout=None if remaining == float("inf") else remaining)
+                except TimeoutError:
+                    continue
+                m = self._route(key, payload)
+                if isinstance(m, Stop) and self.lead and kind is not Stop:
+                    raise _Down(f"stop requested ({m.reason})")
+                if isinstance(m, kind) and match(m):
+                    return m
+                if any_item:
+                    return None
+        finally:
+            self.asking = asking
+
+    def ask_again(self, why: str) -> None:
+        """Send the awaited reply's request again now (an actor's token came back, or this process woke)."""
+        if self.asking is not None:
+            log.info("asking again for the reply awaited: %s", why)
+            self.asking()
 
     async def _collect_byes(self, timeout: float) -> None:
         assert self.node is not None
         want = {ident for role, ident in self.expected if (role, ident) in self.alive}
         deadline = time.monotonic() + timeout
+        next_ask = time.monotonic() + self.cfg.lease_ms / 1000
         while not want <= set(self.byes) and time.monotonic() < deadline:
+            now = time.monotonic()
+            if self.lead and now >= next_ask:  # a Stop put while a link was down is lost: once more, a lease on
+                self.node.send(self.keys.ctl("stop"), Stop(reason=self._stop_reason()))
+                next_ask = now + self.cfg.lease_ms / 1000
             try:
-                key, payload = await self.node.recv(timeout=deadline - time.monotonic())
+                key, payload = await self.node.recv(timeout=max(0.0, min(deadline, next_ask) - now))
             except TimeoutError:
-                break
+                continue
             with contextlib.suppress(SwarmError, RestartBudgetSpent, HostError, StallError):  # leaving anyway
                 self._route(key, payload)
 
@@ -316,8 +355,10 @@ class Supervisor:
         """The supervisor's own events, in the mailbox's order with the messages."""
         now = time.monotonic()
         if key == ALIVE:
-            role, ident = payload[1:].decode().split("/", 1)
-            self._alive_changed((role, ident), payload[:1] == b"+")
+            assert self.waking is not None  # a loss heard as this process wakes is held a lease (runtime/wake.py)
+            if (change := self.waking.token(payload.decode())) is not None:
+                role, ident = change[1:].split("/", 1)
+                self._alive_changed((role, ident), change[0] == "+")
         elif key == EXIT:
             actor, how = parse_exit(payload)
             self._on_exit(actor, how, now)
@@ -334,9 +375,26 @@ class Supervisor:
         elif key == SIM_SILENT:
             self.stalls.on_silent()
         elif key == STATUS:
+            assert self.waking is not None
+            if self.waking.ticked():
+                self._woke(now)
             self.later(self.STATUS_EVERY, STATUS)
+            self.waking.expect(self.STATUS_EVERY)
             if self.lead:
                 self._publish_status(now)
+
+    def _woke(self, now: float) -> None:
+        """This process did not run for a while (SIGSTOP, starved): not the swarm's stall, and the reply it waits for
+        may have been put while its links were down."""
+        assert self.waking is not None
+        slept = self.waking.slept
+        log.warning("the supervisor did not run for %.1f s (stopped or starved): asking again for its replies", slept)
+        if self.training:
+            self.event(
+                "woke", "supervisor", f"did not run for {slept:.1f} s (stopped or starved)", seconds=round(slept, 3)
+            )
+        self.stalls.woke(now)
+        self.ask_again("the supervisor woke")
 
     def _on_joints(self, j: JointStatus) -> None:
         self.joints = j
@@ -346,6 +404,7 @@ class Supervisor:
 
     # -- liveliness, exits, restarts -------------------------------------------------------------
     def _alive_changed(self, actor: ActorId, up: bool) -> None:
+        changed = (actor in self.alive) != up  # a token back that was never counted gone (held as this process woke)
         if up:
             self.alive.add(actor)
             self.why_down.pop(actor[1], None)
@@ -353,9 +412,12 @@ class Supervisor:
             self.alive.discard(actor)
             self.why_down.setdefault(actor[1], (time.monotonic(), "its liveliness token went away"))
         if self.training and actor[0] != "supervisor":
-            self.event("alive" if up else "lost", actor[1], "liveliness token " + ("back" if up else "gone"))
-            if not up:
-                self.result.tokens_lost[actor[1]] = self.result.tokens_lost.get(actor[1], 0) + 1
+            if changed:
+                self.event("alive" if up else "lost", actor[1], "liveliness token " + ("back" if up else "gone"))
+                if not up:
+                    self.result.tokens_lost[actor[1]] = self.result.tokens_lost.get(actor[1], 0) + 1
+            if up:  # its links were down a while: a reply it put meanwhile is lost
+                self.ask_again(f"{actor[0]} {actor[1]}'s token is back")
 
     def _on_exit(self, actor: ActorId, how: str, now: float) -> None:
         role, ident = actor

@@ -62,11 +62,19 @@ class EpochLoop:
         sup.stalls.epoch_started(self._sent)
         # generous: every step may run into its deadline and still finish
         timeout = 30.0 + cfg.steps * cfg.deadline_ms / 1000 * 1.5
-        done = await sup.expect(EpochDone, lambda m: m.epoch == epoch, timeout)
+        # The start goes out again while its end does not come: the sim takes its running epoch's start as nothing,
+        # and answers a finished one's with its EpochDone again (a pause or a cut may have lost either message)
+        done = await sup.expect(EpochDone, lambda m: m.epoch == epoch, timeout, ask=self._ask_epoch)
         self._start = None
         if sup.on_epoch is not None:
             sup.on_epoch(done)
         return done
+
+    def _ask_epoch(self) -> None:
+        sup, start = self.sup, self._start
+        if start is not None and sup.node is not None and not sup.hosts.missing:
+            sup.node.send(sup.keys.ctl("epoch"), start)
+            self._sent = time.monotonic()
 
     def on_joints(self, j: JointStatus) -> None:
         """The sim's status: still at an earlier epoch a second after this one's start went out, the start was lost
@@ -87,7 +95,14 @@ class EpochLoop:
         assert sup.node is not None
         directory = sup.out / "agents"
         directory.mkdir(parents=True, exist_ok=True)
-        sup.node.send(sup.keys.ctl("checkpoint"), Checkpoint(epoch=epoch, directory=str(directory)))
+        request = Checkpoint(epoch=epoch, directory=str(directory))
+        sup.node.send(sup.keys.ctl("checkpoint"), request)
+
+        def ask() -> None:  # an agent that saved already answers the same request with the same Saved, saving nothing
+            assert sup.node is not None
+            sup.node.send(sup.keys.ctl("checkpoint"), request)
+
+        next_ask = time.monotonic() + sup.resend_s
         # An agent that is down, or dies before answering, cannot answer: its previous checkpoint stays
         # its newest, and a restarted one resumes from that.
         before = dict(sup.restarts.totals)
@@ -112,8 +127,11 @@ class EpochLoop:
                 for a in sorted(waiting):
                     sup.event("checkpoint_missed", a, f"no answer from {sup.where[a]} within 30 s; training goes on")
                 return
+            if time.monotonic() >= next_ask:  # its Saved may have been lost on the way (a pause, a cut)
+                ask()
+                next_ask = time.monotonic() + sup.resend_s
             try:  # any mailbox item (an exit, a token gone) may end the wait for an agent: look again after each
-                m = await sup.expect(Saved, lambda s: s.epoch == epoch, timeout=0.5, any_item=True)
+                m = await sup.expect(Saved, lambda s: s.epoch == epoch, timeout=0.5, any_item=True, ask=ask)
             except NoMessage:
                 continue
             if isinstance(m, Saved):

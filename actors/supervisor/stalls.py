@@ -55,7 +55,17 @@ class StallWatch:
         self.judge(now)
 
     def on_silent(self) -> None:
+        waking = self.sup.waking
+        if waking is not None and waking.just_woke():  # the supervisor itself did not run: not the sim's silence
+            self.woke(time.monotonic())
+            return
         self.judge(time.monotonic(), silent=True)
+
+    def woke(self, now: float) -> None:
+        """The supervisor woke from a stall of its own: the time it did not run is no one's lack of progress."""
+        self.progress_at = max(self.progress_at, now)
+        if self._silence is not None:
+            self.arm()
 
     def judge(self, now: float, silent: bool = False) -> None:
         sup = self.sup
