@@ -28,7 +28,6 @@ from kinswarm.actors.run.runfile import load_run
 from kinswarm.actors.runtime import setup_logging
 from kinswarm.actors.runtime.net import zenoh_reason
 from kinswarm.actors.supervisor.result import RecordError
-from kinswarm.protocol.faults import describe
 from kinswarm.protocol.spec import SpecError
 from kinswarm.protocol.topology import Topology
 
