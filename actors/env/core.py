@@ -131,6 +131,10 @@ class Stepper:
         return self._robot
 
     @property
+    def closed(self) -> bool:
+        return self._robot is None
+
+    @property
     def started(self) -> bool:
         """An episode has begun since the world was built (a closed env has none)."""
         return self._robot is not None and self.episode >= 0 and bool(self.decisions)

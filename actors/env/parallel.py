@@ -41,7 +41,8 @@ from typing import Any
 import numpy as np
 from gymnasium import spaces
 from kinswarm.protocol.messages import Fault
-from pettingzoo import ParallelEnv
+from pettingzoo import AECEnv, ParallelEnv
+from pettingzoo.utils.conversions import parallel_to_aec
 
 from .core import N_ACTIONS, Event, Stepper, check_success, load_config
 from .faults import as_fault, reset_options
@@ -137,6 +138,8 @@ class KinswarmParallelEnv(ParallelEnv):
         return self._observations(), self._infos()
 
     def step(self, actions: Mapping[str, Any]) -> tuple[dict, dict, dict, dict, dict]:
+        if self.stepper.closed:
+            raise RuntimeError("step: the env is closed; reset() builds its world again")
         if not self.agents:
             raise RuntimeError("step: the episode is over (every agent truncated or terminated); call reset()")
         chosen: dict[str, int | float] = {}
@@ -298,3 +301,9 @@ def parallel_env(
     except BaseException:
         stepper.close()
         raise
+
+
+def aec_env(run_file: str, **kwargs: Any) -> AECEnv:
+    """The same env in PettingZoo's turn-based (AEC) API, which PettingZoo's render, state and max-cycles tests and
+    AEC-only libraries take: `parallel_env(run_file, **kwargs)` through PettingZoo's own `parallel_to_aec`."""
+    return parallel_to_aec(parallel_env(run_file, **kwargs))

@@ -71,6 +71,8 @@ class RobotEnv(gymnasium.Env):
 
     def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
         st = self.stepper
+        if st.closed:
+            raise RuntimeError("step: the env is closed; reset() builds its world again")
         if not st.started or st.t >= st.steps or self._over:
             raise RuntimeError("step: the episode is over (truncated or terminated) or not begun; call reset()")
         a = np.asarray(action)
