@@ -291,3 +291,33 @@ def test_sb3_check_env_with_render_and_maskable_ppo(name: str) -> None:
         assert model.num_timesteps >= 128
     finally:
         env.close()
+
+
+@pytest.mark.parametrize("name", ["chain4", "iiwa"])
+def test_the_shared_policy_vector_env_keeps_truncation_and_its_copies_differ(name: str) -> None:
+    pytest.importorskip("sb3_contrib", reason="sb3-contrib (and torch) are not in the test install: docs/env.md")
+    import torch
+    from kinswarm.env.sb3 import JointsVecEnv
+    from sb3_contrib import MaskablePPO
+
+    torch.set_num_threads(1)
+    venv = JointsVecEnv([parallel_env(example(name), steps=5, render_mode=None) for _ in range(2)])
+    try:
+        n = len(venv.agents)
+        venv.seed(3)
+        obs = venv.reset()
+        assert obs.shape == (2 * n, venv.obs_dim + n) and obs.dtype == np.float32
+        assert not np.array_equal(obs[:n, : venv.obs_dim], obs[n:, : venv.obs_dim])  # two copies, two goals
+        assert np.array_equal(obs[:n, venv.obs_dim :], np.eye(n))  # the agent's index
+        for t in range(5):
+            obs, rewards, dones, infos = venv.step(np.full(2 * n, 2))
+            assert all(venv.observation_space.contains(row) for row in obs)
+            assert dones.all() if t == 4 else not dones.any()
+        assert all(i["TimeLimit.truncated"] for i in infos)  # a cut: SB3 bootstraps there
+        assert all(i["terminal_observation"].shape == obs[0].shape for i in infos)
+        assert venv.action_masks().shape == (2 * n, 3)
+        model = MaskablePPO("MlpPolicy", venv, n_steps=16, batch_size=32, n_epochs=1, seed=0)
+        model.learn(64)
+        assert len(venv.final_errors) >= 2 * 4
+    finally:
+        venv.close()
