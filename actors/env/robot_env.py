@@ -132,7 +132,12 @@ def gym_env(
     **overrides: Any,
 ) -> RobotEnv:
     """The run file's robot and task as a Gymnasium env (overrides, `draw` and `success` as `parallel_env`'s)."""
-    return RobotEnv(Stepper(load_config(run_file, overrides, sets), draw), continuous, render_mode, success)
+    stepper = Stepper(load_config(run_file, overrides, sets), draw)
+    try:
+        return RobotEnv(stepper, continuous, render_mode, success)
+    except BaseException:  # a bad option: its world not left connected
+        stepper.close()
+        raise
 
 
 def register() -> None:
