@@ -27,7 +27,8 @@ from gymnasium import spaces
 try:
     from stable_baselines3.common.vec_env.base_vec_env import VecEnv
 except ImportError as e:  # one line that says what to install
-    raise ImportError(f"kinswarm.env.sb3 needs Stable-Baselines3 ({e.name} is missing): docs/env.md") from None
+    what = f"kinswarm.env.sb3 needs Stable-Baselines3 ({e.name} is missing): docs/env.md"
+    raise ImportError(what, name=e.name) from None
 
 from .parallel import KinswarmParallelEnv
 
