@@ -69,6 +69,7 @@ def test_the_pages_blocks_that_need_no_sb3_run_as_written(tmp_path: Path) -> Non
     assert (tmp_path / "runs" / "ppo-shared" / "run.toml").is_file()
 
 
+@pytest.mark.timeout(900)  # a hang guard: torch's import, three trainings, an export and a swarm on a loaded machine
 def test_the_pages_sb3_blocks_run_as_written_and_the_vector_route_on_chain4_too(tmp_path: Path) -> None:
     pytest.importorskip("sb3_contrib", reason="sb3-contrib (and torch) are not in the test install: docs/env.md")
     chosen = [b for b in blocks() if needs_sb3(b[1])]
