@@ -112,7 +112,8 @@ def _observe(learner: JointLearner, acts: list[int], step: int) -> None:
 
 def drive(env: KinswarmParallelEnv, epochs: int) -> list[float]:
     """The paper's learners on the env, as the inprocess placement calls them: the children's actions of the step
-    before, then the decision on S_i and the reward; after the last move, the children's last actions."""
+    before, then the decision on S_i as built (infos' "state": float64, which the learner clips itself; the
+    observation is its float32 copy) and the reward; after the last move, the children's last actions."""
     learners = env.stepper.learners()
     finals = []
     for epoch in range(epochs):
@@ -127,7 +128,7 @@ def drive(env: KinswarmParallelEnv, epochs: int) -> list[float]:
                 if info["children"] and info["step"] > 0:
                     _observe(learner, info["children_actions"], info["step"])
                 avoid = [b for b in range(3) if not obs[a]["action_mask"][b]]
-                actions[a] = learner.decide(obs[a]["observation"], rewards[a], avoid=avoid)
+                actions[a] = learner.decide(info["state"], rewards[a], avoid=avoid)  # S_i as built, float64
                 if not info["children"]:
                     learner.observe([])
             obs, rewards, _, _, infos = env.step(actions)  # type: ignore[assignment]
@@ -160,11 +161,11 @@ def test_the_papers_learners_on_the_env_give_the_inprocess_runs_final_errors(nam
 
 # -- goals, faults, seeding, rendering ------------------------------------------------------------------------------
 def test_goals_follow_the_task_per_episode_or_the_reset_option() -> None:
-    env = gym_env(example("chain4"), steps=3, sets=["task.goals=[[4.0, 6.0], [-5.0, 5.0]]"])
+    env = gym_env(example("chain4"), steps=3, sets=["task.goals=[[4.0, 6.0], [-5.0, 5.0]]"], draw=False)
     try:
         goals = [tuple(env.reset()[0][-2:]) for _ in range(3)]
         assert goals == [(4.0, 6.0), (-5.0, 5.0), (4.0, 6.0)]  # episode k: the task's goal of epoch k
-        assert tuple(env.reset(seed=5)[0][-2:]) == (4.0, 6.0)  # a seeded reset starts the schedule again
+        assert tuple(env.reset(seed=5)[0][-2:]) == (4.0, 6.0)  # draw=False: a seeded reset restarts the schedule
         obs, info = env.reset(options={"goal": [1.0, 8.0]})
         assert tuple(obs[-2:]) == (1.0, 8.0)
         assert info["error"] == pytest.approx(float(np.hypot(obs[4] - 1.0, obs[5] - 8.0)), abs=1e-5)

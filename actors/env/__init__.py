@@ -19,9 +19,9 @@ except ImportError as e:  # one line that says what to install, not a traceback 
     raise ImportError(f"kinswarm.env needs the env extra ({e.name} is missing): pip install 'kinswarm[env]'") from None
 
 from .faults import as_fault
-from .parallel import KinswarmParallelEnv, parallel_env
+from .parallel import KinswarmParallelEnv, aec_env, parallel_env
 from .robot_env import ENV_ID, RobotEnv, gym_env, register
 
 register()
 
-__all__ = ["ENV_ID", "KinswarmParallelEnv", "RobotEnv", "as_fault", "gym_env", "parallel_env"]
+__all__ = ["ENV_ID", "KinswarmParallelEnv", "RobotEnv", "aec_env", "as_fault", "gym_env", "parallel_env"]

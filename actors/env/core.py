@@ -31,6 +31,7 @@ from kinswarm.protocol.scenario import load_scenario
 from kinswarm.protocol.topology import Topology
 from kinswarm.sim.robot import Robot
 
+from .draws import draw_goal, draw_pose, draws_goal, draws_start
 from .render import frame
 
 #: the actions of one joint: decrease, keep, increase by one action size
@@ -59,12 +60,29 @@ def load_config(run_file: str | Path, overrides: Mapping[str, Any], sets: Iterab
     return load_run(run_file, given)
 
 
+def check_success(success: float | None) -> float | None:
+    """The `success` option: None (episodes only truncate), or the task's error (its `error` info) within which an
+    episode terminates."""
+    if success is None:
+        return None
+    number = isinstance(success, (int, float)) and not isinstance(success, bool)
+    if not (number and math.isfinite(success) and success > 0):
+        raise ValueError(f"success: expected a distance > 0 (the error within which an episode ends), got {success!r}")
+    return float(success)
+
+
 class Stepper:
     """One robot and its agents' passes, stepped by joint actions. `episode` counts the episodes begun since the last
-    seeded start: it is the epoch index the task's goals, starts and the scenario see."""
+    seeded start: it is the epoch index the task's goals, starts and the scenario see.
 
-    def __init__(self, cfg: RunConfig) -> None:
+    `draw`: a seeded start, and every start after it, draws the episode (draws.py: the goal of a reach task, the start
+    of a random start pose) from a generator seeded by that seed; until a seed is given, and with draw=False always,
+    episode k has the goal and start of the run's epoch k."""
+
+    def __init__(self, cfg: RunConfig, draw: bool = True) -> None:
         self.cfg = cfg
+        self.draw = draw
+        self.rng: np.random.Generator | None = None  # the episodes' draws since the last seeded start
         self.topo: Topology = cfg.topo()
         self.task = task_of(cfg)
         self.settings: dict[str, LearnerSettings] = learner_settings(self.task, cfg.learner, cfg.source)
@@ -79,8 +97,7 @@ class Stepper:
         }
         self.dof = list(topo.dof_agents)  # the agents with a joint: the env's agents, in the robot's DOF order
         self.deciders = [a for a in reversed(self.order) if a in self.settings]  # leaves first, as the up pass
-        scenario = load_scenario(cfg.scenario, topo) if cfg.scenario else None
-        self.robot = Robot(topo, cfg.scene_spec, cfg.action_rad, cfg.seed, scenario)
+        self._robot: Robot | None = self.build()
         self.episode = -1
         self.seed = cfg.seed
         self.last: dict[str, int] = {}  # each agent's action at the step before
@@ -89,6 +106,28 @@ class Stepper:
         self.root_reward: float | None = None
         self.events: list[Event] = []  # the robot's events (faults applied, disturbances over) of the last call
         self.goal_length = len(self.task.goal(0, cfg.steps)[0])
+        self._bounds: tuple[np.ndarray, np.ndarray] | None = None
+
+    def build(self) -> Robot:
+        """The robot in its own PyBullet world, as the run file builds it (a reset after `close` builds it anew)."""
+        cfg = self.cfg
+        scenario = load_scenario(cfg.scenario, self.topo) if cfg.scenario else None
+        return Robot(self.topo, cfg.scene_spec, cfg.action_rad, cfg.seed, scenario)
+
+    @property
+    def robot(self) -> Robot:
+        if self._robot is None:
+            raise RuntimeError("the env is closed: reset() builds its world again")
+        return self._robot
+
+    @property
+    def closed(self) -> bool:
+        return self._robot is None
+
+    @property
+    def started(self) -> bool:
+        """An episode has begun since the world was built (a closed env has none)."""
+        return self._robot is not None and self.episode >= 0 and bool(self.decisions)
 
     @property
     def steps(self) -> int:
@@ -100,11 +139,18 @@ class Stepper:
 
     def frame(self) -> np.ndarray:
         """An RGB picture of the robot now: its pose, its goal, the episode and step (both faces' `render`)."""
+        if not self.started:
+            raise RuntimeError("render: no episode to draw; call reset() first")
         angles = self.robot.world.joint_positions()
         return frame(self.topo, angles, self.robot.goal(), f"{self.topo.name}  episode {self.episode}  step {self.t}")
 
     def close(self) -> None:
-        self.robot.close()
+        """Disconnect the PyBullet world (again: nothing). The faults applied go with it; a later start builds the
+        world anew, as at construction."""
+        if self._robot is not None:
+            self._robot.close()
+            self._robot = None
+            self.decisions = {}
 
     def learners(self) -> dict[str, JointLearner]:
         """The run's learners for each joint, built as the inprocess placement builds them (the same seeds)."""
@@ -120,6 +166,53 @@ class Stepper:
             for a in self.deciders
         }
 
+    # -- the whole robot: the Gymnasium face's observation, the parallel face's global state ----------------------
+    def state_bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """The bounds of `global_state`, entry by entry: a reading within its joint's limits widened by pi (an offset
+        fault reads up to 180 degrees beside the angle), a position within the base +- 2 reaches, a heading within
+        +-pi, a quaternion's part within +-1."""
+        topo = self.topo
+        lo: list[float] = []
+        hi: list[float] = []
+        for a in self.dof:  # the readings
+            j_lo, j_hi = topo.agents[a].limits
+            lo.append(j_lo - math.pi)
+            hi.append(j_hi + math.pi)
+        r, base = 2.0 * topo.reach, topo.base
+        position = [(base[i] - r, base[i] + r) for i in range(3 if topo.spatial else 2)]
+        pose = position + ([(-1.0, 1.0)] * 4 if topo.spatial else [(-math.pi, math.pi)])
+        for _ in topo.end_effectors:
+            lo += [b[0] for b in pose]
+            hi += [b[1] for b in pose]
+        goal = position + [(-1.0, 1.0)] * (self.goal_length - len(position))
+        lo += [b[0] for b in goal][: self.goal_length]
+        hi += [b[1] for b in goal][: self.goal_length]
+        return np.array(lo, np.float32), np.array(hi, np.float32)
+
+    def global_state(self) -> np.ndarray:
+        """float32: every joint's encoder reading (DOF order: through the encoder faults, what the agents read),
+        every end effector's pose, the goal; each clipped to `state_bounds`."""
+        if self._bounds is None:
+            lo, hi = self.state_bounds()
+            self._bounds = lo.astype(np.float64), hi.astype(np.float64)
+        robot = self.robot
+        q = robot.readings()
+        values = [q[a] for a in self.dof]
+        for leaf in self.topo.end_effectors:
+            values += list(robot.tips[leaf])
+        values += list(robot.goal())
+        return np.clip(np.array(values, dtype=np.float64), *self._bounds).astype(np.float32)
+
+    def state_slices(self) -> dict[str, slice]:
+        """Where each part lies in `global_state`: "<joint>" its reading, "<end effector>.tip" its pose, "goal"."""
+        out = {a: slice(i, i + 1) for i, a in enumerate(self.dof)}
+        i, width = len(self.dof), 7 if self.topo.spatial else 3
+        for leaf in self.topo.end_effectors:
+            out[f"{leaf}.tip"] = slice(i, i + width)
+            i += width
+        out["goal"] = slice(i, i + self.goal_length)
+        return out
+
     # -- an episode ----------------------------------------------------------------------------------
     def start(
         self,
@@ -127,27 +220,34 @@ class Stepper:
         goal: Sequence[float] | None = None,
         faults: Sequence[Fault] | None = None,
     ) -> None:
-        """An episode begins: `seed` restarts the goal schedule at epoch 0 and reseeds the robot's disturbances;
-        `goal` replaces the task's goal of this episode; `faults` (when given: the joints freed first) apply from its
-        first step, as a scenario's at step 0."""
+        """An episode begins: `seed` restarts the goal schedule at epoch 0, reseeds the robot's disturbances and (with
+        `draw`) the episodes' draws; `goal` replaces the episode's goal; `faults` (when given: the joints freed first)
+        apply from its first step, as a scenario's at step 0."""
         if goal is not None:
             goal = self.check_goal(goal)
         for f in faults or ():
             self.check(f)
+        if self._robot is None:
+            self._robot = self.build()
         if seed is not None:
             self.seed = seed
             self.episode = -1
             self.robot.faults.rng = np.random.default_rng([seed, zlib.crc32(_DISTURB_STREAM)])
+            self.rng = np.random.default_rng(seed) if self.draw else None
         self.episode += 1
         e = epoch_start(self.cfg, self.task, self.episode)
-        path = e.path
+        path, e_start = e.path, e.start
         if goal is not None:
             e_goal, path = tuple(goal), []
+        elif self.rng is not None and draws_goal(self.task):
+            e_goal, path = draw_goal(self.robot.world, self.topo, self.rng, self.goal_length), []
         else:
             e_goal = e.goal
+        if self.rng is not None and draws_start(self.task):
+            e_start = draw_pose(self.topo, self.rng)
         keep = self.cfg.successive and self.episode > 0
         self.events = []
-        warning = self.robot.start(e_goal, path, e.start, keep_pose=keep)
+        warning = self.robot.start(e_goal, path, e_start, keep_pose=keep)
         if warning:
             self.events.append((self.episode, 0, "start", "robot", warning))
         for a in self.order:

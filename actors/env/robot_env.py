@@ -2,24 +2,22 @@
 
   observation    float32: every joint's encoder reading (what the agents read: through the encoder faults), every
                  end effector's pose (a planar robot's x, y, heading; a spatial one's 7-float frame), the goal. Each
-                 clipped to its bounds: a reading to its joint's limits widened by pi (an offset fault reads up to
-                 180 degrees beside the angle), a position to the robot's base +- 2 reaches, a heading to +-pi, a
-                 quaternion's part to +-1
+                 clipped to its bounds (core.Stepper.state_bounds). The parallel face's `state()` is the same vector
   action         MultiDiscrete([3] * joints): per joint one move down, none, one up; or, with continuous=True, a Box
                  [-1, 1] per joint: that share of one move (the run's action size, times the task's scale)
   reward         the root's task reward of the move, the r the swarm's agents get (before their local terms); a
                  compound root that pays each child its own (grasp) gives their mean
   info           "error" (the task's distance), "step", "action_mask" (joints x 3, int8: the moves each joint's task
-                 leaves out; advice, not enforced)
+                 leaves out; advice, not enforced). `action_masks()` gives it flat, as sb3-contrib's MaskablePPO asks
 
-Episodes, goals, faults and seeding are the parallel env's (parallel.py): the run's `steps` moves ending in
-truncation, reset(seed=, options={"goal", "faults"}), `apply_fault`. Registered as "kinswarm/Robot-v0":
+Episodes, goals, faults, seeding and lifecycle are the parallel env's (parallel.py): the run's `steps` moves ending in
+truncation (with `success`, terminated once the task's error is within it), reset(seed=, options={"goal", "faults"}),
+`apply_fault`, `close()` then `reset()` building the world again. Registered as "kinswarm/Robot-v0":
 `gymnasium.make("kinswarm/Robot-v0", run_file="examples/chain4.toml")` once kinswarm.env is imported.
 """
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping, Sequence
 from typing import Any
 
@@ -28,40 +26,30 @@ import numpy as np
 from gymnasium import spaces
 from kinswarm.protocol.messages import Fault
 
-from .core import N_ACTIONS, Event, Stepper, load_config
+from .core import N_ACTIONS, Event, Stepper, check_success, load_config
 from .faults import as_fault, reset_options
+from .render import FPS, RENDER_MODES, Renderer
 
 ENV_ID = "kinswarm/Robot-v0"
 
 
 class RobotEnv(gymnasium.Env):
-    metadata = {"render_modes": ["rgb_array"], "render_fps": 10}
+    metadata = {"render_modes": list(RENDER_MODES), "render_fps": FPS}
 
-    def __init__(self, stepper: Stepper, continuous: bool = False, render_mode: str | None = "rgb_array") -> None:
-        if render_mode not in (None, "rgb_array"):
-            raise ValueError(f"render_mode: {render_mode!r} is not one of None, 'rgb_array'")
+    def __init__(
+        self,
+        stepper: Stepper,
+        continuous: bool = False,
+        render_mode: str | None = "rgb_array",
+        success: float | None = None,
+    ) -> None:
+        self.renderer = Renderer(stepper.frame, render_mode)
         self.stepper, self.continuous, self.render_mode = stepper, continuous, render_mode
-        topo, n = stepper.topo, len(stepper.dof)
-        lo: list[float] = []
-        hi: list[float] = []
-        for a in stepper.dof:  # the readings
-            j_lo, j_hi = topo.agents[a].limits
-            lo.append(j_lo - math.pi)
-            hi.append(j_hi + math.pi)
-        r, base = 2.0 * topo.reach, topo.base
-        position = [(base[i] - r, base[i] + r) for i in range(3 if topo.spatial else 2)]
-        pose = position + ([(-1.0, 1.0)] * 4 if topo.spatial else [(-math.pi, math.pi)])
-        for _ in topo.end_effectors:
-            lo += [b[0] for b in pose]
-            hi += [b[1] for b in pose]
-        goal = position + [(-1.0, 1.0)] * (stepper.goal_length - len(position))
-        lo += [b[0] for b in goal][: stepper.goal_length]
-        hi += [b[1] for b in goal][: stepper.goal_length]
-        self.observation_space = spaces.Box(np.array(lo, np.float32), np.array(hi, np.float32), dtype=np.float32)
-        self._lo, self._hi = (
-            self.observation_space.low.astype(np.float64),
-            self.observation_space.high.astype(np.float64),
-        )
+        self.success = check_success(success)
+        self._over = False  # terminated: the task's error came within `success`
+        n = len(stepper.dof)
+        lo, hi = stepper.state_bounds()
+        self.observation_space = spaces.Box(lo, hi, dtype=np.float32)
         if continuous:
             self.action_space: spaces.Space = spaces.Box(-1.0, 1.0, shape=(n,), dtype=np.float32)
         else:
@@ -77,12 +65,16 @@ class RobotEnv(gymnasium.Env):
     ) -> tuple[np.ndarray, dict[str, Any]]:
         super().reset(seed=seed)
         self.stepper.start(seed, *reset_options(options))
-        return self._observation(), self._info()
+        self._over = False
+        self.renderer.shown()
+        return self.stepper.global_state(), self._info()
 
     def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
         st = self.stepper
-        if st.episode < 0 or st.t >= st.steps:
-            raise RuntimeError("step: the episode is over (truncated) or not begun; call reset()")
+        if st.closed:
+            raise RuntimeError("step: the env is closed; reset() builds its world again")
+        if not st.started or st.t >= st.steps or self._over:
+            raise RuntimeError("step: the episode is over (truncated or terminated) or not begun; call reset()")
         a = np.asarray(action)
         if a.shape != (len(st.dof),):
             raise ValueError(f"step: expected an action per joint ({len(st.dof)}), got shape {a.shape}")
@@ -96,26 +88,28 @@ class RobotEnv(gymnasium.Env):
             moves = {j: int(v) for j, v in zip(st.dof, a, strict=True)}
         st.act(moves)
         reward = 0.0 if st.root_reward is None else float(st.root_reward)
-        return self._observation(), reward, False, st.t >= st.steps, self._info()
+        terminated = self.success is not None and st.error <= self.success
+        self._over = terminated
+        self.renderer.shown()
+        return st.global_state(), reward, terminated, st.t >= st.steps, self._info()
+
+    def action_masks(self) -> np.ndarray:
+        """The moves each joint's task allows now, flat (joint 0's three, then joint 1's, ...): sb3-contrib's
+        MaskablePPO calls it on a MultiDiscrete action space."""
+        return self._info()["action_mask"].astype(bool).reshape(-1)
 
     def apply_fault(self, fault: Fault | Mapping[str, Any] | str, *targets: str, **params: Any) -> list[Event]:
         """A joint fault now, from this step's moves (as the parallel env's `apply_fault`)."""
         return self.stepper.apply(as_fault(fault, targets, params))
 
-    def render(self) -> np.ndarray:
-        return self.stepper.frame()
+    def render(self) -> np.ndarray | None:
+        return self.renderer.render()
 
     def close(self) -> None:
+        """Release the PyBullet world and any window; a later `reset()` builds the world again (faults applied
+        before are gone with it)."""
         self.stepper.close()
-
-    def _observation(self) -> np.ndarray:
-        st = self.stepper
-        q = st.robot.readings()
-        values = [q[a] for a in st.dof]
-        for leaf in st.topo.end_effectors:
-            values += list(st.robot.tips[leaf])
-        values += list(st.robot.goal())
-        return np.clip(np.array(values, dtype=np.float64), self._lo, self._hi).astype(np.float32)
+        self.renderer.close()
 
     def _info(self) -> dict[str, Any]:
         st = self.stepper
@@ -133,10 +127,17 @@ def gym_env(
     continuous: bool = False,
     sets: Sequence[str] = (),
     render_mode: str | None = "rgb_array",
+    draw: bool = True,
+    success: float | None = None,
     **overrides: Any,
 ) -> RobotEnv:
-    """The run file's robot and task as a Gymnasium env (overrides as `parallel_env`'s)."""
-    return RobotEnv(Stepper(load_config(run_file, overrides, sets)), continuous, render_mode)
+    """The run file's robot and task as a Gymnasium env (overrides, `draw` and `success` as `parallel_env`'s)."""
+    stepper = Stepper(load_config(run_file, overrides, sets), draw)
+    try:
+        return RobotEnv(stepper, continuous, render_mode, success)
+    except BaseException:  # a bad option: its world not left connected
+        stepper.close()
+        raise
 
 
 def register() -> None:

@@ -45,7 +45,9 @@ def _learners() -> Any:
         from . import learners
     except ImportError as e:
         raise ValueError(
-            f"kinswarm experiment peers needs the peers extra ({e.name} is missing): pip install -e '.[peers]'"
+            f"kinswarm experiment peers needs the peers extra ({e.name} is missing): on a machine without a GPU first "
+            "pip install torch --index-url https://download.pytorch.org/whl/cpu (else pip pulls torch's CUDA build, "
+            "several GB), then pip install -e '.[peers]'"
         ) from None
     return learners
 

@@ -13,11 +13,10 @@ from typing import Any
 import gymnasium
 import numpy as np
 import torch
-from gymnasium import spaces
 from kinswarm.env import gym_env, parallel_env
+from kinswarm.env.sb3 import JointsVecEnv
 from stable_baselines3 import PPO, SAC
 from stable_baselines3.common.callbacks import BaseCallback
-from stable_baselines3.common.vec_env.base_vec_env import VecEnv
 
 # the generalisation recipe's robot, task and reward (graded)
 RUN_FILE = str(Path(__file__).resolve().parents[2] / "examples" / "reach-generalise.toml")
@@ -31,8 +30,11 @@ def _goals_text(goals: Sequence[Goal]) -> str:
 
 # -- the whole robot, one agent ------------------------------------------------------------------------------------
 def central_env(goals: Sequence[Goal], steps: int, continuous: bool, seed: int) -> gymnasium.Env:
-    """gym_env on the training goals, one per episode in the given order (the task's goal list cycles)."""
-    return gym_env(RUN_FILE, continuous=continuous, steps=steps, seed=seed, sets=[_goals_text(goals)], render_mode=None)
+    """gym_env on the training goals, one per episode in the given order (the task's goal list cycles; draw=False:
+    SB3's seeded reset does not draw others)."""
+    return gym_env(
+        RUN_FILE, continuous=continuous, steps=steps, seed=seed, sets=[_goals_text(goals)], render_mode=None, draw=False
+    )
 
 
 class GoalsEnv(gymnasium.Wrapper):
@@ -57,87 +59,30 @@ class GoalsEnv(gymnasium.Wrapper):
 
 
 # -- every joint, one shared policy ------------------------------------------------------------------------------
-class JointsVecEnv(VecEnv):
-    """parallel_env's joints as the rows of an SB3 vector env, so that one PPO policy is shared by all of them
-    (independent learners with parameter sharing). A row's observation is its agent's S_i as parallel_env gives it
-    (clipped to its bounds) followed by a one-hot of the agent's index; all rows end their episode together."""
+# parallel_env's joints as the rows of an SB3 vector env (kinswarm.env.sb3: S_i, then a one-hot of the agent's index)
+class GoalsOptions:
+    """JointsVecEnv's reset options: each episode the next goal of a list, with the given faults from its first
+    step (the joints freed first)."""
 
-    def __init__(self, par: Any, seed: int | None = None, goals_faults: tuple[Sequence[Goal], Faults] | None = None):
-        self.par, self.agents = par, list(par.possible_agents)
-        self.n = len(self.agents)
-        boxes = [par.observation_space(a)["observation"] for a in self.agents]
-        self.obs_dim = boxes[0].shape[0]
-        if any(b.shape != boxes[0].shape for b in boxes):
-            raise ValueError("shared policy: the joints' observations differ in size")
-        lo = np.concatenate([np.min([b.low for b in boxes], 0), np.zeros(self.n)]).astype(np.float32)
-        hi = np.concatenate([np.max([b.high for b in boxes], 0), np.ones(self.n)]).astype(np.float32)
-        self.render_mode = None
-        super().__init__(self.n, spaces.Box(lo, hi, dtype=np.float32), spaces.Discrete(3))
-        self._first_seed, self._actions = seed, np.zeros(self.n, dtype=np.int64)
-        self.goals_faults, self.i = goals_faults, 0
-        self.final_errors: list[float] = []
+    def __init__(self, goals: Sequence[Goal], faults: Faults) -> None:
+        self.goals, self.faults, self.i = list(goals), faults, 0
 
-    def _stack(self, obs: dict[str, dict[str, np.ndarray]]) -> np.ndarray:
-        out = np.zeros((self.n, self.obs_dim + self.n), dtype=np.float32)
-        for i, a in enumerate(self.agents):
-            out[i, : self.obs_dim] = obs[a]["observation"]
-            out[i, self.obs_dim + i] = 1.0
-        return out
-
-    def _reset(self) -> np.ndarray:
-        seed, self._first_seed = self._first_seed, None
-        options = None
-        if self.goals_faults is not None:
-            goals, faults = self.goals_faults
-            options = {"goal": list(goals[self.i % len(goals)]), "faults": faults}
-            self.i += 1
-        obs, _ = self.par.reset(seed=seed, options=options)
-        return self._stack(obs)
-
-    def reset(self) -> np.ndarray:
-        return self._reset()
-
-    def step_async(self, actions: np.ndarray) -> None:
-        self._actions = np.asarray(actions).reshape(self.n)
-
-    def step_wait(self) -> Any:
-        obs, rew, _, trunc, infos = self.par.step({a: int(self._actions[i]) for i, a in enumerate(self.agents)})
-        stacked = self._stack(obs)
-        done = any(trunc.values())
-        rewards = np.array([rew[a] for a in self.agents], dtype=np.float32)
-        out_infos: list[dict[str, Any]] = [{"error": infos[a]["error"]} for a in self.agents]
-        if done:
-            self.final_errors.append(float(infos[self.agents[0]]["error"]))
-            for i, info in enumerate(out_infos):
-                info["terminal_observation"] = stacked[i]
-                info["TimeLimit.truncated"] = True
-            stacked = self._reset()
-        return stacked, rewards, np.full(self.n, done), out_infos
-
-    def close(self) -> None:
-        self.par.close()
-
-    def get_attr(self, attr_name: str, indices: Any = None) -> list[Any]:
-        return [getattr(self, attr_name)] * len(self._indices(indices))
-
-    def set_attr(self, attr_name: str, value: Any, indices: Any = None) -> None:
-        setattr(self, attr_name, value)
-
-    def env_method(self, method_name: str, *args: Any, indices: Any = None, **kwargs: Any) -> list[Any]:
-        return [getattr(self, method_name)(*args, **kwargs)] * len(self._indices(indices))
-
-    def env_is_wrapped(self, wrapper_class: type, indices: Any = None) -> list[bool]:
-        return [False] * len(self._indices(indices))
-
-    def _indices(self, indices: Any) -> list[int]:
-        if indices is None:
-            return list(range(self.n))
-        return [indices] if isinstance(indices, int) else list(indices)
+    def __call__(self, copy: int) -> dict[str, Any]:
+        goal = self.goals[self.i % len(self.goals)]
+        self.i += 1
+        return {"goal": list(goal), "faults": self.faults}
 
 
 def joints_env(goals: Sequence[Goal], steps: int, seed: int) -> JointsVecEnv:
-    par = parallel_env(RUN_FILE, steps=steps, seed=seed, sets=[_goals_text(goals)], render_mode=None)
-    return JointsVecEnv(par, seed=seed)
+    """The training goals in order, one per episode (the task's goal list; draw=False: a seed does not draw them)."""
+    par = parallel_env(RUN_FILE, steps=steps, seed=seed, sets=[_goals_text(goals)], render_mode=None, draw=False)
+    venv = JointsVecEnv(par)
+    venv.seed(seed)
+    return venv
+
+
+def goals_env(goals: Sequence[Goal], steps: int, faults: Faults) -> JointsVecEnv:
+    return JointsVecEnv(parallel_env(RUN_FILE, steps=steps, render_mode=None), options=GoalsOptions(goals, faults))
 
 
 # -- evaluation -----------------------------------------------------------------------------------------------------
@@ -145,7 +90,7 @@ def evaluate(model: Any, method: str, goals: Sequence[Goal], steps: int, faults:
     """Final errors of the frozen, deterministic policy, one `steps`-step episode per goal from the start pose."""
     faults = faults or []
     if method == "ppo-shared":
-        venv = JointsVecEnv(parallel_env(RUN_FILE, steps=steps, render_mode=None), goals_faults=(goals, faults))
+        venv = goals_env(goals, steps, faults)
         obs = venv.reset()
         while len(venv.final_errors) < len(goals):
             actions, _ = model.predict(obs, deterministic=True)
@@ -299,7 +244,7 @@ def check_onnx(model: Any, path: Path, goals: Sequence[Goal], steps: int) -> dic
     except ImportError:
         return {"checked": False, "why": "onnxruntime is not installed"}
     sess = ort.InferenceSession(str(path), providers=["CPUExecutionProvider"])
-    venv = JointsVecEnv(parallel_env(RUN_FILE, steps=steps, render_mode=None), goals_faults=(goals, []))
+    venv = goals_env(goals, steps, [])
     obs, same, total = venv.reset(), 0, 0
     while len(venv.final_errors) < len(goals):
         actions, _ = model.predict(obs, deterministic=True)
