@@ -129,7 +129,7 @@ def _open_session(cfg: RunConfig, topo: Topology, plan: Plan, host: str) -> tupl
         except Exception as e:
             if attempt + 1 < tries:
                 log.info("picked port taken (%s): picking again", zenoh_reason(e))
-                plan = local_plan(AUTO_LISTEN, cfg.lease_ms)
+                plan = local_plan(AUTO_LISTEN, cfg.lease_ms, plan.security.secret, plan.security.net_dir)
                 continue
             where = ", ".join(spec.listen) or ", ".join(spec.connect)
             if plan.name != "local":
@@ -251,7 +251,7 @@ def run_swarm(
 ) -> dict:
     """Run one swarm (or, with a deploy plan, one host's share of it) to the end and return its summary
     (used by the CLI, experiments and tests). Without a plan: the one-host plan (`kinswarm run`)."""
-    plan = plan if plan is not None else local_plan(cfg.listen, cfg.lease_ms)
+    plan = plan if plan is not None else local_plan(cfg.listen, cfg.lease_ms, cfg.key, Path(cfg.out) / "net")
     host = host if host is not None else plan.leader
     out = Path(cfg.out)
     check_start(plan, topo)
@@ -269,7 +269,7 @@ def run_swarm(
 def resume_swarm(cfg: RunConfig, topo: Topology, progress: bool = False, view: str | None = None) -> dict:
     """Continue the run in `cfg.out` (checked by resume.check_resume) from its last complete checkpoint, in its own
     directory, under its own lock: its rows past that checkpoint dropped, its agents restored from it."""
-    plan = local_plan(cfg.listen, cfg.lease_ms)
+    plan = local_plan(cfg.listen, cfg.lease_ms, cfg.key, Path(cfg.out) / "net")
     check_start(plan, topo)
     out = Path(cfg.out)
     with reclaim(out) as claimed:
