@@ -67,6 +67,12 @@ def actors_of(cfg: RunConfig, topo: Topology) -> list[ActorId]:
 class Supervisor:
     STATUS_EVERY = 0.5  # seconds between SwarmStatus messages
     hosts_wait_s = 600.0  # how long the leader waits for the other hosts' actors (`kinswarm up --wait`)
+    # A start fails only when no actor became ready for START_STALL_S, plus START_STALL_PER_ACTOR for each actor
+    # still starting: N fresh interpreters share the machine's cores, and an actor is ready only once its neighbours
+    # listen, so the first ones come late in a large swarm (measured: docs/architecture.md). A fixed 60 s failed a
+    # 16-agent chain at load 9-15; a swarm that makes progress is never given up.
+    START_STALL_S = 60.0
+    START_STALL_PER_ACTOR = 2.0
 
     def __init__(
         self,
@@ -111,6 +117,7 @@ class Supervisor:
         self._timers: set[asyncio.TimerHandle] = set()
         self.hostname = {h: h for h in self.plan.hosts} if self.multi else {self.host: socket.gethostname()}
         self.resumed: Resume | None = None  # `--resume`: where the run goes on (actors/run/resume.py)
+        self.on_start: Callable[[int, int], None] | None = None  # told (ready, of) as this host's actors come up
 
     def host_of(self, actor: ActorId) -> str:
         role, ident = actor
@@ -165,7 +172,7 @@ class Supervisor:
                 self.hosts.start()
             try:
                 await self.placement.start(self.local, restore=self.resumed is not None and self.resumed.restore)
-                await self._wait_alive(self.local, timeout=60.0)
+                await self._wait_ready(self.local)
                 if self.lead:
                     await self._wait_alive(self.expected, timeout=self.hosts_wait_s, what="the other hosts' actors")
                     await self.epochs.train()
@@ -267,6 +274,35 @@ class Supervisor:
                     self._route(*await self.node.recv())
         except TimeoutError:
             raise SwarmError(f"not alive after {timeout:.0f} s: {sorted(set(expected) - self.alive)}") from None
+
+    async def _wait_ready(self, expected: list[ActorId]) -> None:
+        """Until every actor of `expected` is alive (wired, matched, its token up), telling `on_start` as they come;
+        a SwarmError when none became ready for a stall period (START_STALL_S), not after a fixed time."""
+        assert self.node is not None
+        want = set(expected)
+        ready = len(want & self.alive)
+        if self.on_start is not None:
+            self.on_start(ready, len(want))
+        stall = self.START_STALL_S + self.START_STALL_PER_ACTOR * (len(want) - ready)
+        deadline = time.monotonic() + stall
+        while ready < len(want):
+            remaining = deadline - time.monotonic()
+            if remaining <= 0:
+                late = [f"{role} {ident}" for role, ident in sorted(want - self.alive)]
+                more = f" and {len(late) - 8} more" if len(late) > 8 else ""
+                why = f"{ready}/{len(want)} ready; not: {', '.join(late[:8])}{more}"
+                raise SwarmError(f"starting: no actor became ready for {stall:.0f} s ({why})")
+            try:
+                self._route(*await self.node.recv(timeout=remaining))
+            except TimeoutError:
+                continue
+            if (now := len(want & self.alive)) > ready:
+                ready = now
+                stall = self.START_STALL_S + self.START_STALL_PER_ACTOR * (len(want) - ready)
+                deadline = time.monotonic() + stall
+                log.info("starting: %d/%d actors ready", ready, len(want))
+                if self.on_start is not None:
+                    self.on_start(ready, len(want))
 
     def _route(self, key: str, payload: bytes) -> Any:
         """Handle one mailbox item: the supervisor's own events and what it consumes itself; return EpochDone,
