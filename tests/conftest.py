@@ -11,6 +11,7 @@ import shutil
 import signal
 import socket
 import tempfile
+import time
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -20,7 +21,7 @@ from hypothesis import settings
 from hypothesis_timeout import pytest_timeout_set_timer  # noqa: F401  # the hook: a hung property ends at its timeout
 from kinswarm.actors.run.config import RunConfig
 from kinswarm.actors.run.runfile import load_run
-from kinswarm.actors.runtime import Mailbox
+from kinswarm.actors.runtime import Mailbox, NetSpec
 from kinswarm.protocol.keys import Keys
 
 # Swarms a test started as child processes (a `kinswarm run`, in a session of its own): whatever the test's outcome,
@@ -106,6 +107,19 @@ def chain4() -> Path:
 @pytest.fixture
 def tree5() -> Path:
     return EXAMPLES / "tree5.toml"
+
+
+def tool_net(out: Path, stop: Any = None, wait_s: float = 120.0) -> NetSpec | None:
+    """The NetSpec a run wrote for its tools (`<out>/net/cli.json`: its endpoint and credentials; a one-host run's
+    hub admits only its own identities), once the run has written it; None if `stop` (an Event) was set first."""
+    path = out / "net" / "cli.json"
+    deadline = time.monotonic() + wait_s  # a hang guard
+    while stop is None or not stop.is_set():
+        with contextlib.suppress(OSError, ValueError):  # not yet there, or half written
+            return NetSpec.from_json(path.read_text())
+        assert time.monotonic() < deadline, f"{path} never appeared"
+        time.sleep(0.02)
+    return None
 
 
 def swarm_pids(marker: str) -> list[int]:

@@ -12,7 +12,6 @@ from __future__ import annotations
 import asyncio
 import logging
 import random
-import socket
 import sys
 import threading
 import time
@@ -23,7 +22,7 @@ from typing import Any
 import msgpack
 import pytest
 import zenoh
-from conftest import LOCKSTEP_ARGS, free_port
+from conftest import LOCKSTEP_ARGS, free_port, tool_net
 from kinswarm.actors.cli.commands import _resolve, build_parser
 from kinswarm.actors.run.config import RunConfig
 from kinswarm.actors.run.launch import run_swarm
@@ -196,17 +195,12 @@ class Flood(threading.Thread):
             pass  # our own flood on metrics/epoch
 
     def run(self) -> None:
-        # connect only once the supervisor listens: a failed first attempt makes Zenoh retry a second later
-        host, port = self.cfg.listen.removeprefix("tcp/").rsplit(":", 1)
+        # connect once the supervisor listens and has told its tools how: the hub admits only the run's identities
+        # (a stranger cannot even join; this flood is of a process that read the run's files, which the codec refuses)
         deadline = time.monotonic() + 90
-        while True:
-            try:
-                socket.create_connection((host, int(port)), timeout=0.2).close()
-                break
-            except OSError:
-                assert time.monotonic() < deadline, "the supervisor never listened"
-                time.sleep(0.01)
-        s = open_session(connect=[self.cfg.listen])
+        net = tool_net(Path(self.cfg.out), wait_s=90)
+        assert net is not None
+        s = open_session(net)
         try:
             sub = s.declare_subscriber(self.keys.metrics("epoch"), self.on_epoch)
             want = {self.keys.alive("supervisor", "main"), self.keys.alive("sim", "sim"),

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import pytest
 import zenoh
-from conftest import EXAMPLES, LOCKSTEP_ARGS, free_port, run_config, swarm_pids
+from conftest import EXAMPLES, LOCKSTEP_ARGS, free_port, run_config, swarm_pids, tool_net
 from kinswarm.actors.cli.commands import main as cli_main
 from kinswarm.actors.runtime import open_session
 from kinswarm.protocol.robots import load_robot
@@ -124,11 +124,15 @@ def test_tree_runs_in_processes(tmp_path, tree5, endpoint):
     assert s["missed_cmds"] == 0 and len(s["final_error"]) == 2
 
 
-def _spam(run_id: str, connect: str, stop: threading.Event) -> int:
-    """Publish garbage and ill-typed messages on every key of the run until told to stop."""
+def _spam(run_id: str, out: Path, stop: threading.Event) -> int:
+    """Publish garbage and ill-typed messages on every key of the run until told to stop: a process that may join the
+    run's network (it read the run's files for its credentials) but holds no valid message, which the codec refuses."""
     import msgpack
 
-    s = open_session(connect=[connect])
+    net = tool_net(out, stop)
+    if net is None:
+        return 0
+    s = open_session(net)
     keys = [
         "a/a1/down",
         "a/a2/down",
@@ -169,8 +173,8 @@ def test_malformed_messages_are_rejected_and_the_run_goes_on(tmp_path, chain4):
     port = free_port()
     stop = threading.Event()
     sent: list[int] = []
-    t = threading.Thread(target=lambda: sent.append(_spam("noisy", f"tcp/127.0.0.1:{port}", stop)))
-    # the spammer connects as soon as the supervisor listens
+    t = threading.Thread(target=lambda: sent.append(_spam("noisy", tmp_path / "noisy", stop)))
+    # the spammer connects as soon as the supervisor listens (and has told its tools how)
     t.start()
     try:
         noisy = run(

@@ -4,11 +4,15 @@ one-host plan built in code (`local_plan`), the same machinery.
 
 A plan names hosts, each with an address the others reach it at and the actors it runs ("sim", "agents" for
 every agent no other host claims, or agent ids); one host leads (it trains, the others serve). No router
-host by default (`mode = "peer"`): on one host the actors are peers that gossip connects directly; on
-several, each host's supervisor is its host's Zenoh router, its actors are clients of it, and the other
-supervisors connect to the leader's, so the one link between hosts is a configured one that comes back
-after a cut. `mode = "client"` makes every process a client of the plan's routers (`kinswarm router`),
-for sites where hosts cannot reach each other directly.
+host by default (`mode = "peer"`): each host's supervisor is its host's Zenoh router (the hub), its actors are
+clients of it, and the other supervisors connect to the leader's, so the one link between hosts is a configured
+one that comes back after a cut. A host of N actors holds N connections, not a mesh of N^2 (docs/architecture.md:
+18 processes held 490 as gossiping peers). `mode = "client"` makes every process a client of the plan's routers
+(`kinswarm router`), for sites where hosts cannot reach each other directly.
+
+`kinswarm run` (the one-host plan built in code) guards its hub with per-run user/password credentials derived
+from the run's secret (`local_plan(..., secret=)`): a process without the run's files cannot even join its
+network, so it can declare no liveliness token and no subscriber on the run's keys.
 
 Security, for anything beyond one machine: `tls` turns every endpoint into `tls/...` with the plan's
 certificates (`kinswarm certs PLAN --out DIR` writes throwaway ones); `mtls` makes both ends present one,
@@ -22,6 +26,7 @@ children, so agent y publishes on a/<parent(y)>/up and a/<descendant>/down).
 from __future__ import annotations
 
 import hashlib
+import hmac
 import ipaddress
 import os
 import socket
@@ -60,6 +65,10 @@ class Security:
     certs: str = ""  # directory: ca.pem, <identity>.pem, <identity>.key
     credentials: str = ""  # TOML: [users] <identity> = "password"
     acl: bool = False
+    # `kinswarm run`: every identity's password derived from the run's secret (run_password), the hub's dictionary
+    # of them written into `net_dir` (the run's net/, owner-only). A plan's own `credentials` take precedence.
+    secret: bytes = field(default=b"", repr=False)
+    net_dir: str = ""
 
     @property
     def on(self) -> bool:
@@ -134,24 +143,20 @@ class Plan:
         h = self.hosts[host]
         if self.mode == "client":
             spec = NetSpec(mode="client", connect=self.routers, lease_ms=self.lease_ms, must_connect=True)
-        elif len(self.hosts) > 1:
-            # Several hosts: each host's supervisor is its host's Zenoh router and its actors are clients of it;
-            # the other supervisors connect to the leader's. Routers forward and reconnect to a configured
-            # endpoint after a cut; peers learned by gossip did not (1 cut in ~8 never healed).
-            if supervisor:
-                leader = () if host == self.leader else (self.hosts[self.leader].listen,)
-                spec = NetSpec(
-                    mode="router", listen=(h.listen,), connect=leader, lease_ms=self.lease_ms,
-                    close_blocked_ms=self.lease_ms,
-                )  # fmt: skip
-            else:
-                spec = NetSpec(mode="client", connect=(h.listen,), lease_ms=self.lease_ms, must_connect=True)
         elif supervisor:
-            spec = NetSpec(listen=(h.listen,), lease_ms=self.lease_ms)
-        else:  # one host: peers, which gossip connects to each other directly (one hop, no relay)
+            # Each host's supervisor is its host's Zenoh router and its actors are clients of it; the other
+            # supervisors connect to the leader's. Routers forward and reconnect to a configured endpoint after a
+            # cut; peers learned by gossip did not (1 cut in ~8 never healed). On one host too: gossiping peers
+            # meshed (N^2 connections: 490 for 18 processes; a 16-agent chain could not start in 60 s), a hub
+            # holds one connection per actor, at the cost of a relay on every hop (docs/architecture.md).
+            several = len(self.hosts) > 1
+            leader = (self.hosts[self.leader].listen,) if several and host != self.leader else ()
             spec = NetSpec(
-                listen=(self.endpoint(h.address, 0),), connect=(h.listen,), lease_ms=self.lease_ms, must_connect=True
-            )
+                mode="router", listen=(h.listen,), connect=leader, lease_ms=self.lease_ms,
+                close_blocked_ms=self.lease_ms if several else 0,
+            )  # fmt: skip
+        else:
+            spec = NetSpec(mode="client", connect=(h.listen,), lease_ms=self.lease_ms, must_connect=True)
         return self.secure(spec, identity, topo)
 
     def secure(self, spec: NetSpec, identity: str, topo: Topology | None) -> NetSpec:
@@ -173,6 +178,11 @@ class Plan:
             if identity not in users:
                 raise PlanError(self.source, "security.credentials", f"no password for {identity} in {s.credentials}")
             changes.update(user=identity, password=users[identity], dictionary=dictionary_file(s.credentials, users))
+        elif s.secret:
+            changes.update(user=identity, password=run_password(s.secret, identity))
+            if spec.listen and topo is not None:  # the hub: it checks everyone else
+                users = {i: run_password(s.secret, i) for i in [*self.identities(topo), "controller"]}
+                changes["dictionary"] = write_dictionary(Path(s.net_dir) / "hub.dictionary", users)
         if s.acl and topo is not None:
             changes["acl"] = acl(self, topo)
         return spec.with_(**changes)
@@ -222,13 +232,24 @@ def load_credentials(path: str | Path, source: str | Path = "") -> dict[str, str
 
 def dictionary_file(credentials: str | Path, users: dict[str, str]) -> str:
     """Zenoh's usrpwd dictionary (user:password lines) beside the credentials file, written once, 0600."""
-    path = Path(credentials).with_suffix(".dictionary")
+    return write_dictionary(Path(credentials).with_suffix(".dictionary"), users)
+
+
+def write_dictionary(path: Path, users: dict[str, str]) -> str:
+    """Zenoh's usrpwd dictionary (user:password lines) at `path`, written when it differs, owner-only."""
     text = "".join(f"{u}:{p}\n" for u, p in sorted(users.items()))
     if not path.exists() or path.read_text() != text:
+        path.parent.mkdir(parents=True, exist_ok=True)
         fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
         with os.fdopen(fd, "w") as f:
             f.write(text)
     return str(path)
+
+
+def run_password(secret: bytes, identity: str) -> str:
+    """A one-host run's password for `identity`: a MAC of it under the run's secret (config.json, owner-only), so
+    whoever may read the run's files may join its network and nobody else; no password file to keep in step."""
+    return hmac.new(secret, b"kinswarm-usrpwd/" + identity.encode(), hashlib.sha256).hexdigest()[:32]
 
 
 # -- loading -----------------------------------------------------------------------------------------
@@ -240,13 +261,17 @@ def free_endpoint(address: str = "127.0.0.1") -> str:
         return f"tcp/{address}:{s.getsockname()[1]}"
 
 
-def local_plan(listen: str, lease_ms: int = LEASE_MS) -> Plan:
-    """The embedded default (deploy/local.toml): one host, every actor on it, peers on loopback. `listen` "auto": a
-    free port, picked here (the actors are told the endpoint the plan holds)."""
+def local_plan(listen: str, lease_ms: int = LEASE_MS, secret: bytes = b"", net_dir: str | Path = "") -> Plan:
+    """The embedded default (deploy/local.toml): one host, every actor on it, clients of the supervisor's hub on
+    loopback. `listen` "auto": a free port, picked here (the actors are told the endpoint the plan holds).
+    `secret` (the run's, with its `net_dir`): the hub admits only the run's own identities (Security.secret)."""
     if listen == AUTO_LISTEN:
         listen = free_endpoint()
     host = Host(name="local", address="127.0.0.1", listen=listen, actors=("sim", "agents"))
-    return Plan(source="(local)", name="local", leader="local", hosts={"local": host}, lease_ms=lease_ms)
+    security = Security(secret=secret, net_dir=str(net_dir)) if secret else Security()
+    return Plan(
+        source="(local)", name="local", leader="local", hosts={"local": host}, lease_ms=lease_ms, security=security
+    )
 
 
 def load_plan(path: str | Path) -> Plan:

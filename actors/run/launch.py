@@ -103,7 +103,7 @@ async def _supervise(
 
     with contextlib.ExitStack() as undo:  # until the run begins, a failure leaves nothing of it (its port free again)
         undo.callback(session.close)
-        on_epoch, close_watchers = _watchers(cfg, progress and lead, view if lead else None)
+        on_epoch, close_watchers, on_start = _watchers(cfg, progress and lead, view if lead else None)
         undo.callback(close_watchers)
         placement: ProcessPlacement | SinglePlacement
         if cfg.placement == "single":
@@ -113,6 +113,7 @@ async def _supervise(
         sup = Supervisor(cfg, topo, session, placement, on_epoch=on_epoch, plan=plan, host=host)
         sup.hosts_wait_s = wait_s
         sup.resumed = resume
+        sup.on_start = on_start
         undo.pop_all()
     claimed.begin()  # from here on the run directory is the run's, however it ends
     with _signals_stop_once() as caught:
@@ -149,7 +150,7 @@ def _open_session(cfg: RunConfig, topo: Topology, plan: Plan, host: str) -> tupl
         except Exception as e:
             if attempt + 1 < tries:
                 log.info("picked port taken (%s): picking again", zenoh_reason(e))
-                plan = local_plan(AUTO_LISTEN, cfg.lease_ms)
+                plan = local_plan(AUTO_LISTEN, cfg.lease_ms, plan.security.secret, plan.security.net_dir)
                 continue
             where = ", ".join(spec.listen) or ", ".join(spec.connect)
             if plan.name != "local":
@@ -167,8 +168,11 @@ def _open_session(cfg: RunConfig, topo: Topology, plan: Plan, host: str) -> tupl
 OnEpoch = Callable[[EpochDone], None]
 
 
-def _watchers(cfg: RunConfig, progress: bool, view: str | None) -> tuple[OnEpoch, Callable[[], None]]:
-    """What watches the epochs as they end: the progress bar, the live viewer; (on_epoch, close)."""
+def _watchers(
+    cfg: RunConfig, progress: bool, view: str | None
+) -> tuple[OnEpoch, Callable[[], None], Callable[[int, int], None]]:
+    """What watches the run: the progress bar, the live viewer; (on_epoch, close, on_start: the bar says how many
+    actors are ready while the swarm starts, which takes minutes for a hundred agents)."""
     bar = None
     if progress:
         from tqdm import tqdm
@@ -191,13 +195,17 @@ def _watchers(cfg: RunConfig, progress: bool, view: str | None) -> tuple[OnEpoch
             bar.set_postfix(final=f"{d.final_error:.3f}", mean=f"{d.mean_error:.3f}", **fleet, steps_s=f"{rate:.0f}")
             bar.update(1)
 
+    def on_start(ready: int, of: int) -> None:
+        if bar is not None:
+            bar.set_postfix_str(f"starting: {ready}/{of} actors ready" if ready < of else "")
+
     def close() -> None:
         if bar is not None:
             bar.close()
         if live is not None:
             live.close()
 
-    return on_epoch, close
+    return on_epoch, close, on_start
 
 
 def _finish(cfg: RunConfig, result: RunResult, progress: bool) -> dict:
@@ -242,7 +250,7 @@ def _run_inprocess(cfg: RunConfig, topo: Topology, progress: bool, view: str | N
     from kinswarm.actors.supervisor.inprocess import InProcessRun
     from kinswarm.actors.supervisor.recorder import Recorder
 
-    on_epoch, close_watchers = _watchers(cfg, progress, view)
+    on_epoch, close_watchers, _ = _watchers(cfg, progress, view)
     try:
         result = InProcessRun(cfg, topo).run(Recorder(Path(cfg.out)), on_epoch)
     finally:
@@ -285,7 +293,7 @@ def run_swarm(
 ) -> dict:
     """Run one swarm (or, with a deploy plan, one host's share of it) to the end and return its summary
     (used by the CLI, experiments and tests). Without a plan: the one-host plan (`kinswarm run`)."""
-    plan = plan if plan is not None else local_plan(cfg.listen, cfg.lease_ms)
+    plan = plan if plan is not None else local_plan(cfg.listen, cfg.lease_ms, cfg.key, Path(cfg.out) / "net")
     host = host if host is not None else plan.leader
     out = Path(cfg.out)
     check_start(plan, topo)
@@ -303,7 +311,7 @@ def run_swarm(
 def resume_swarm(cfg: RunConfig, topo: Topology, progress: bool = False, view: str | None = None) -> dict:
     """Continue the run in `cfg.out` (checked by resume.check_resume) from its last complete checkpoint, in its own
     directory, under its own lock: its rows past that checkpoint dropped, its agents restored from it."""
-    plan = local_plan(cfg.listen, cfg.lease_ms)
+    plan = local_plan(cfg.listen, cfg.lease_ms, cfg.key, Path(cfg.out) / "net")
     check_start(plan, topo)
     out = Path(cfg.out)
     with reclaim(out) as claimed:

@@ -28,6 +28,9 @@ from .timeline import HANDLED
 #: a node logs the first rejected message on each of up to this many keys, then every 1000th: a flood on one key
 #: cannot hide a bad message on another, and the log stays bounded
 LOGGED_KEYS = 100
+# wait_matched looks again this often when other Nodes share the session (they tell no listener), else this often
+# for safety's sake: Zenoh's matching listener wakes it at once
+LOCAL_CHECK_S, REMOTE_CHECK_S = 0.005, 1.0
 M = TypeVar("M")
 
 
@@ -360,16 +363,37 @@ class Node(LinkFaults, Gathering):
 
     # -- readiness -------------------------------------------------------------------------------
     async def wait_matched(self, keys: Iterable[str], timeout: float) -> None:
-        """Wait until every given publisher has a matching subscriber: a put before that is lost."""
-        pending = [k for k in keys]
+        """Wait until every given publisher has a matching subscriber: a put before that is lost. Woken by Zenoh's
+        matching listeners, not a poll: a hundred actors starting together polled each 5 ms, CPU the ones still
+        importing needed. A Node of this session that listens (the single placement's local bus) tells no listener:
+        with other Nodes on the session, the keys are looked at every LOCAL_CHECK_S."""
+        pending = list(keys)
+        changed = asyncio.Event()
+        loop = self._loop
+
+        def wake(_: Any) -> None:  # zenoh thread
+            with contextlib.suppress(RuntimeError):  # the loop is closing: nobody waits any more
+                loop.call_soon_threadsafe(changed.set)
+
+        listeners = [self.publisher(k).declare_matching_listener(wake) for k in pending]
         deadline = time.monotonic() + timeout
-        while pending:
-            pending = [k for k in pending if not (self._heard_here(k) or self.publisher(k).matching_status.matching)]
-            if not pending:
-                return
-            if time.monotonic() > deadline:
-                raise TimeoutError(f"{self.role}/{self.ident}: nobody subscribes to {pending}")
-            await asyncio.sleep(0.005)
+        try:
+            while True:
+                changed.clear()
+                pending = [k for k in pending if not (self._heard_here(k) or self._pubs[k].matching_status.matching)]
+                if not pending:
+                    return
+                remaining = deadline - time.monotonic()
+                if remaining <= 0:
+                    raise TimeoutError(f"{self.role}/{self.ident}: nobody subscribes to {pending}")
+                again = LOCAL_CHECK_S if self._bus.nodes > 1 else REMOTE_CHECK_S
+                with contextlib.suppress(TimeoutError):
+                    async with asyncio.timeout(min(remaining, again)):
+                        await changed.wait()
+        finally:
+            for listener in listeners:
+                with contextlib.suppress(Exception):  # gone with the session
+                    listener.undeclare()
 
     def _heard_here(self, key: str) -> bool:
         """A Node or tap of this session listens on step key `key` (it hears it through the local bus)."""

@@ -13,6 +13,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
+import os
 import socket
 import time
 from collections.abc import Callable
@@ -68,6 +69,13 @@ def actors_of(cfg: RunConfig, topo: Topology) -> list[ActorId]:
 class Supervisor:
     STATUS_EVERY = 0.5  # seconds between SwarmStatus messages
     hosts_wait_s = 600.0  # how long the leader waits for the other hosts' actors (`kinswarm up --wait`)
+    # A start fails only when it stalls: for START_STALL_S no actor became ready and the processes still starting
+    # used less than START_BUSY_CPU_S of CPU between them. N fresh interpreters share the machine's cores (and take
+    # turns at loading the learner's compiled kernels), and an actor is ready only once its neighbours listen, so in
+    # a large swarm the first become ready after minutes, then the rest in a burst. A fixed 60 s failed a 16-agent
+    # chain at load 9-15; 60 s + 2 s an actor still failed a 100-agent chain at load ~130 whose agents were busy.
+    START_STALL_S = 60.0
+    START_BUSY_CPU_S = 1.0
 
     def __init__(
         self,
@@ -117,6 +125,7 @@ class Supervisor:
         self.asking: Callable[[], None] | None = None
         self.resend_s = 2 * cfg.lease_ms / 1000  # how often it is asked again while no reply comes
         self.waking: WakeGuard | None = None  # this process's own stalls (run())
+        self.on_start: Callable[[int, int], None] | None = None  # told (ready, of) as this host's actors come up
 
     def host_of(self, actor: ActorId) -> str:
         role, ident = actor
@@ -173,7 +182,7 @@ class Supervisor:
                 self.hosts.start()
             try:
                 await self.placement.start(self.local, restore=self.resumed is not None and self.resumed.restore)
-                await self._wait_alive(self.local, timeout=60.0)
+                await self._wait_ready(self.local)
                 if self.lead:
                     await self._wait_alive(self.expected, timeout=self.hosts_wait_s, what="the other hosts' actors")
                     await self.epochs.train()
@@ -306,6 +315,58 @@ class Supervisor:
                     self._route(*await self.node.recv())
         except TimeoutError:
             raise SwarmError(f"not alive after {timeout:.0f} s: {sorted(set(expected) - self.alive)}") from None
+
+    async def _wait_ready(self, expected: list[ActorId]) -> None:
+        """Until every actor of `expected` is alive (wired, matched, its token up), telling `on_start` as they come;
+        a SwarmError once the start stalls (START_STALL_S with no actor become ready and the starting processes
+        idle), never after a fixed time."""
+        assert self.node is not None
+        want = set(expected)
+        ready = len(want & self.alive)
+        if self.on_start is not None:
+            self.on_start(ready, len(want))
+        deadline, cpu = time.monotonic() + self.START_STALL_S, self._starting_cpu(want)
+        while ready < len(want):
+            remaining = deadline - time.monotonic()
+            if remaining <= 0:
+                now_cpu = self._starting_cpu(want)
+                if now_cpu is not None and cpu is not None and now_cpu - cpu >= self.START_BUSY_CPU_S:
+                    log.info(
+                        "starting: %d/%d actors ready, the others busy (%.0f CPU-s)", ready, len(want), now_cpu - cpu
+                    )
+                    deadline, cpu = time.monotonic() + self.START_STALL_S, now_cpu
+                    continue
+                late = [f"{role} {ident}" for role, ident in sorted(want - self.alive)]
+                more = f" and {len(late) - 8} more" if len(late) > 8 else ""
+                why = f"{ready}/{len(want)} ready; not: {', '.join(late[:8])}{more}"
+                raise SwarmError(f"starting: no actor became ready for {self.START_STALL_S:.0f} s, nor busy ({why})")
+            try:
+                self._route(*await self.node.recv(timeout=remaining))
+            except TimeoutError:
+                continue
+            if (now := len(want & self.alive)) > ready:
+                ready = now
+                deadline, cpu = time.monotonic() + self.START_STALL_S, self._starting_cpu(want)
+                log.info("starting: %d/%d actors ready", ready, len(want))
+                if self.on_start is not None:
+                    self.on_start(ready, len(want))
+
+    def _starting_cpu(self, want: set[ActorId]) -> float | None:
+        """CPU seconds used so far by the processes of the actors of `want` not yet alive (Linux: /proc/PID/stat);
+        None where actors share this process (the single placement) or /proc cannot tell."""
+        pids = self.placement.pids
+        mine = os.getpid()
+        own = [pids[ident] for role, ident in want - self.alive if pids.get(ident, mine) != mine]
+        if not own:
+            return None
+        total = 0
+        for pid in own:
+            try:  # utime and stime: fields 14 and 15, counted after the command's closing parenthesis
+                fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+                total += int(fields[11]) + int(fields[12])
+            except (OSError, IndexError, ValueError):  # gone (its end is an event of its own), or no /proc
+                continue
+        return total / os.sysconf("SC_CLK_TCK")
 
     def _route(self, key: str, payload: bytes) -> Any:
         """Handle one mailbox item: the supervisor's own events and what it consumes itself; return EpochDone,
