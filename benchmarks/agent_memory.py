@@ -129,6 +129,8 @@ def one_row(python: str, n: int, steps: int, seed: int) -> dict:
         first = None
         at_first: dict[str, list[tuple[int, int]]] = {}
         working: dict[str, list[tuple[int, int]]] = {}
+        waiting: dict[str, list[tuple[int, int]]] = {}  # before any step: the fullest reading, every ~2 s
+        last_wait = 0.0
         try:
             while p.poll() is None:
                 clock = read_clock(out)
@@ -137,6 +139,11 @@ def one_row(python: str, n: int, steps: int, seed: int) -> dict:
                     at_first = snapshot(p.pid)
                 if clock is not None and (clock[0] >= 1 or clock[1] >= steps // 2) and not working:
                     working = snapshot(p.pid)
+                if first is None and time.monotonic() - last_wait > 2.0:
+                    last_wait = time.monotonic()
+                    now = snapshot(p.pid)
+                    if len(now.get("agent", [])) >= len(waiting.get("agent", [])):
+                        waiting = now
                 time.sleep(0.01)
             text = p.stdout.read() if p.stdout else ""
         finally:
@@ -144,7 +151,7 @@ def one_row(python: str, n: int, steps: int, seed: int) -> dict:
                 p.kill()
             p.wait()
         total = time.monotonic() - t0
-    shown = working or at_first
+    shown, phase = next(((s, n) for s, n in ((working, "working"), (at_first, "first step")) if s), (waiting, "waiting"))
     agents = shown.get("agent", [])
     sim = shown.get("sim", [(0, 0)])
     row = {
@@ -152,6 +159,7 @@ def one_row(python: str, n: int, steps: int, seed: int) -> dict:
         "n": n,
         "load": load,
         "ok": p.returncode == 0,
+        "reading": phase,  # working: mid-run; first step: the run ended before mid-run; waiting: it never stepped
         "first_step_s": first,
         "summary_s": total,
         "agents": len(agents),
@@ -165,6 +173,7 @@ def one_row(python: str, n: int, steps: int, seed: int) -> dict:
         "total_pss_mb": sum(m[0] for ms in shown.values() for m in ms) / 1024,
         "at_first_step": {k: [list(m) for m in v] for k, v in at_first.items()},
         "working": {k: [list(m) for m in v] for k, v in working.items()},
+        "waiting": {k: [list(m) for m in v] for k, v in waiting.items()},
     }
     if not row["ok"]:
         row["error"] = text.strip().splitlines()[-1:] if text.strip() else ["(no output)"]
@@ -204,7 +213,8 @@ def main() -> None:
                 f"{fmt(r['agent_rss_mb']):>8} / {fmt(r['agent_rss_max_mb']):<7} "
                 f"{fmt(r['sim_pss_mb']):>5}/{fmt(r['sim_rss_mb']):<6} {fmt(r['zygote_pss_mb']):>10} "
                 f"{fmt(r['total_pss_mb']):>9} {fmt(r['first_step_s'], '.1f'):>9}s {fmt(r['summary_s'], '.1f'):>7}s"
-                + ("" if r["ok"] else f"  FAILED: {r['error'][0]}"),
+                + ("" if r["reading"] == "working" else f"  (memory read {r['reading']})")
+                + ("" if r["ok"] else f"  FAILED: {r['error'][0][:160]}"),
                 flush=True,
             )
     print("memory in MB (of the processes at work, 2nd reading); times from the command")

@@ -58,10 +58,14 @@ class Actor(Protocol):
 def build_actor(role: str, ident: str, cfg: RunConfig, topo: Topology, node: Node, restore: bool = False) -> Actor:
     """`restore`: a restart -- resume from this run's newest good checkpoint instead of the start."""
     if role == "agent":
-        from kinswarm.actors.agent import Agent
-        from kinswarm.actors.agent.fleet import FleetAgent
+        if cfg.fleet > 1:
+            from kinswarm.actors.agent.fleet import FleetAgent
 
-        agent = FleetAgent(cfg, topo, ident, node) if cfg.fleet > 1 else Agent(cfg, topo, ident, node)
+            agent: Any = FleetAgent(cfg, topo, ident, node)
+        else:
+            from kinswarm.actors.agent import Agent
+
+            agent = Agent(cfg, topo, ident, node)
         if restore:
             agent.memory.resume(Path(cfg.out) / "agents")
         elif cfg.from_dir:
