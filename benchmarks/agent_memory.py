@@ -151,7 +151,8 @@ def one_row(python: str, n: int, steps: int, seed: int) -> dict:
                 p.kill()
             p.wait()
         total = time.monotonic() - t0
-    shown, phase = next(((s, n) for s, n in ((working, "working"), (at_first, "first step")) if s), (waiting, "waiting"))
+    readings = ((working, "working"), (at_first, "first step"), (waiting, "waiting"))
+    shown, phase = next(((got, name) for got, name in readings if got), readings[-1])
     agents = shown.get("agent", [])
     sim = shown.get("sim", [(0, 0)])
     row = {
