@@ -8,8 +8,8 @@ of --steps steps, nothing drawn or recorded. The run's processes are found by wa
 in /proc; once the sim's clock (<run>/net/clock) shows the first step, and again after the first epoch, every one's
 `smaps_rollup` is read: PSS (proportional set size: a page shared by k processes counts 1/k in each, so memory the
 agents share counts once over all of them) and RSS (every page the process maps, shared or not). The table shows
-the second reading (the processes at work). Command to first step is from the supervisor's start to the clock's
-first step (read every 10 ms); command to summary is the whole run.
+the second reading (the processes at work). Times are from the command: to every agent's process existing (read
+every 0.2 s), to the clock's first step (read every 10 ms), to the run's end (command to summary).
 
 `--python` runs the rows under other interpreters too (another checkout's venv python: a change's before and after),
 alternated N by N so both see the same load. Each row prints the load average (1 min) it started at.
@@ -130,9 +130,14 @@ def one_row(python: str, n: int, steps: int, seed: int) -> dict:
         at_first: dict[str, list[tuple[int, int]]] = {}
         working: dict[str, list[tuple[int, int]]] = {}
         waiting: dict[str, list[tuple[int, int]]] = {}  # before any step: the fullest reading, every ~2 s
-        last_wait = 0.0
+        last_wait = last_count = 0.0
+        spawned = None  # every agent's process exists (its imports may still run)
         try:
             while p.poll() is None:
+                if spawned is None and time.monotonic() - last_count > 0.2:
+                    last_count = time.monotonic()
+                    if sum(role_of(q) == "agent" for q in descendants(p.pid)) >= n:
+                        spawned = last_count - t0
                 clock = read_clock(out)
                 if first is None and clock is not None and clock[0] >= 0:
                     first = time.monotonic() - t0
@@ -161,6 +166,7 @@ def one_row(python: str, n: int, steps: int, seed: int) -> dict:
         "load": load,
         "ok": p.returncode == 0,
         "reading": phase,  # working: mid-run; first step: the run ended before mid-run; waiting: it never stepped
+        "spawned_s": spawned,
         "first_step_s": first,
         "summary_s": total,
         "agents": len(agents),
@@ -200,7 +206,7 @@ def main() -> None:
     rows = []
     head = (
         f"{'N':>4} {'python':<28} {'load':>5} {'agent PSS med/max':>18} {'agent RSS med/max':>18} "
-        f"{'sim PSS/RSS':>12} {'zygote PSS':>10} {'total PSS':>9} {'first step':>10} {'summary':>8}"
+        f"{'sim PSS/RSS':>12} {'zygote PSS':>10} {'total PSS':>9} {'spawned':>8} {'first step':>10} {'summary':>8}"
     )
     print(head)
     for n in sizes:
@@ -213,12 +219,14 @@ def main() -> None:
                 f"{fmt(r['agent_pss_mb']):>8} / {fmt(r['agent_pss_max_mb']):<7} "
                 f"{fmt(r['agent_rss_mb']):>8} / {fmt(r['agent_rss_max_mb']):<7} "
                 f"{fmt(r['sim_pss_mb']):>5}/{fmt(r['sim_rss_mb']):<6} {fmt(r['zygote_pss_mb']):>10} "
-                f"{fmt(r['total_pss_mb']):>9} {fmt(r['first_step_s'], '.1f'):>9}s {fmt(r['summary_s'], '.1f'):>7}s"
+                f"{fmt(r['total_pss_mb']):>9} {fmt(r['spawned_s'], '.1f'):>7}s "
+                f"{fmt(r['first_step_s'], '.1f'):>9}s {fmt(r['summary_s'], '.1f'):>7}s"
                 + ("" if r["reading"] == "working" else f"  (memory read {r['reading']})")
                 + ("" if r["ok"] else f"  FAILED: {r['error'][0][:160]}"),
                 flush=True,
             )
-    print("memory in MB (of the processes at work, 2nd reading); times from the command")
+    print("memory in MB (of the processes at work, 2nd reading); times from the command: every agent's process")
+    print("exists, the sim's first step, the run's summary")
     if a.json:
         a.json.write_text(json.dumps(rows, indent=1))
 
