@@ -29,6 +29,8 @@ from kinswarm.protocol.faults import PROCESS_FAULTS
 from kinswarm.protocol.keys import Keys
 from kinswarm.protocol.topology import Topology
 
+from .result import SwarmError
+
 ActorId = tuple[str, str]  # (role, ident)
 EXIT = "__exit__"  # mailbox key of an actor's end: payload b"role/ident/how"
 Push = Callable[[str, bytes], None]
@@ -46,8 +48,8 @@ def parse_exit(payload: bytes) -> tuple[ActorId, str]:
 ZYGOTE_ANSWER_S = 60.0  # hang guard: a fork's pid comes back in milliseconds
 
 
-class ZygoteError(RuntimeError):
-    pass
+class ZygoteError(SwarmError):
+    """The actors' zygote failed to load, or is gone: no actor can be started (the run fails with this line)."""
 
 
 class Forked:
