@@ -9,7 +9,9 @@ in /proc; once the sim's clock (<run>/net/clock) shows the first step, and again
 `smaps_rollup` is read: PSS (proportional set size: a page shared by k processes counts 1/k in each, so memory the
 agents share counts once over all of them) and RSS (every page the process maps, shared or not). The table shows
 the second reading (the processes at work). Times are from the command: to every agent's process existing (read
-every 0.2 s), to the clock's first step (read every 10 ms), to the run's end (command to summary).
+every 0.2 s), to the clock's first step (read every 10 ms), to the run's end (command to summary); CPU is the user and
+system time of every process of the run (getrusage of the children: each actor was waited for by its parent). On a
+shared machine the CPU column is the steadier: N fresh interpreters get N shares of a busy machine, a zygote one.
 
 `--python` runs the rows under other interpreters too (another checkout's venv python: a change's before and after),
 alternated N by N so both see the same load. Each row prints the load average (1 min) it started at.
@@ -20,6 +22,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import resource
 import statistics
 import subprocess
 import sys
@@ -124,6 +127,7 @@ def one_row(python: str, n: int, steps: int, seed: int) -> dict:
         argv += ["--epochs", "2", "--steps", str(steps), "--seed", str(seed), "--out", str(out)]
         argv += ["--listen", f"tcp/127.0.0.1:{free_port()}", "--no-progress", "--set", "run.record=false"]
         load = os.getloadavg()[0]
+        before = resource.getrusage(resource.RUSAGE_CHILDREN)
         t0 = time.monotonic()
         p = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
         first = None
@@ -156,8 +160,11 @@ def one_row(python: str, n: int, steps: int, seed: int) -> dict:
                 p.kill()
             p.wait()
         total = time.monotonic() - t0
+        after = resource.getrusage(resource.RUSAGE_CHILDREN)  # every process of the run: each was waited for
+        cpu = (after.ru_utime + after.ru_stime) - (before.ru_utime + before.ru_stime)
     readings = ((working, "working"), (at_first, "first step"), (waiting, "waiting"))
-    shown, phase = next(((got, name) for got, name in readings if got), readings[-1])
+    # a reading taken late (a loaded machine can hold this loop back past the run's end) may miss the actors
+    shown, phase = next(((got, name) for got, name in readings if len(got.get("agent", [])) == n), readings[-1])
     agents = shown.get("agent", [])
     sim = shown.get("sim", [(0, 0)])
     row = {
@@ -169,6 +176,7 @@ def one_row(python: str, n: int, steps: int, seed: int) -> dict:
         "spawned_s": spawned,
         "first_step_s": first,
         "summary_s": total,
+        "cpu_s": cpu,
         "agents": len(agents),
         "agent_pss_mb": statistics.median(a[0] for a in agents) / 1024 if agents else None,
         "agent_pss_max_mb": max(a[0] for a in agents) / 1024 if agents else None,
@@ -206,7 +214,8 @@ def main() -> None:
     rows = []
     head = (
         f"{'N':>4} {'python':<28} {'load':>5} {'agent PSS med/max':>18} {'agent RSS med/max':>18} "
-        f"{'sim PSS/RSS':>12} {'zygote PSS':>10} {'total PSS':>9} {'spawned':>8} {'first step':>10} {'summary':>8}"
+        f"{'sim PSS/RSS':>12} {'zygote PSS':>10} {'total PSS':>9} {'spawned':>8} {'first step':>10} {'summary':>8} "
+        f"{'CPU':>7}"
     )
     print(head)
     for n in sizes:
@@ -220,13 +229,13 @@ def main() -> None:
                 f"{fmt(r['agent_rss_mb']):>8} / {fmt(r['agent_rss_max_mb']):<7} "
                 f"{fmt(r['sim_pss_mb']):>5}/{fmt(r['sim_rss_mb']):<6} {fmt(r['zygote_pss_mb']):>10} "
                 f"{fmt(r['total_pss_mb']):>9} {fmt(r['spawned_s'], '.1f'):>7}s "
-                f"{fmt(r['first_step_s'], '.1f'):>9}s {fmt(r['summary_s'], '.1f'):>7}s"
+                f"{fmt(r['first_step_s'], '.1f'):>9}s {fmt(r['summary_s'], '.1f'):>7}s {fmt(r['cpu_s'], '.1f'):>6}s"
                 + ("" if r["reading"] == "working" else f"  (memory read {r['reading']})")
                 + ("" if r["ok"] else f"  FAILED: {r['error'][0][:160]}"),
                 flush=True,
             )
     print("memory in MB (of the processes at work, 2nd reading); times from the command: every agent's process")
-    print("exists, the sim's first step, the run's summary")
+    print("exists, the sim's first step, the run's summary; CPU: user + system of all the run's processes")
     if a.json:
         a.json.write_text(json.dumps(rows, indent=1))
 
