@@ -22,6 +22,7 @@ from kinswarm.actors.run.resolved import write_resolved
 from kinswarm.actors.run.resume import Resume, prepare_resume, settle
 from kinswarm.actors.run.rundir import Claim, claim, reclaim
 from kinswarm.actors.runtime import NetSpec, open_session
+from kinswarm.actors.runtime.hub import Hub
 from kinswarm.actors.runtime.net import zenoh_reason
 from kinswarm.protocol.messages import EpochDone
 from kinswarm.protocol.topology import Topology
@@ -91,7 +92,7 @@ async def _supervise(
     from kinswarm.actors.supervisor import ProcessPlacement, SinglePlacement, Supervisor
 
     out = Path(cfg.out)
-    session, plan = _open_session(cfg, topo, plan, host)
+    session, plan, hub = _open_session(cfg, topo, plan, host)
     lead = host == plan.leader
     sup_id = "main" if lead else host
     # where the run listens, for `kinswarm fault/status` (an auto port is known only from here)
@@ -102,6 +103,8 @@ async def _supervise(
         return write_net(out / "net" / f"{identity}.json", plan.net(host, identity, supervisor=False, topo=topo))
 
     with contextlib.ExitStack() as undo:  # until the run begins, a failure leaves nothing of it (its port free again)
+        if hub is not None:
+            undo.callback(hub.close)
         undo.callback(session.close)
         on_epoch, close_watchers, on_start = _watchers(cfg, progress and lead, view if lead else None)
         undo.callback(close_watchers)
@@ -122,6 +125,8 @@ async def _supervise(
         finally:
             close_watchers()
             session.close()
+            if hub is not None:
+                hub.close()
         if result.interrupted and caught:
             result.signal = signal.Signals(caught[0]).name
             if resume is None and not result.epochs:  # stopped while starting: nothing of it blocks a retry
@@ -138,16 +143,27 @@ async def _supervise(
         return _finish(cfg, result, progress)
 
 
-def _open_session(cfg: RunConfig, topo: Topology, plan: Plan, host: str) -> tuple[zenoh.Session, Plan]:
-    """The supervisor's session, and the plan whose endpoint it listens on. An auto port (no --listen) another
-    program took between its pick and the bind (rare: a few ms) is picked again, a few times."""
+def _open_session(cfg: RunConfig, topo: Topology, plan: Plan, host: str) -> tuple[zenoh.Session, Plan, Hub | None]:
+    """The supervisor's session, the plan whose endpoint the host's hub listens on, and the hub. With actor processes
+    the hub (the host's Zenoh router) is a process of its own, and the supervisor one of its clients
+    (actors/runtime/hub.py: a paused supervisor must not pause the swarm); in the `single` placement the supervisor's
+    session, which every actor shares, is the router. An auto port (no --listen) another program took between its
+    pick and the bind (rare: a few ms) is picked again, a few times."""
     auto = plan.source == "(local)" and cfg.listen == AUTO_LISTEN
     tries = 5 if auto else 1
     for attempt in range(tries):
         spec = plan.net(host, plan.identity("supervisor", "", host), supervisor=True, topo=topo)
+        hub = None
         try:
-            return open_session(spec), plan
+            if spec.mode == "router" and cfg.placement != "single":
+                hub = Hub(write_net(Path(cfg.out) / "net" / "hub.json", spec))
+                spec = spec.with_(
+                    mode="client", listen=(), connect=spec.listen, must_connect=True, dictionary="", acl=None
+                )
+            return open_session(spec), plan, hub
         except Exception as e:
+            if hub is not None:
+                hub.close()
             if attempt + 1 < tries:
                 log.info("picked port taken (%s): picking again", zenoh_reason(e))
                 plan = local_plan(AUTO_LISTEN, cfg.lease_ms, plan.security.secret, plan.security.net_dir)
