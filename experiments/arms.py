@@ -57,7 +57,9 @@ def link_length(shape: str, n: int, branching: int = BRANCHING) -> float:
     return REACH * len(leaves) / sum(d[i] for i in leaves)
 
 
-def run_file(shape: str, n: int, path: Path, branching: int = BRANCHING, goal: tuple[float, float] = (4.16, 6.18)) -> Path:
+def run_file(
+    shape: str, n: int, path: Path, branching: int = BRANCHING, goal: tuple[float, float] = (4.16, 6.18)
+) -> Path:
     """Write the run file of an n-joint robot of `shape` to `path` (joints a1 ... aN, a1 the root) and return it."""
     par = parents(shape, n, branching)
     length = link_length(shape, n, branching)

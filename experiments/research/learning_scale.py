@@ -91,7 +91,9 @@ def run(ctx: Context) -> dict[str, Any]:
     level = 1 if q else LEVEL
     train_steps, eval_steps = (100, 100) if q else (500, EVAL_STEPS)
     test = halton(ctx.test_set)[: 8 if q else TEST_SIZE]
-    robots = {(shape, n): str(run_file(shape, n, ctx.out / "robots" / f"{shape}{n}.toml")) for shape in SHAPES for n in sizes}
+    robots = {
+        (shape, n): str(run_file(shape, n, ctx.out / "robots" / f"{shape}{n}.toml")) for shape in SHAPES for n in sizes
+    }
     train: dict[tuple[str, int, int], Spec] = {}
     for (shape, n), file in robots.items():
         for seed in ctx.seed_list:
@@ -132,9 +134,7 @@ def run(ctx: Context) -> dict[str, Any]:
         )
         for law, shapes in REFERENCES.items():
             if shape in shapes:  # deterministic: one run
-                tests[(law, shape, n, 0)] = Spec(
-                    f"scale-ref{ctx.test_set}-{law}-{shape}{n}", controller=law, **common
-                )
+                tests[(law, shape, n, 0)] = Spec(f"scale-ref{ctx.test_set}-{law}-{shape}{n}", controller=law, **common)
     tested = dict(zip(tests, run_timed(ctx, list(tests.values()), "test"), strict=True))
     return _report(ctx, robots, sizes, level, train_steps, eval_steps, test, trained, tested)
 

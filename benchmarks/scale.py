@@ -1,0 +1,551 @@
+"""The cost of a growing swarm: chains and wide trees of N joints, from the command to its summary.
+
+    python benchmarks/scale.py                                   # N = 4..64, chain and tree, 3 placements, 2 hosts
+    python benchmarks/scale.py --n 8,128 --topologies chain --placements process --repeats 3 --json out.json
+    python benchmarks/scale.py --hosts-n ''                      # no two-host rows
+
+Each row is one `kinswarm run FILE` as a user types it (a fresh process; learning on, the real PyBullet world, real
+Zenoh sessions), FILE written by experiments/arms.py into a tmp dir: N `[[robot.agent]]` tables, the tip reaching 12
+from the base at every N (a chain's links 12 / N; a tree's joints carry up to 3 children, so its depth grows as
+log N). While it runs, this script reads the run's process tree from /proc (no psutil):
+
+- start: seconds from the command to the sim's first step (its clock, `<run>/net/clock`; the `inprocess` placement
+  has none: its first epoch's end less the epoch's seconds), and to `summary.json`;
+- steps/s: the sim's per-epoch timing (metrics.jsonl), the first epoch dropped as warm-up;
+- CPU-ms a step: utime + stime (/proc/PID/stat) of every process of the run summed, over the epochs after the first
+  (from the first epoch's row to the last one's), per step; and the run's whole CPU (wait4: every process it reaped);
+- RSS (/proc/PID/status) and PSS (/proc/PID/smaps_rollup: memory shared between processes counted once) of each
+  actor process, agents and sim apart, when the first epoch has ended;
+- Zenoh sessions (the run's processes with Zenoh's runtime threads: kinswarm opens one a process) and TCP
+  connections (established sockets in /proc/PID/fd, looked up in the process's own /proc/PID/net/tcp{,6}; both ends
+  of a loopback connection count, as `ss -tnp` lists them), per process and in total, at the same moment.
+
+Placements: `process` (one OS process per actor, the subject), `single` and `inprocess` (the controls). With
+--hosts-n (root: network namespaces, as benchmarks/deploy_rate.py), the same robot split over two hosts (`kinswarm up`
+with one plan on each: the sim and a1 on `brain`, every other agent on `limbs`). A run that fails is a row ("failed:
+<reason>"), never the end of the benchmark. Prints a table (markdown) and writes JSON (--json, default
+scale.json in the current directory). Quote medians over repeats and say the load: these machines are shared.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import signal
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT / "tests"))
+from kinswarm.experiments.arms import SHAPES, depth, run_file  # noqa: E402
+from kinswarm.protocol.clock import ClockReader, clock_path  # noqa: E402
+from netns import Hosts, NetnsUnavailable  # noqa: E402
+
+KINSWARM = [sys.executable, "-m", "kinswarm.actors.cli"]
+TICK = os.sysconf("SC_CLK_TCK")
+PAGE = os.sysconf("SC_PAGE_SIZE")
+PLACEMENTS = ("process", "single", "inprocess")
+POLL_S = 0.05  # how often the process tree is read: a measurement's resolution, not a wait on anything
+COLUMNS = ("N", "topology", "placement", "depth", "procs", "first step s", "summary s", "exit s", "steps/s",
+           "CPU-ms/step", "agent RSS MB", "agent PSS MB", "sim RSS MB", "sim PSS MB", "sessions", "TCP", "TCP/proc",
+           "result")  # fmt: skip
+ROW_KEYS = ("n", "topology", "placement", "hosts", "repeat", "depth", "result", "load", "processes", "actors",
+            "first_step_s", "summary_s", "exit_s", "steps_per_s", "cpu_ms_per_step", "cpu_total_s", "agent_rss_mb",
+            "agent_pss_mb", "sim_rss_mb", "sim_pss_mb", "sessions", "tcp_total", "tcp_per_process",
+            "tcp_per_process_max", "per_process")  # fmt: skip
+
+
+# -- /proc ---------------------------------------------------------------------------------------------------------
+def _stat(pid: int) -> tuple[int, int] | None:
+    """(ppid, utime + stime in ticks), or None if gone."""
+    try:
+        raw = Path(f"/proc/{pid}/stat").read_text()
+    except OSError:
+        return None
+    rest = raw[raw.rindex(")") + 2 :].split()  # after "pid (comm) ": state ppid ... utime(14) stime(15)
+    return int(rest[1]), int(rest[11]) + int(rest[12])
+
+
+def tree(roots: Iterable[int]) -> dict[int, int]:
+    """Every live process in the trees under `roots` (themselves included): pid -> CPU ticks so far."""
+    table: dict[int, tuple[int, int]] = {}
+    for d in os.listdir("/proc"):
+        if d.isdigit() and (st := _stat(int(d))) is not None:
+            table[int(d)] = st
+    children: dict[int, list[int]] = {}
+    for pid, (ppid, _) in table.items():
+        children.setdefault(ppid, []).append(pid)
+    out: dict[int, int] = {}
+    todo = [r for r in roots if r in table]
+    while todo:
+        pid = todo.pop()
+        out[pid] = table[pid][1]
+        todo += children.get(pid, [])
+    return out
+
+
+def role_of(pid: int) -> str:
+    """sim, agent, supervisor (the `kinswarm run` or `up` process) or other (e.g. a zenoh helper)."""
+    try:
+        argv = Path(f"/proc/{pid}/cmdline").read_bytes().split(b"\0")
+    except OSError:
+        return "gone"
+    words = [a.decode(errors="replace") for a in argv]
+    if "kinswarm.actors.run.main" in words:
+        i = words.index("kinswarm.actors.run.main")
+        return words[i + 1] if i + 1 < len(words) else "actor"
+    if "kinswarm.actors.cli" in words or any(w.endswith("/kinswarm") for w in words):
+        return "supervisor"
+    return "other"
+
+
+def memory_mb(pid: int) -> tuple[float, float]:
+    """(RSS, PSS) in MB; NaN where unreadable."""
+    rss = pss = float("nan")
+    try:
+        for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+            if line.startswith("VmRSS:"):
+                rss = int(line.split()[1]) / 1024
+        for line in Path(f"/proc/{pid}/smaps_rollup").read_text().splitlines():
+            if line.startswith("Pss:"):
+                pss = int(line.split()[1]) / 1024
+    except OSError:
+        pass
+    return rss, pss
+
+
+def runs_zenoh(pid: int) -> bool:
+    """Whether `pid` has a Zenoh session open: Zenoh's runtime threads (net-N, acc-N) exist once one is. Each of
+    kinswarm's processes opens at most one (the single placement's actors share the supervisor's)."""
+    try:
+        tasks = os.listdir(f"/proc/{pid}/task")
+    except OSError:
+        return False
+    for t in tasks:
+        try:
+            if Path(f"/proc/{pid}/task/{t}/comm").read_text().startswith(("net-", "acc-")):
+                return True
+        except OSError:
+            continue
+    return False
+
+
+def _tcp_table(pid: int) -> dict[int, str]:
+    """socket inode -> TCP state (hex: 01 established, 0A listening) in `pid`'s network namespace."""
+    states: dict[int, str] = {}
+    for name in ("tcp", "tcp6"):
+        try:
+            lines = Path(f"/proc/{pid}/net/{name}").read_text().splitlines()[1:]
+        except OSError:
+            continue
+        for line in lines:
+            f = line.split()
+            states[int(f[9])] = f[3]
+    return states
+
+
+def sockets(pid: int, tables: dict[str, dict[int, str]]) -> tuple[int, int]:
+    """(established TCP connections, listening TCP sockets) of `pid`; `tables`: per network namespace, filled here."""
+    try:
+        ns = os.readlink(f"/proc/{pid}/ns/net")
+        fds = os.listdir(f"/proc/{pid}/fd")
+    except OSError:
+        return 0, 0
+    if ns not in tables:
+        tables[ns] = _tcp_table(pid)
+    table = tables[ns]
+    est = listen = 0
+    for fd in fds:
+        try:
+            target = os.readlink(f"/proc/{pid}/fd/{fd}")
+        except OSError:
+            continue
+        if target.startswith("socket:["):
+            state = table.get(int(target[8:-1]))
+            est += state == "01"
+            listen += state == "0A"
+    return est, listen
+
+
+# -- one run -------------------------------------------------------------------------------------------------------
+@dataclass
+class Watch:
+    """What the poll loop saw of one run."""
+
+    started: float
+    first_step: float | None = None
+    summary: float | None = None
+    rows_seen: list[tuple[float, int]] = field(default_factory=list)  # (when, rows in metrics.jsonl) as they grew
+    cpu_at: list[tuple[float, int]] = field(default_factory=list)  # (when, the tree's ticks of live processes)
+    seen: dict[int, int] = field(default_factory=dict)  # every pid ever in the tree -> its last ticks
+    snapshot: dict[int, dict[str, Any]] | None = None  # per process at the first epoch's end
+
+    def poll(self, roots: Sequence[int], leader_dir: Path, clock: ClockReader | None) -> None:
+        now = time.perf_counter()
+        procs = tree(roots)
+        self.seen.update(procs)
+        self.cpu_at.append((now, sum(procs.values())))
+        if self.first_step is None and clock is not None and (at := clock.read()) is not None and at[0] >= 0:
+            self.first_step = now
+        rows = _rows(leader_dir)
+        if not self.rows_seen or rows > self.rows_seen[-1][1]:
+            self.rows_seen.append((now, rows))
+        if rows >= 1 and self.snapshot is None:
+            self.snapshot = _snapshot(procs)
+        if self.summary is None and (leader_dir / "summary.json").is_file():
+            self.summary = now
+
+    def cpu_near(self, t: float) -> int:
+        return min(self.cpu_at, key=lambda c: abs(c[0] - t))[1]
+
+
+def _rows(run_dir: Path) -> int:
+    try:
+        return sum(1 for line in (run_dir / "metrics.jsonl").read_text().splitlines() if line.strip())
+    except OSError:
+        return 0
+
+
+def _snapshot(procs: dict[int, int]) -> dict[int, dict[str, Any]]:
+    tables: dict[str, dict[int, str]] = {}
+    snap = {}
+    for pid in procs:
+        rss, pss = memory_mb(pid)
+        est, listen = sockets(pid, tables)
+        snap[pid] = {
+            "role": role_of(pid),
+            "rss_mb": rss,
+            "pss_mb": pss,
+            "tcp": est,
+            "listen": listen,
+            "zenoh": runs_zenoh(pid),
+        }
+    return snap
+
+
+def _stop(pids: Iterable[int], sig: signal.Signals) -> None:
+    for pid in pids:
+        try:
+            os.kill(pid, sig)
+        except ProcessLookupError:
+            pass
+
+
+def run_one(
+    file: Path,
+    placement: str,
+    epochs: int,
+    steps: int,
+    seed: int,
+    out: Path,
+    guard_s: float,
+    progress: Callable[[str], None],
+) -> dict[str, Any]:
+    """`kinswarm run FILE` on this host, watched from the command to its end."""
+    argv = [*KINSWARM, "run", str(file), "--placement", placement, "--epochs", str(epochs), "--steps", str(steps),
+            "--seed", str(seed), "--out", str(out), "--run-id", out.name, "--no-progress",
+            "--set", "run.record=false"]  # fmt: skip  # record: motion.gif is minutes of drawing no column times
+    log = out.parent / f"{out.name}.log"
+    w = Watch(started=time.perf_counter())
+    with open(log, "wb") as f:
+        p = subprocess.Popen(argv, stdout=f, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL)
+    clock = ClockReader(clock_path(out))
+    status, rusage, guarded = None, None, False
+    last_said = time.perf_counter()
+    try:
+        while status is None:
+            pid, st, ru = os.wait4(p.pid, os.WNOHANG)
+            if pid:
+                status, rusage = st, ru
+                break
+            w.poll([p.pid], out, clock)
+            time.sleep(POLL_S)
+            now = time.perf_counter()
+            if now - last_said > 15:
+                last_said = now
+                at = clock.read()
+                progress(f"  ... {now - w.started:.0f} s, {len(w.seen)} processes so far, sim at {at}")
+            if now - w.started > guard_s:  # a hang guard only: a run this slow is a row, not a stuck benchmark
+                guarded = True
+                _stop([p.pid], signal.SIGTERM)  # the supervisor stops its actors in order
+                if not _waited(p.pid, 30.0):
+                    _stop(tree([p.pid]), signal.SIGKILL)
+                _, status, rusage = os.wait4(p.pid, 0)
+    finally:
+        clock.close()
+        if status is None:  # interrupted: the supervisor stops its actors in order
+            _stop([p.pid], signal.SIGTERM)
+            os.wait4(p.pid, 0)
+        p.returncode = 0 if status is None else os.waitstatus_to_exitcode(status)
+    exit_s = time.perf_counter() - w.started
+    # the actors run in sessions of their own: whatever outlived the supervisor is ended by its PID (checked to be
+    # still this run's: a PID may have been reused)
+    _stop([pid for pid in w.seen if pid != p.pid and _of_run(pid, out)], signal.SIGKILL)
+    row = _measure(w, out, epochs, steps, exit_s)
+    row["cpu_total_s"] = None if rusage is None else round(rusage.ru_utime + rusage.ru_stime, 2)
+    row["result"] = _result(out, log, p.returncode, guarded, guard_s)
+    return row
+
+
+def _of_run(pid: int, out: Path) -> bool:
+    try:
+        return str(out).encode() in Path(f"/proc/{pid}/cmdline").read_bytes()
+    except OSError:
+        return False
+
+
+def _waited(pid: int, timeout: float) -> bool:
+    """Whether `pid` (our child) ended within `timeout` s (not reaped)."""
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        try:
+            r = os.waitid(os.P_PID, pid, os.WEXITED | os.WNOHANG | os.WNOWAIT)
+        except ChildProcessError:
+            return False
+        if r is not None:
+            return True
+        time.sleep(0.1)
+    return False
+
+
+def _result(out: Path, log: Path, code: int, guarded: bool, guard_s: float) -> str:
+    if guarded:
+        return f"failed: no end within the hang guard ({guard_s:.0f} s)"
+    try:
+        summary = json.loads((out / "summary.json").read_text())
+    except (OSError, ValueError):
+        summary = {}
+    if summary.get("error"):
+        return "failed: " + " ".join(str(summary["error"]).split())[:160]
+    if code != 0 or not summary:
+        tail = (
+            [line for line in log.read_text(errors="replace").splitlines() if line.strip()][-1:] if log.exists() else []
+        )
+        return f"failed: exit code {code}" + (f": {tail[0][:160]}" if tail else "")
+    return "ok"
+
+
+def _measure(w: Watch, leader_dir: Path, epochs: int, steps: int, exit_s: float) -> dict[str, Any]:
+    t0 = w.started
+    rows = []
+    try:
+        rows = [json.loads(line) for line in (leader_dir / "metrics.jsonl").read_text().splitlines() if line.strip()]
+    except (OSError, ValueError):
+        pass
+    row: dict[str, Any] = {"exit_s": round(exit_s, 2)}
+    row["summary_s"] = None if w.summary is None else round(w.summary - t0, 2)
+    first = w.first_step
+    if first is None and rows and w.rows_seen and len(w.rows_seen) > 1:  # no clock (inprocess): epoch 0's end less it
+        first = next(t for t, n in w.rows_seen if n >= 1) - float(rows[0]["seconds"])
+    row["first_step_s"] = None if first is None else round(first - t0, 2)
+    later = rows[1:] or rows
+    row["steps_per_s"] = round(sum(r["steps"] for r in later) / sum(r["seconds"] for r in later), 1) if later else None
+    # CPU over the epochs after the first: from the moment epoch 0's row appeared to the moment the last one did
+    grown = [(t, n) for t, n in w.rows_seen if n >= 1]
+    if len(grown) >= 2 and grown[-1][1] > grown[0][1]:
+        (ta, na), (tb, nb) = grown[0], grown[-1]
+        ticks = w.cpu_near(tb) - w.cpu_near(ta)
+        row["cpu_ms_per_step"] = round(1000 * ticks / TICK / ((nb - na) * steps), 2)
+    else:
+        row["cpu_ms_per_step"] = None
+    snap = w.snapshot or {}
+    actors = {pid: s for pid, s in snap.items() if s["role"] in ("agent", "sim", "controller")}
+    agents = [s for s in actors.values() if s["role"] == "agent"]
+    sims = [s for s in actors.values() if s["role"] == "sim"]
+    row["processes"] = len(w.seen)
+    row["actors"] = len(actors)
+    for who, group in (("agent", agents), ("sim", sims)):
+        for k in ("rss_mb", "pss_mb"):
+            vals = [s[k] for s in group if s[k] == s[k]]
+            row[f"{who}_{k}"] = round(statistics.median(vals), 1) if vals else None
+    row["sessions"] = sum(s["zenoh"] for s in snap.values()) if snap else None
+    tcp = [s["tcp"] for s in snap.values()]
+    row["tcp_total"] = sum(tcp) if snap else None
+    row["tcp_per_process"] = round(sum(tcp) / len(tcp), 1) if tcp else None
+    row["tcp_per_process_max"] = max(tcp) if tcp else None
+    row["per_process"] = [{"pid": pid, **s} for pid, s in sorted(snap.items())]
+    return row
+
+
+def run_split(
+    file: Path, n: int, epochs: int, steps: int, seed: int, base: Path, guard_s: float, progress: Callable[[str], None]
+) -> dict[str, Any]:
+    """The same robot over two network-namespace hosts: `kinswarm up` on each, the sim and a1 on brain (the
+    leader), the other agents on limbs."""
+    plan = base / "plan.toml"
+    plan.write_text(
+        f'[plan]\nname = "scale"\nleader = "brain"\n[run]\nfile = "{file}"\n'
+        f'set = ["run.epochs={epochs}", "run.steps={steps}", "run.seed={seed}", "run.record=false"]\n'
+        '[[host]]\nname = "brain"\naddress = "{brain}"\nactors = ["sim", "a1"]\n'
+        '[[host]]\nname = "limbs"\naddress = "{limbs}"\nactors = ["agents"]\n'
+    )
+    with Hosts(["brain", "limbs"], tag="sc") as h:
+        plan.write_text(plan.read_text().replace("{brain}", h.address("brain")).replace("{limbs}", h.address("limbs")))
+        w = Watch(started=time.perf_counter())
+        limbs = h.spawn("limbs", [*KINSWARM, "up", str(plan), "--host", "limbs", "--out", str(base / "limbs")],
+                        base / "l.log")  # fmt: skip
+        leader = h.spawn("brain", [*KINSWARM, "up", str(plan), "--host", "brain", "--out", str(base / "brain"),
+                                   "--no-progress"], base / "b.log")  # fmt: skip
+        clock = ClockReader(clock_path(base / "brain"))
+        guarded = False
+        last_said = time.perf_counter()
+        try:
+            while leader.poll() is None:
+                w.poll([leader.pid, limbs.pid], base / "brain", clock)
+                time.sleep(POLL_S)
+                now = time.perf_counter()
+                if now - last_said > 15:
+                    last_said = now
+                    progress(f"  ... {now - w.started:.0f} s, {len(w.seen)} processes so far, sim at {clock.read()}")
+                if now - w.started > guard_s:
+                    guarded = True
+                    break
+            exit_s = time.perf_counter() - w.started
+        finally:
+            clock.close()
+        # limbs stops its share by itself on the leader's Stop; Hosts' exit ends whatever did not
+        end = time.monotonic() + 30
+        while limbs.poll() is None and time.monotonic() < end:
+            time.sleep(0.1)
+    row = _measure(w, base / "brain", epochs, steps, exit_s)
+    row["cpu_total_s"] = round(sum(w.seen.values()) / TICK, 2)  # the last reading of every process: a lower bound
+    row["result"] = _result(base / "brain", base / "b.log", leader.returncode or 0, guarded, guard_s)
+    return row
+
+
+# -- the table -----------------------------------------------------------------------------------------------------
+def _f(v: Any, digits: int = 1) -> str:
+    if v is None:
+        return "—"
+    if isinstance(v, float):
+        return f"{v:.{digits}f}"
+    return str(v)
+
+
+def table(rows: Sequence[dict[str, Any]]) -> str:
+    """Markdown: one line per (N, topology, placement), medians over repeats; a configuration that failed in any
+    repeat says so in `result`."""
+    groups: dict[tuple[int, str, str], list[dict[str, Any]]] = {}
+    for r in rows:
+        groups.setdefault(
+            (r["n"], r["topology"], r["placement"] + (" (2 hosts)" if r["hosts"] == 2 else "")), []
+        ).append(r)
+    lines = ["| " + " | ".join(COLUMNS) + " |", "|" + "---|" * len(COLUMNS)]
+    for (n, topo, placement), rs in sorted(groups.items(), key=lambda kv: (kv[0][1], kv[0][0], kv[0][2])):
+        ok = [r for r in rs if r["result"] == "ok"]
+
+        def med(key: str, rs: list[dict[str, Any]] = ok) -> float | None:
+            vals = [r[key] for r in rs if r.get(key) is not None]
+            return statistics.median(vals) if vals else None
+
+        failed = [r["result"] for r in rs if r["result"] != "ok"]
+        result = "ok" if not failed else (f"{len(ok)}/{len(rs)} ok; " if ok else "") + failed[0]
+        cells = [n, topo, placement, rs[0]["depth"], _f(med("processes", rs)), _f(med("first_step_s", rs)),
+                 _f(med("summary_s")), _f(med("exit_s")), _f(med("steps_per_s"), 0), _f(med("cpu_ms_per_step"), 2),
+                 _f(med("agent_rss_mb", rs)), _f(med("agent_pss_mb", rs)), _f(med("sim_rss_mb", rs)),
+                 _f(med("sim_pss_mb", rs)), _f(med("sessions", rs), 0), _f(med("tcp_total", rs), 0),
+                 _f(med("tcp_per_process", rs)), result]  # fmt: skip
+        lines.append("| " + " | ".join(str(c) for c in cells) + " |")
+    return "\n".join(lines)
+
+
+def _csv(kind: Callable[[str], Any], what: str) -> Callable[[str], list[Any]]:
+    def parse(s: str) -> list[Any]:
+        try:
+            return [kind(x) for x in s.split(",") if x.strip()]
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected a comma-separated list of {what}, got {s!r}") from None
+
+    return parse
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--n", type=_csv(int, "joint counts"), default=[4, 8, 16, 32, 64], help="default 4,8,16,32,64")
+    p.add_argument("--topologies", type=_csv(str, "topologies"), default=list(SHAPES), help="chain,tree")
+    p.add_argument("--placements", type=_csv(str, "placements"), default=list(PLACEMENTS), help=",".join(PLACEMENTS))
+    p.add_argument("--hosts-n", type=_csv(int, "joint counts"), default=[8],
+                   help="N of the two-host rows (process placement); '' for none (default 8)")  # fmt: skip
+    p.add_argument("--repeats", type=int, default=1)
+    p.add_argument("--epochs", type=int, default=3, help="epochs a run (the first is dropped as warm-up; default 3)")
+    p.add_argument("--steps", type=int, default=200, help="steps an epoch (default 200)")
+    p.add_argument("--guard", type=float, default=900.0, help="hang guard: seconds before a run is ended (900)")
+    p.add_argument("--json", type=Path, default=Path("scale.json"))
+    a = p.parse_args(argv)
+    bad = [t for t in a.topologies if t not in SHAPES] + [x for x in a.placements if x not in PLACEMENTS]
+    if bad:
+        p.error(f"unknown topology or placement {bad[0]!r}: topologies {', '.join(SHAPES)}; placements "
+                f"{', '.join(PLACEMENTS)}")  # fmt: skip
+    if any(n < 1 for n in [*a.n, *a.hosts_n]) or a.repeats < 1 or a.epochs < 2 or a.steps < 1:
+        p.error("--n, --hosts-n >= 1, --repeats >= 1, --epochs >= 2 (the first is a warm-up), --steps >= 1")
+
+    def say(msg: str) -> None:
+        print(msg, file=sys.stderr, flush=True)
+
+    plan = [(n, t, pl, 1) for n in a.n for t in a.topologies for pl in a.placements]
+    plan += [(n, t, "process", 2) for n in a.hosts_n for t in a.topologies]
+    rows: list[dict[str, Any]] = []
+    skipped = ""
+    t_start = time.perf_counter()
+    with tempfile.TemporaryDirectory(prefix="kinswarm-scale-") as d:
+        tmp = Path(d)
+        for rep in range(a.repeats):  # repeats outermost: drift on a shared machine hits every row alike
+            for i, (n, topo, placement, hosts) in enumerate(plan):
+                if hosts == 2 and skipped:
+                    continue
+                file = run_file(topo, n, tmp / "files" / f"{topo}{n}.toml")
+                out = tmp / f"{topo}{n}-{placement}-h{hosts}-r{rep}"
+                load = os.getloadavg()
+                say(f"[{rep * len(plan) + i + 1}/{a.repeats * len(plan)}] {topo} N={n} {placement}"
+                    f"{' over 2 hosts' if hosts == 2 else ''}, repeat {rep + 1} (load {load[0]:.1f}; "
+                    f"{time.perf_counter() - t_start:.0f} s in)")  # fmt: skip
+                if hosts == 2:
+                    try:
+                        out.mkdir(parents=True)
+                        row = run_split(file, n, a.epochs, a.steps, rep, out, a.guard, say)
+                    except NetnsUnavailable as e:
+                        skipped = f"two-host rows skipped: no network namespaces here ({e})"
+                        say(skipped)
+                        continue
+                else:
+                    out.parent.mkdir(parents=True, exist_ok=True)
+                    row = run_one(file, placement, a.epochs, a.steps, rep, out, a.guard, say)
+                row = {"n": n, "topology": topo, "placement": placement, "hosts": hosts, "repeat": rep,
+                       "depth": depth(topo, n), "load": [round(x, 2) for x in load], **row}  # fmt: skip
+                rows.append(row)
+                say(f"  -> {row['result']}: first step {_f(row['first_step_s'])} s, summary {_f(row['summary_s'])} s, "
+                    f"{_f(row['steps_per_s'], 0)} steps/s, {_f(row['cpu_ms_per_step'], 2)} CPU-ms/step, "
+                    f"{row['processes']} processes, TCP {row['tcp_total']}")  # fmt: skip
+    load_end = os.getloadavg()
+    print(f"kinswarm scale: {a.epochs} epochs x {a.steps} steps a run, {a.repeats} repeat(s) (medians); "
+          f"{os.cpu_count()} cores; load {', '.join(f'{x:.1f}' for x in load_end)} at the end")  # fmt: skip
+    print(table(rows))
+    if skipped:
+        print(skipped)
+    doc = {
+        "command": "python benchmarks/scale.py " + " ".join(argv if argv is not None else sys.argv[1:]),
+        "columns": list(COLUMNS),
+        "machine": {"cores": os.cpu_count(), "python": platform.python_version(), "kernel": platform.release()},
+        "epochs": a.epochs,
+        "steps": a.steps,
+        "repeats": a.repeats,
+        "load_end": list(load_end),
+        "skipped": skipped,
+        "rows": [{k: r.get(k) for k in ROW_KEYS} for r in rows],
+    }
+    a.json.write_text(json.dumps(doc, indent=1) + "\n")
+    print(f"JSON: {a.json}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
