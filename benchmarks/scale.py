@@ -15,7 +15,8 @@ log N). While it runs, this script reads the run's process tree from /proc (no p
 - CPU-ms a step: utime + stime (/proc/PID/stat) of every process of the run summed, over the epochs after the first
   (from the first epoch's row to the last one's), per step; and the run's whole CPU (wait4: every process it reaped);
 - RSS (/proc/PID/status) and PSS (/proc/PID/smaps_rollup: memory shared between processes counted once) of each
-  actor process, agents and sim apart, when the first epoch has ended;
+  actor process, agents and sim apart, when the first epoch has ended (at the first step if the run was ending by
+  then);
 - Zenoh sessions (the run's processes with Zenoh's runtime threads: kinswarm opens one a process) and TCP
   connections (established sockets in /proc/PID/fd, looked up in the process's own /proc/PID/net/tcp{,6}; both ends
   of a loopback connection count, as `ss -tnp` lists them), per process and in total, at the same moment.
@@ -185,22 +186,27 @@ class Watch:
     first_step: float | None = None
     summary: float | None = None
     rows_seen: list[tuple[float, int]] = field(default_factory=list)  # (when, rows in metrics.jsonl) as they grew
-    cpu_at: list[tuple[float, int]] = field(default_factory=list)  # (when, the tree's ticks of live processes)
+    cpu_at: list[tuple[float, int]] = field(default_factory=list)  # (when, the tree's ticks so far)
     seen: dict[int, int] = field(default_factory=dict)  # every pid ever in the tree -> its last ticks
-    snapshot: dict[int, dict[str, Any]] | None = None  # per process at the first epoch's end
+    snapshot: dict[int, dict[str, Any]] | None = None  # per process at the first epoch's end (or first step)
+    settled: bool = False  # the first epoch's end has been seen
 
     def poll(self, roots: Sequence[int], leader_dir: Path, clock: ClockReader | None) -> None:
         now = time.perf_counter()
         procs = tree(roots)
         self.seen.update(procs)
-        self.cpu_at.append((now, sum(procs.values())))
+        self.cpu_at.append((now, sum(self.seen.values())))  # an exited process keeps its last reading
         if self.first_step is None and clock is not None and (at := clock.read()) is not None and at[0] >= 0:
             self.first_step = now
+            self.snapshot = _snapshot(procs)  # every actor is up: the run has begun
         rows = _rows(leader_dir)
         if not self.rows_seen or rows > self.rows_seen[-1][1]:
             self.rows_seen.append((now, rows))
-        if rows >= 1 and self.snapshot is None:
-            self.snapshot = _snapshot(procs)
+        if rows >= 1 and not self.settled:  # warmed up; unless the run is already ending (a short epoch)
+            self.settled = True
+            later = _snapshot(procs)
+            if self.snapshot is None or _actors(later) >= _actors(self.snapshot):
+                self.snapshot = later
         if self.summary is None and (leader_dir / "summary.json").is_file():
             self.summary = now
 
@@ -213,6 +219,10 @@ def _rows(run_dir: Path) -> int:
         return sum(1 for line in (run_dir / "metrics.jsonl").read_text().splitlines() if line.strip())
     except OSError:
         return 0
+
+
+def _actors(snap: dict[int, dict[str, Any]]) -> int:
+    return sum(s["role"] in ("agent", "sim", "controller") for s in snap.values())
 
 
 def _snapshot(procs: dict[int, int]) -> dict[int, dict[str, Any]]:
@@ -230,6 +240,29 @@ def _snapshot(procs: dict[int, int]) -> dict[int, dict[str, Any]]:
             "zenoh": runs_zenoh(pid),
         }
     return snap
+
+
+def available_mb() -> float:
+    for line in Path("/proc/meminfo").read_text().splitlines():
+        if line.startswith("MemAvailable:"):
+            return int(line.split()[1]) / 1024
+    return float("inf")
+
+
+def too_big(n: int, placement: str, rows: Sequence[dict[str, Any]]) -> str | None:
+    """Why a `process` run of n agents would not fit in this machine's free memory, judged from the agents' PSS in
+    the rows so far (twice it, for the start-up's peak and other users), or None."""
+    if placement != "process":
+        return None
+    pss = [r["agent_pss_mb"] for r in rows if r["placement"] == "process" and r.get("agent_pss_mb")]
+    if not pss:
+        return None
+    need, free = 2 * (n + 2) * max(pss), available_mb()
+    return (
+        None
+        if need < free
+        else f"skipped: needs ~{need / 1024:.1f} GB ({n + 2} x 2 x {max(pss):.0f} MB PSS), {free / 1024:.1f} GB free"
+    )
 
 
 def _stop(pids: Iterable[int], sig: signal.Signals) -> None:
@@ -458,6 +491,89 @@ def table(rows: Sequence[dict[str, Any]]) -> str:
     return "\n".join(lines)
 
 
+GROWTH = {"first_step_s": "first step s", "summary_s": "summary s", "steps_per_s": "steps/s",
+          "cpu_ms_per_step": "CPU-ms/step", "agent_pss_mb": "agent PSS MB", "tcp_total": "TCP"}  # fmt: skip
+
+
+def growth(rows: Sequence[dict[str, Any]]) -> dict[str, dict[str, dict[str, float]]]:
+    """How each cost grows with N, per topology and placement (one host): the exponent k of a least-squares fit of
+    log(cost) on log(N) over the sizes that ran (medians over repeats), and 2^k, its factor per doubling."""
+    import numpy as np
+
+    out: dict[str, dict[str, dict[str, float]]] = {}
+    keys = sorted({(r["topology"], r["placement"]) for r in rows if r["hosts"] == 1})
+    for topo, placement in keys:
+        ok = [r for r in rows if (r["topology"], r["placement"], r["hosts"], r["result"]) == (topo, placement, 1, "ok")]
+        fits: dict[str, dict[str, float]] = {}
+        for key in GROWTH:
+            by_n: dict[int, list[float]] = {}
+            for r in ok:
+                if r.get(key):
+                    by_n.setdefault(r["n"], []).append(float(r[key]))
+            if len(by_n) >= 2:
+                ns = sorted(by_n)
+                k = float(np.polyfit(np.log(ns), np.log([statistics.median(by_n[n]) for n in ns]), 1)[0])
+                fits[key] = {"exponent": round(k, 2), "per_doubling": round(2**k, 2), "from_n": ns[0], "to_n": ns[-1]}
+        if fits:
+            out[f"{topo}/{placement}"] = fits
+    return out
+
+
+def growth_table(fits: dict[str, dict[str, dict[str, float]]]) -> str:
+    head = ["topology/placement", *(f"{v} (x per doubling, N^k)" for v in GROWTH.values())]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for name, f in fits.items():
+        cells = [f"{f[k]['per_doubling']:.2f} (k {f[k]['exponent']:.2f})" if k in f else "—" for k in GROWTH]
+        lines.append("| " + " | ".join([name, *cells]) + " |")
+    return "\n".join(lines)
+
+
+def figure(rows: Sequence[dict[str, Any]], path: Path, title: str) -> None:
+    """The cost curve: start-up, steps/s, CPU-ms a step, the agents' memory and the TCP connections against N (log-log;
+    medians over repeats), a line per topology and placement; failed sizes left out (the table names them)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    panels = (("first_step_s", "command to first step (s)"), ("steps_per_s", "steps/s"),
+              ("cpu_ms_per_step", "CPU-ms a step, all processes"), ("agent_pss_mb", "agent PSS, median (MB)"),
+              ("tcp_total", "TCP connections, all processes"))  # fmt: skip
+    fig, axes = plt.subplots(1, len(panels), figsize=(4.0 * len(panels), 3.6))
+    style = {"process": "o-", "single": "s--", "inprocess": "^:"}
+    colour = {"chain": "C0", "tree": "C1"}
+    groups = sorted({(r["topology"], r["placement"], r["hosts"]) for r in rows})
+    all_n = sorted({r["n"] for r in rows})
+    for ax, (key, label) in zip(axes, panels, strict=True):
+        for topo, placement, hosts in groups:
+            by_n: dict[int, list[float]] = {}
+            for r in rows:
+                if (r["topology"], r["placement"], r["hosts"]) == (topo, placement, hosts) and r["result"] == "ok":
+                    if r.get(key):
+                        by_n.setdefault(r["n"], []).append(float(r[key]))
+            if not by_n:
+                continue
+            ns = sorted(by_n)
+            name = f"{topo}, {placement}" + (", 2 hosts" if hosts == 2 else "")
+            fmt = "D" if hosts == 2 else style.get(placement, "o-")
+            ax.plot(ns, [statistics.median(by_n[n]) for n in ns], fmt, color=colour.get(topo), label=name, ms=4)
+        if key == "tcp_total" and all_n:  # the shapes to tell apart: a full mesh of N + 2 peers, and a star
+            ax.plot(all_n, [(n + 2) * (n + 1) for n in all_n], color="grey", lw=0.8, label="(N+2)(N+1): full mesh")
+            ax.plot(all_n, [2 * (n + 1) for n in all_n], color="grey", lw=0.8, ls="--", label="2(N+1): a star")
+        ax.set_xscale("log", base=2)
+        ax.set_yscale("log")
+        ax.set_xticks(all_n, [str(n) for n in all_n])
+        ax.set_xlabel("joints N")
+        ax.set_title(label, fontsize=9)
+    axes[0].legend(fontsize=6)
+    axes[-1].legend(fontsize=6)
+    fig.suptitle(title, fontsize=9)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+
+
 def _csv(kind: Callable[[str], Any], what: str) -> Callable[[str], list[Any]]:
     def parse(s: str) -> list[Any]:
         try:
@@ -480,7 +596,21 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--steps", type=int, default=200, help="steps an epoch (default 200)")
     p.add_argument("--guard", type=float, default=900.0, help="hang guard: seconds before a run is ended (900)")
     p.add_argument("--json", type=Path, default=Path("scale.json"))
+    p.add_argument("--figure", type=Path, default=None, help="also draw the cost curve to this PNG")
+    p.add_argument("--replot", type=Path, default=None, metavar="JSON",
+                   help="run nothing: print the table and growth of a JSON this wrote, and draw --figure")  # fmt: skip
     a = p.parse_args(argv)
+    if a.replot is not None:
+        try:
+            old = json.loads(a.replot.read_text())
+            rows = old["rows"]
+        except (OSError, ValueError, KeyError) as e:
+            p.error(f"--replot {a.replot}: not a JSON this benchmark wrote ({e})")
+        print(table(rows))
+        print(growth_table(growth(rows)))
+        if a.figure is not None:
+            figure(rows, a.figure, old.get("command", ""))
+        return 0
     bad = [t for t in a.topologies if t not in SHAPES] + [x for x in a.placements if x not in PLACEMENTS]
     if bad:
         p.error(f"unknown topology or placement {bad[0]!r}: topologies {', '.join(SHAPES)}; placements "
@@ -508,6 +638,12 @@ def main(argv: list[str] | None = None) -> int:
                 say(f"[{rep * len(plan) + i + 1}/{a.repeats * len(plan)}] {topo} N={n} {placement}"
                     f"{' over 2 hosts' if hosts == 2 else ''}, repeat {rep + 1} (load {load[0]:.1f}; "
                     f"{time.perf_counter() - t_start:.0f} s in)")  # fmt: skip
+                head = {"n": n, "topology": topo, "placement": placement, "hosts": hosts, "repeat": rep,
+                        "depth": depth(topo, n), "load": [round(x, 2) for x in load]}  # fmt: skip
+                if (why := too_big(n, placement, rows)) is not None:
+                    say(f"  -> {why}")
+                    rows.append({**head, "result": why})
+                    continue
                 if hosts == 2:
                     try:
                         out.mkdir(parents=True)
@@ -519,8 +655,7 @@ def main(argv: list[str] | None = None) -> int:
                 else:
                     out.parent.mkdir(parents=True, exist_ok=True)
                     row = run_one(file, placement, a.epochs, a.steps, rep, out, a.guard, say)
-                row = {"n": n, "topology": topo, "placement": placement, "hosts": hosts, "repeat": rep,
-                       "depth": depth(topo, n), "load": [round(x, 2) for x in load], **row}  # fmt: skip
+                row = {**head, **row}
                 rows.append(row)
                 say(f"  -> {row['result']}: first step {_f(row['first_step_s'])} s, summary {_f(row['summary_s'])} s, "
                     f"{_f(row['steps_per_s'], 0)} steps/s, {_f(row['cpu_ms_per_step'], 2)} CPU-ms/step, "
@@ -529,6 +664,8 @@ def main(argv: list[str] | None = None) -> int:
     print(f"kinswarm scale: {a.epochs} epochs x {a.steps} steps a run, {a.repeats} repeat(s) (medians); "
           f"{os.cpu_count()} cores; load {', '.join(f'{x:.1f}' for x in load_end)} at the end")  # fmt: skip
     print(table(rows))
+    fits = growth(rows)
+    print(growth_table(fits))
     if skipped:
         print(skipped)
     doc = {
@@ -540,9 +677,12 @@ def main(argv: list[str] | None = None) -> int:
         "repeats": a.repeats,
         "load_end": list(load_end),
         "skipped": skipped,
+        "growth": fits,
         "rows": [{k: r.get(k) for k in ROW_KEYS} for r in rows],
     }
     a.json.write_text(json.dumps(doc, indent=1) + "\n")
+    if a.figure is not None:
+        figure(rows, a.figure, doc["command"])
     print(f"JSON: {a.json}")
     return 0
 
