@@ -584,6 +584,23 @@ def _csv(kind: Callable[[str], Any], what: str) -> Callable[[str], list[Any]]:
     return parse
 
 
+def save(a: argparse.Namespace, argv: list[str] | None, rows: list[dict[str, Any]], skipped: str) -> None:
+    """The JSON, rewritten after every row: a benchmark stopped half-way keeps what it measured."""
+    doc = {
+        "command": "python benchmarks/scale.py " + " ".join(argv if argv is not None else sys.argv[1:]),
+        "columns": list(COLUMNS),
+        "machine": {"cores": os.cpu_count(), "python": platform.python_version(), "kernel": platform.release()},
+        "epochs": a.epochs,
+        "steps": a.steps,
+        "repeats": a.repeats,
+        "load_end": list(os.getloadavg()),
+        "skipped": skipped,
+        "growth": growth(rows),
+        "rows": [{k: r.get(k) for k in ROW_KEYS} for r in rows],
+    }
+    a.json.write_text(json.dumps(doc, indent=1) + "\n")
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--n", type=_csv(int, "joint counts"), default=[4, 8, 16, 32, 64], help="default 4,8,16,32,64")
@@ -621,8 +638,12 @@ def main(argv: list[str] | None = None) -> int:
     def say(msg: str) -> None:
         print(msg, file=sys.stderr, flush=True)
 
-    plan = [(n, t, pl, 1) for n in a.n for t in a.topologies for pl in a.placements]
+    # the subject first (process placement on one host, then over two), the controls after: a benchmark stopped
+    # half-way on a busy machine has measured what matters most
+    first = [pl for pl in PLACEMENTS if pl in a.placements]
+    plan = [(n, t, "process", 1) for n in a.n for t in a.topologies] if "process" in first else []
     plan += [(n, t, "process", 2) for n in a.hosts_n for t in a.topologies]
+    plan += [(n, t, pl, 1) for pl in first if pl != "process" for n in a.n for t in a.topologies]
     rows: list[dict[str, Any]] = []
     skipped = ""
     t_start = time.perf_counter()
@@ -643,6 +664,7 @@ def main(argv: list[str] | None = None) -> int:
                 if (why := too_big(n, placement, rows)) is not None:
                     say(f"  -> {why}")
                     rows.append({**head, "result": why})
+                    save(a, argv, rows, skipped)
                     continue
                 if hosts == 2:
                     try:
@@ -657,6 +679,7 @@ def main(argv: list[str] | None = None) -> int:
                     row = run_one(file, placement, a.epochs, a.steps, rep, out, a.guard, say)
                 row = {**head, **row}
                 rows.append(row)
+                save(a, argv, rows, skipped)
                 say(f"  -> {row['result']}: first step {_f(row['first_step_s'])} s, summary {_f(row['summary_s'])} s, "
                     f"{_f(row['steps_per_s'], 0)} steps/s, {_f(row['cpu_ms_per_step'], 2)} CPU-ms/step, "
                     f"{row['processes']} processes, TCP {row['tcp_total']}")  # fmt: skip
@@ -664,25 +687,12 @@ def main(argv: list[str] | None = None) -> int:
     print(f"kinswarm scale: {a.epochs} epochs x {a.steps} steps a run, {a.repeats} repeat(s) (medians); "
           f"{os.cpu_count()} cores; load {', '.join(f'{x:.1f}' for x in load_end)} at the end")  # fmt: skip
     print(table(rows))
-    fits = growth(rows)
-    print(growth_table(fits))
+    print(growth_table(growth(rows)))
     if skipped:
         print(skipped)
-    doc = {
-        "command": "python benchmarks/scale.py " + " ".join(argv if argv is not None else sys.argv[1:]),
-        "columns": list(COLUMNS),
-        "machine": {"cores": os.cpu_count(), "python": platform.python_version(), "kernel": platform.release()},
-        "epochs": a.epochs,
-        "steps": a.steps,
-        "repeats": a.repeats,
-        "load_end": list(load_end),
-        "skipped": skipped,
-        "growth": fits,
-        "rows": [{k: r.get(k) for k in ROW_KEYS} for r in rows],
-    }
-    a.json.write_text(json.dumps(doc, indent=1) + "\n")
+    save(a, argv, rows, skipped)
     if a.figure is not None:
-        figure(rows, a.figure, doc["command"])
+        figure(rows, a.figure, "python benchmarks/scale.py " + " ".join(argv if argv is not None else sys.argv[1:]))
     print(f"JSON: {a.json}")
     return 0
 
