@@ -10,13 +10,14 @@ from the base at every N (a chain's links 12 / N; a tree's joints carry up to 3 
 log N). While it runs, this script reads the run's process tree from /proc (no psutil):
 
 - start: seconds from the command to the sim's first step (its clock, `<run>/net/clock`; the `inprocess` placement
-  has none: its first epoch's end less the epoch's seconds), and to `summary.json`;
+  has none: its first epoch's end less the epoch's seconds), and to `summary.json` (once it is written and every
+  actor has left, the CLI is ended: what it does next is drawing plots, minutes on a loaded machine, untimed);
 - steps/s: the sim's per-epoch timing (metrics.jsonl), the first epoch dropped as warm-up;
 - CPU-ms a step: utime + stime (/proc/PID/stat) of every process of the run summed, over the epochs after the first
   (from the first epoch's row to the last one's), per step; and the run's whole CPU (wait4: every process it reaped);
 - RSS (/proc/PID/status) and PSS (/proc/PID/smaps_rollup: memory shared between processes counted once) of each
   actor process, agents and sim apart, when the first epoch has ended (at the first step if the run was ending by
-  then);
+  then; a run that never stepped: at the most actors its start reached, read every 5 s);
 - Zenoh sessions (the run's processes with Zenoh's runtime threads: kinswarm opens one a process) and TCP
   connections (established sockets in /proc/PID/fd, looked up in the process's own /proc/PID/net/tcp{,6}; both ends
   of a loopback connection count, as `ss -tnp` lists them), per process and in total, at the same moment.
@@ -56,7 +57,7 @@ TICK = os.sysconf("SC_CLK_TCK")
 PAGE = os.sysconf("SC_PAGE_SIZE")
 PLACEMENTS = ("process", "single", "inprocess")
 POLL_S = 0.05  # how often the process tree is read: a measurement's resolution, not a wait on anything
-COLUMNS = ("N", "topology", "placement", "depth", "procs", "first step s", "summary s", "exit s", "steps/s",
+COLUMNS = ("N", "topology", "placement", "depth", "procs", "first step s", "summary s", "steps/s",
            "CPU-ms/step", "agent RSS MB", "agent PSS MB", "sim RSS MB", "sim PSS MB", "sessions", "TCP", "TCP/proc",
            "result")  # fmt: skip
 ROW_KEYS = ("n", "topology", "placement", "hosts", "repeat", "depth", "result", "load", "processes", "actors",
@@ -190,6 +191,7 @@ class Watch:
     seen: dict[int, int] = field(default_factory=dict)  # every pid ever in the tree -> its last ticks
     snapshot: dict[int, dict[str, Any]] | None = None  # per process at the first epoch's end (or first step)
     settled: bool = False  # the first epoch's end has been seen
+    probed: float = 0.0  # when the starting run's processes were last read
 
     def poll(self, roots: Sequence[int], leader_dir: Path, clock: ClockReader | None) -> None:
         now = time.perf_counter()
@@ -199,6 +201,11 @@ class Watch:
         if self.first_step is None and clock is not None and (at := clock.read()) is not None and at[0] >= 0:
             self.first_step = now
             self.snapshot = _snapshot(procs)  # every actor is up: the run has begun
+        if self.first_step is None and now - self.probed > 5.0:  # starting: what is up so far (a start that fails
+            self.probed = now  # leaves its memory and connections at the most actors it reached)
+            early = _snapshot(procs)
+            if self.snapshot is None or _actors(early) >= _actors(self.snapshot):
+                self.snapshot = early
         rows = _rows(leader_dir)
         if not self.rows_seen or rows > self.rows_seen[-1][1]:
             self.rows_seen.append((now, rows))
@@ -301,6 +308,12 @@ def run_one(
                 status, rusage = st, ru
                 break
             w.poll([p.pid], out, clock)
+            if w.summary is not None and set(tree([p.pid])) <= {p.pid}:
+                # the summary is written and every actor has left: what the CLI does next is drawing the plots,
+                # minutes on a loaded machine that no column times
+                _stop([p.pid], signal.SIGTERM)
+                _, status, rusage = os.wait4(p.pid, 0)
+                break
             time.sleep(POLL_S)
             now = time.perf_counter()
             if now - last_said > 15:
@@ -319,6 +332,8 @@ def run_one(
             _stop([p.pid], signal.SIGTERM)
             os.wait4(p.pid, 0)
         p.returncode = 0 if status is None else os.waitstatus_to_exitcode(status)
+        if w.summary is not None and p.returncode == -signal.SIGTERM:  # ended by us after its summary
+            p.returncode = 0
     exit_s = time.perf_counter() - w.started
     # the actors run in sessions of their own: whatever outlived the supervisor is ended by its PID (checked to be
     # still this run's: a PID may have been reused)
@@ -434,6 +449,11 @@ def run_split(
         try:
             while leader.poll() is None:
                 w.poll([leader.pid, limbs.pid], base / "brain", clock)
+                live = tree([leader.pid, limbs.pid])
+                if w.summary is not None and not any(role_of(pid) in ("agent", "sim") for pid in live):
+                    leader.send_signal(signal.SIGTERM)  # as run_one: the plots it would draw next are not timed
+                    leader.wait()
+                    break
                 time.sleep(POLL_S)
                 now = time.perf_counter()
                 if now - last_said > 15:
@@ -451,7 +471,8 @@ def run_split(
             time.sleep(0.1)
     row = _measure(w, base / "brain", epochs, steps, exit_s)
     row["cpu_total_s"] = round(sum(w.seen.values()) / TICK, 2)  # the last reading of every process: a lower bound
-    row["result"] = _result(base / "brain", base / "b.log", leader.returncode or 0, guarded, guard_s)
+    code = 0 if w.summary is not None and leader.returncode == -signal.SIGTERM else leader.returncode or 0
+    row["result"] = _result(base / "brain", base / "b.log", code, guarded, guard_s)
     return row
 
 
@@ -483,7 +504,7 @@ def table(rows: Sequence[dict[str, Any]]) -> str:
         failed = [r["result"] for r in rs if r["result"] != "ok"]
         result = "ok" if not failed else (f"{len(ok)}/{len(rs)} ok; " if ok else "") + failed[0]
         cells = [n, topo, placement, rs[0]["depth"], _f(med("processes", rs)), _f(med("first_step_s", rs)),
-                 _f(med("summary_s")), _f(med("exit_s")), _f(med("steps_per_s"), 0), _f(med("cpu_ms_per_step"), 2),
+                 _f(med("summary_s")), _f(med("steps_per_s"), 0), _f(med("cpu_ms_per_step"), 2),
                  _f(med("agent_rss_mb", rs)), _f(med("agent_pss_mb", rs)), _f(med("sim_rss_mb", rs)),
                  _f(med("sim_pss_mb", rs)), _f(med("sessions", rs), 0), _f(med("tcp_total", rs), 0),
                  _f(med("tcp_per_process", rs)), result]  # fmt: skip
