@@ -13,8 +13,10 @@ log N). While it runs, this script reads the run's process tree from /proc (no p
   has none: its first epoch's end less the epoch's seconds), and to `summary.json` (once it is written and every
   actor has left, the CLI is ended: what it does next is drawing plots, minutes on a loaded machine, untimed);
 - steps/s: the sim's per-epoch timing (metrics.jsonl), the first epoch dropped as warm-up;
-- CPU-ms a step: utime + stime (/proc/PID/stat) of every process of the run summed, over the epochs after the first
-  (from the first epoch's row to the last one's), per step; and the run's whole CPU (wait4: every process it reaped);
+- CPU-ms a step: utime + stime (/proc/PID/stat) of every process of the run summed, between two readings of the sim's
+  clock (from the epochs after the first, or from the first step when they went by too fast to be read twice, to
+  the last step; inprocess: from the first epoch's row to the last one's), per step; and the run's whole CPU (wait4:
+  every process it reaped);
 - RSS (/proc/PID/status) and PSS (/proc/PID/smaps_rollup: memory shared between processes counted once) of each
   actor process, agents and sim apart, when the first epoch has ended (at the first step if the run was ending by
   then; a run that never stepped: at the most actors its start reached, read every 5 s);
@@ -189,6 +191,7 @@ class Watch:
     rows_seen: list[tuple[float, int]] = field(default_factory=list)  # (when, rows in metrics.jsonl) as they grew
     cpu_at: list[tuple[float, int]] = field(default_factory=list)  # (when, the tree's ticks so far)
     seen: dict[int, int] = field(default_factory=dict)  # every pid ever in the tree -> its last ticks
+    steps_at: list[tuple[int, int, int]] = field(default_factory=list)  # (the sim's epoch, step, the tree's ticks)
     snapshot: dict[int, dict[str, Any]] | None = None  # per process at the first epoch's end (or first step)
     settled: bool = False  # the first epoch's end has been seen
     probed: float = 0.0  # when the starting run's processes were last read
@@ -198,7 +201,10 @@ class Watch:
         procs = tree(roots)
         self.seen.update(procs)
         self.cpu_at.append((now, sum(self.seen.values())))  # an exited process keeps its last reading
-        if self.first_step is None and clock is not None and (at := clock.read()) is not None and at[0] >= 0:
+        at = clock.read() if clock is not None else None
+        if at is not None and at[0] >= 0:
+            self.steps_at.append((at[0], at[1], sum(self.seen.values())))
+        if self.first_step is None and at is not None and at[0] >= 0:
             self.first_step = now
             self.snapshot = _snapshot(procs)  # every actor is up: the run has begun
         if self.first_step is None and now - self.probed > 5.0:  # starting: what is up so far (a start that fails
@@ -382,6 +388,19 @@ def _result(out: Path, log: Path, code: int, guarded: bool, guard_s: float) -> s
     return "ok"
 
 
+def _cpu_per_step(steps_at: list[tuple[int, int, int]], steps: int) -> float | None:
+    if not steps_at:
+        return None
+    glob = [(e * steps + k, ticks) for e, k, ticks in steps_at]
+    last = max(g for g, _ in glob)
+    end = next((g, t) for g, t in glob if g == last)
+    later = [(g, t) for (e, _, _), (g, t) in zip(steps_at, glob, strict=True) if e >= 1 and g < last]
+    start = later[0] if len(later) >= 2 and last - later[0][0] >= 20 else glob[0]
+    if end[0] - start[0] < 10:
+        return None
+    return round(1000 * (end[1] - start[1]) / TICK / (end[0] - start[0]), 2)
+
+
 def _measure(w: Watch, leader_dir: Path, epochs: int, steps: int, exit_s: float) -> dict[str, Any]:
     t0 = w.started
     rows = []
@@ -397,14 +416,15 @@ def _measure(w: Watch, leader_dir: Path, epochs: int, steps: int, exit_s: float)
     row["first_step_s"] = None if first is None else round(first - t0, 2)
     later = rows[1:] or rows
     row["steps_per_s"] = round(sum(r["steps"] for r in later) / sum(r["seconds"] for r in later), 1) if later else None
-    # CPU over the epochs after the first: from the moment epoch 0's row appeared to the moment the last one did
+    # CPU a step: between two readings of the sim's clock, from the first of the epochs after the first (or, when
+    # those went by too fast to be read twice, the first step) to the first reading of the last step
+    row["cpu_ms_per_step"] = _cpu_per_step(w.steps_at, steps)
     grown = [(t, n) for t, n in w.rows_seen if n >= 1]
-    if len(grown) >= 2 and grown[-1][1] > grown[0][1]:
+    if row["cpu_ms_per_step"] is None and len(grown) >= 2 and grown[-1][1] > grown[0][1]:
+        # no clock (inprocess): from the moment epoch 0's row appeared to the moment the last one did
         (ta, na), (tb, nb) = grown[0], grown[-1]
         ticks = w.cpu_near(tb) - w.cpu_near(ta)
         row["cpu_ms_per_step"] = round(1000 * ticks / TICK / ((nb - na) * steps), 2)
-    else:
-        row["cpu_ms_per_step"] = None
     snap = w.snapshot or {}
     actors = {pid: s for pid, s in snap.items() if s["role"] in ("agent", "sim", "controller")}
     agents = [s for s in actors.values() if s["role"] == "agent"]
