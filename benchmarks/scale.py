@@ -18,8 +18,8 @@ log N). While it runs, this script reads the run's process tree from /proc (no p
   the last step; inprocess: from the first epoch's row to the last one's), per step; and the run's whole CPU (wait4:
   every process it reaped);
 - RSS (/proc/PID/status) and PSS (/proc/PID/smaps_rollup: memory shared between processes counted once) of each
-  actor process, agents and sim apart, when the first epoch has ended (at the first step if the run was ending by
-  then; a run that never stepped: at the most actors its start reached, read every 5 s);
+  actor process, agents and sim apart, once the sim is in its second epoch (else at its first step; a run that
+  never stepped: at the most actors its start reached, read every 5 s);
 - Zenoh sessions (the run's processes with Zenoh's runtime threads: kinswarm opens one a process) and TCP
   connections (established sockets in /proc/PID/fd, looked up in the process's own /proc/PID/net/tcp{,6}; both ends
   of a loopback connection count, as `ss -tnp` lists them), per process and in total, at the same moment.
@@ -215,7 +215,7 @@ class Watch:
         rows = _rows(leader_dir)
         if not self.rows_seen or rows > self.rows_seen[-1][1]:
             self.rows_seen.append((now, rows))
-        if rows >= 1 and not self.settled:  # warmed up; unless the run is already ending (a short epoch)
+        if at is not None and at[0] >= 1 and not self.settled:  # the first epoch is over: warmed up
             self.settled = True
             later = _snapshot(procs)
             if self.snapshot is None or _actors(later) >= _actors(self.snapshot):
