@@ -314,7 +314,7 @@ def run_one(
                 status, rusage = st, ru
                 break
             w.poll([p.pid], out, clock)
-            if w.summary is not None and set(tree([p.pid])) <= {p.pid}:
+            if w.summary is not None and not any(role_of(q) in ("agent", "sim") for q in tree([p.pid])):
                 # the summary is written and every actor has left: what the CLI does next is drawing the plots,
                 # minutes on a loaded machine that no column times
                 _stop([p.pid], signal.SIGTERM)
