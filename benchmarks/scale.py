@@ -316,8 +316,8 @@ def run_one(
             w.poll([p.pid], out, clock)
             if w.summary is not None and not any(role_of(q) in ("agent", "sim") for q in tree([p.pid])):
                 # the summary is written and every actor has left: what the CLI does next is drawing the plots,
-                # minutes on a loaded machine that no column times
-                _stop([p.pid], signal.SIGTERM)
+                # minutes on a loaded machine that no column times (and deaf to SIGTERM until it is done)
+                _stop([p.pid], signal.SIGKILL)
                 _, status, rusage = os.wait4(p.pid, 0)
                 break
             time.sleep(POLL_S)
@@ -338,7 +338,7 @@ def run_one(
             _stop([p.pid], signal.SIGTERM)
             os.wait4(p.pid, 0)
         p.returncode = 0 if status is None else os.waitstatus_to_exitcode(status)
-        if w.summary is not None and p.returncode == -signal.SIGTERM:  # ended by us after its summary
+        if w.summary is not None and p.returncode == -signal.SIGKILL:  # ended by us after its summary
             p.returncode = 0
     exit_s = time.perf_counter() - w.started
     # the actors run in sessions of their own: whatever outlived the supervisor is ended by its PID (checked to be
@@ -471,7 +471,7 @@ def run_split(
                 w.poll([leader.pid, limbs.pid], base / "brain", clock)
                 live = tree([leader.pid, limbs.pid])
                 if w.summary is not None and not any(role_of(pid) in ("agent", "sim") for pid in live):
-                    leader.send_signal(signal.SIGTERM)  # as run_one: the plots it would draw next are not timed
+                    leader.send_signal(signal.SIGKILL)  # as run_one: the plots it would draw next are not timed
                     leader.wait()
                     break
                 time.sleep(POLL_S)
@@ -491,7 +491,7 @@ def run_split(
             time.sleep(0.1)
     row = _measure(w, base / "brain", epochs, steps, exit_s)
     row["cpu_total_s"] = round(sum(w.seen.values()) / TICK, 2)  # the last reading of every process: a lower bound
-    code = 0 if w.summary is not None and leader.returncode == -signal.SIGTERM else leader.returncode or 0
+    code = 0 if w.summary is not None and leader.returncode == -signal.SIGKILL else leader.returncode or 0
     row["result"] = _result(base / "brain", base / "b.log", code, guarded, guard_s)
     return row
 
@@ -655,6 +655,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--guard", type=float, default=900.0, help="hang guard: seconds before a run is ended (900)")
     p.add_argument("--json", type=Path, default=Path("scale.json"))
     p.add_argument("--figure", type=Path, default=None, help="also draw the cost curve to this PNG")
+    p.add_argument("--resume", action="store_true", help="keep the rows already in --json, run the others")
     p.add_argument("--replot", type=Path, default=None, metavar="JSON",
                    help="run nothing: print the table and growth of a JSON this wrote, and draw --figure")  # fmt: skip
     a = p.parse_args(argv)
@@ -686,13 +687,16 @@ def main(argv: list[str] | None = None) -> int:
     plan += [(n, t, "process", 2) for n in a.hosts_n for t in a.topologies]
     plan += [(n, t, pl, 1) for pl in first if pl != "process" for n in a.n for t in a.topologies]
     rows: list[dict[str, Any]] = []
+    if a.resume and a.json.is_file():  # the rows a stopped benchmark measured stay; their configurations are skipped
+        rows = json.loads(a.json.read_text())["rows"]
+    done = {(r["n"], r["topology"], r["placement"], r["hosts"], r["repeat"]) for r in rows}
     skipped = ""
     t_start = time.perf_counter()
     with tempfile.TemporaryDirectory(prefix="kinswarm-scale-") as d:
         tmp = Path(d)
         for rep in range(a.repeats):  # repeats outermost: drift on a shared machine hits every row alike
             for i, (n, topo, placement, hosts) in enumerate(plan):
-                if hosts == 2 and skipped:
+                if (hosts == 2 and skipped) or (n, topo, placement, hosts, rep) in done:
                     continue
                 file = run_file(topo, n, tmp / "files" / f"{topo}{n}.toml")
                 out = tmp / f"{topo}{n}-{placement}-h{hosts}-r{rep}"
