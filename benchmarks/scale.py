@@ -18,8 +18,8 @@ log N). While it runs, this script reads the run's process tree from /proc (no p
   the last step; inprocess: from the first epoch's row to the last one's), per step; and the run's whole CPU (wait4:
   every process it reaped);
 - RSS (/proc/PID/status) and PSS (/proc/PID/smaps_rollup: memory shared between processes counted once) of each
-  actor process, agents and sim apart, once the sim is in its second epoch (else at its first step; a run that
-  never stepped: at the most actors its start reached, read every 5 s);
+  actor process, agents and sim apart, once the sim is in its second epoch (else once every actor is up; a run that
+  never got so far: at the most actors its start reached, read every 5 s);
 - Zenoh sessions (the run's processes with Zenoh's runtime threads: kinswarm opens one a process) and TCP
   connections (established sockets in /proc/PID/fd, looked up in the process's own /proc/PID/net/tcp{,6}; both ends
   of a loopback connection count, as `ss -tnp` lists them), per process and in total, at the same moment.
@@ -193,7 +193,9 @@ class Watch:
     seen: dict[int, int] = field(default_factory=dict)  # every pid ever in the tree -> its last ticks
     steps_at: list[tuple[int, int, int]] = field(default_factory=list)  # (the sim's epoch, step, the tree's ticks)
     snapshot: dict[int, dict[str, Any]] | None = None  # per process at the first epoch's end (or first step)
-    settled: bool = False  # the first epoch's end has been seen
+    expect: int = 0  # actor processes (sim and agents) of the run
+    complete: bool = False  # a snapshot with every actor is taken
+    settled: bool = False  # the sim's second epoch has been seen
     probed: float = 0.0  # when the starting run's processes were last read
 
     def poll(self, roots: Sequence[int], leader_dir: Path, clock: ClockReader | None) -> None:
@@ -206,12 +208,21 @@ class Watch:
             self.steps_at.append((at[0], at[1], sum(self.seen.values())))
         if self.first_step is None and at is not None and at[0] >= 0:
             self.first_step = now
-            self.snapshot = _snapshot(procs)  # every actor is up: the run has begun
-        if self.first_step is None and now - self.probed > 5.0:  # starting: what is up so far (a start that fails
-            self.probed = now  # leaves its memory and connections at the most actors it reached)
-            early = _snapshot(procs)
-            if self.snapshot is None or _actors(early) >= _actors(self.snapshot):
-                self.snapshot = early
+        # memory and connections: once every actor is up (the sim's clock is there), and again once the sim is in its
+        # second epoch (warmed up) if every actor is still there; a start that never gets so far keeps the most
+        # actors it reached, read every 5 s
+        up = at is not None and sum(role_of(pid) in ("agent", "sim") for pid in procs) >= self.expect
+        if not self.complete and (up or now - self.probed > 5.0):
+            self.probed = now
+            snap = _snapshot(procs)
+            if self.snapshot is None or _actors(snap) >= _actors(self.snapshot):
+                self.snapshot = snap
+            self.complete = up and _actors(snap) >= self.expect
+        if at is not None and at[0] >= 1 and not self.settled:
+            self.settled = True
+            snap = _snapshot(procs)
+            if _actors(snap) >= self.expect:
+                self.snapshot = snap
         rows = _rows(leader_dir)
         if not self.rows_seen or rows > self.rows_seen[-1][1]:
             self.rows_seen.append((now, rows))
@@ -288,6 +299,7 @@ def _stop(pids: Iterable[int], sig: signal.Signals) -> None:
 
 def run_one(
     file: Path,
+    n: int,
     placement: str,
     epochs: int,
     steps: int,
@@ -297,11 +309,12 @@ def run_one(
     progress: Callable[[str], None],
 ) -> dict[str, Any]:
     """`kinswarm run FILE` on this host, watched from the command to its end."""
+    expect = n + 1 if placement == "process" else 0
     argv = [*KINSWARM, "run", str(file), "--placement", placement, "--epochs", str(epochs), "--steps", str(steps),
             "--seed", str(seed), "--out", str(out), "--run-id", out.name, "--no-progress",
             "--set", "run.record=false"]  # fmt: skip  # record: motion.gif is minutes of drawing no column times
     log = out.parent / f"{out.name}.log"
-    w = Watch(started=time.perf_counter())
+    w = Watch(started=time.perf_counter(), expect=expect)
     with open(log, "wb") as f:
         p = subprocess.Popen(argv, stdout=f, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL)
     clock = ClockReader(clock_path(out))
@@ -458,7 +471,7 @@ def run_split(
     )
     with Hosts(["brain", "limbs"], tag="sc") as h:
         plan.write_text(plan.read_text().replace("{brain}", h.address("brain")).replace("{limbs}", h.address("limbs")))
-        w = Watch(started=time.perf_counter())
+        w = Watch(started=time.perf_counter(), expect=n + 1)
         limbs = h.spawn("limbs", [*KINSWARM, "up", str(plan), "--host", "limbs", "--out", str(base / "limbs")],
                         base / "l.log")  # fmt: skip
         leader = h.spawn("brain", [*KINSWARM, "up", str(plan), "--host", "brain", "--out", str(base / "brain"),
@@ -721,7 +734,7 @@ def main(argv: list[str] | None = None) -> int:
                         continue
                 else:
                     out.parent.mkdir(parents=True, exist_ok=True)
-                    row = run_one(file, placement, a.epochs, a.steps, rep, out, a.guard, say)
+                    row = run_one(file, n, placement, a.epochs, a.steps, rep, out, a.guard, say)
                 row = {**head, **row}
                 rows.append(row)
                 save(a, argv, rows, skipped)

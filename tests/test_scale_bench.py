@@ -47,7 +47,7 @@ def test_scale_bench_smoke(tmp_path, monkeypatch, capsys):
     monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))  # the runs' directories, and nothing left outside
     out = tmp_path / "scale.json"
     argv = ["--n", "4,8", "--topologies", "chain,tree", "--placements", "process", "--hosts-n", "", "--epochs", "2",
-            "--steps", "40", "--json", str(out)]  # fmt: skip
+            "--steps", "100", "--json", str(out)]  # fmt: skip
     assert scale.main(argv) == 0
     printed = capsys.readouterr().out
     header = next(line for line in printed.splitlines() if line.startswith("| N |"))
