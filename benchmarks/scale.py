@@ -37,6 +37,7 @@ import argparse
 import json
 import os
 import platform
+import re
 import signal
 import statistics
 import subprocess
@@ -392,7 +393,10 @@ def _result(out: Path, log: Path, code: int, guarded: bool, guard_s: float) -> s
     except (OSError, ValueError):
         summary = {}
     if summary.get("error"):
-        return "failed: " + " ".join(str(summary["error"]).split())[:160]
+        error = " ".join(str(summary["error"]).split())
+        if (m := re.match(r"(not alive after [\d.]+ s): \[(.*)\]$", error)) is not None:  # say how many first
+            error = f"{m.group(1)}, {m.group(2).count('(')} actors: [{m.group(2)}]"
+        return "failed: " + error[:160]
     if code != 0 or not summary:
         tail = (
             [line for line in log.read_text(errors="replace").splitlines() if line.strip()][-1:] if log.exists() else []
@@ -518,6 +522,11 @@ def _f(v: Any, digits: int = 1) -> str:
     return str(v)
 
 
+def _short(result: str) -> str:
+    """A failed start without its list of the actors not alive (the JSON keeps it)."""
+    return result.split(": [", 1)[0]
+
+
 def table(rows: Sequence[dict[str, Any]]) -> str:
     """Markdown: one line per (N, topology, placement), medians over repeats; a configuration that failed in any
     repeat says so in `result`."""
@@ -534,7 +543,7 @@ def table(rows: Sequence[dict[str, Any]]) -> str:
             vals = [r[key] for r in rs if r.get(key) is not None]
             return statistics.median(vals) if vals else None
 
-        failed = [r["result"] for r in rs if r["result"] != "ok"]
+        failed = [_short(r["result"]) for r in rs if r["result"] != "ok"]
         result = "ok" if not failed else (f"{len(ok)}/{len(rs)} ok; " if ok else "") + failed[0]
         cells = [n, topo, placement, rs[0]["depth"], _f(med("processes", rs)), _f(med("first_step_s", rs)),
                  _f(med("summary_s")), _f(med("steps_per_s"), 0), _f(med("cpu_ms_per_step"), 2),
