@@ -58,10 +58,11 @@ def test_scale_bench_smoke(tmp_path, monkeypatch, capsys):
     assert sorted((r["n"], r["topology"]) for r in rows) == [(4, "chain"), (4, "tree"), (8, "chain"), (8, "tree")]
     for r in rows:
         assert set(r) == set(scale.ROW_KEYS)
-        assert r["result"] == "ok" or r["result"].startswith("failed: "), r["result"]
         if r["result"] != "ok":
-            # 4 agents always start; the supervisor's fixed start-up deadline may fail 8 on a busy machine
-            assert r["n"] == 8, r["result"]
+            # the one failure allowed: the supervisor's fixed start-up deadline, which a loaded machine can miss (it is
+            # the benchmark's job to show it as a row); the row still says what had started
+            assert r["result"].startswith("failed: not alive after"), r["result"]
+            assert r["processes"] >= 2
             continue
         n = r["n"]
         # the supervisor, the sim and one process per agent, each with its own Zenoh session, all connected
