@@ -523,8 +523,11 @@ def _f(v: Any, digits: int = 1) -> str:
 
 
 def _short(result: str) -> str:
-    """A failed start without its list of the actors not alive (the JSON keeps it)."""
-    return result.split(": [", 1)[0]
+    """A failure in a table cell: without the list of the actors not alive, or the log's time stamps (the JSON keeps
+    both)."""
+    head, _, log = result.partition("; its log ends: ")
+    why = re.search(r"(\w+Error: [^:\[]+)", log)
+    return head.split(": [", 1)[0] + (f" ({why.group(1).strip()})" if why else "")
 
 
 def table(rows: Sequence[dict[str, Any]]) -> str:
@@ -620,6 +623,12 @@ def figure(rows: Sequence[dict[str, Any]], path: Path, title: str) -> None:
             name = f"{topo}, {placement}" + (", 2 hosts" if hosts == 2 else "")
             fmt = "D" if hosts == 2 else style.get(placement, "o-")
             ax.plot(ns, [statistics.median(by_n[n]) for n in ns], fmt, color=colour.get(topo), label=name, ms=4)
+        if key == "tcp_total":  # a failed start's last reading: open markers
+            for topo in sorted({r["topology"] for r in rows}):
+                bad = [r for r in rows if r["topology"] == topo and r["result"] != "ok" and r.get("tcp_total")]
+                if bad:
+                    ax.plot([r["n"] for r in bad], [r["tcp_total"] for r in bad], "o", mfc="none",
+                            color=colour.get(topo), label=f"{topo}: a failed start's last reading")  # fmt: skip
         if key == "tcp_total" and all_n:  # the shapes to tell apart: a full mesh of N + 2 peers, and a star
             ax.plot(all_n, [(n + 2) * (n + 1) for n in all_n], color="grey", lw=0.8, label="(N+2)(N+1): full mesh")
             ax.plot(all_n, [2 * (n + 1) for n in all_n], color="grey", lw=0.8, ls="--", label="2(N+1): a star")
