@@ -145,7 +145,7 @@ def test_the_sim_answers_a_finished_epochs_start_again_and_ignores_the_running_o
 
 
 def test_an_agent_answers_a_repeated_checkpoint_request_without_saving_again(tmp_path, chain4):
-    from kinswarm.actors.agent import Agent
+    from kinswarm.actors.agent.actor import Agent
     from kinswarm.protocol.messages import Checkpoint, Saved
 
     async def body() -> None:

@@ -197,7 +197,7 @@ def preload(cfg: RunConfig) -> None:
     """Load what this run's actors will: the agent's modules, and each distinct learner of the run built once, so
     numba loads (or, with a cold cache, compiles) its kernels for the argument types the agents call them with.
     Learners of a kind from outside the learning package (an ONNX policy) are left to their agents."""
-    from kinswarm.actors.agent import Agent  # noqa: F401 - loaded to be shared
+    from kinswarm.actors.agent.actor import Agent  # noqa: F401 - loaded to be shared
     from kinswarm.actors.run.runfile import kind_of, learner_settings, task_of
 
     if cfg.fleet > 1:
