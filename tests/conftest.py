@@ -138,6 +138,20 @@ def swarm_pids(marker: str) -> list[int]:
     return pids
 
 
+def actor_pids(run_dir: Path, role: str, ident: str) -> list[int]:
+    """PIDs of a run's live actor `role ident`: forked by the run's zygote, it shares the zygote's command line (which
+    names the run's config) and is told apart by its process name, ROLE-ID (/proc/PID/comm, 15 bytes)."""
+    name = f"{role}-{ident}"[:15]
+    pids = []
+    for pid in swarm_pids(str(run_dir / "config.json")):
+        try:
+            if Path(f"/proc/{pid}/comm").read_text().strip() == name:
+                pids.append(pid)
+        except OSError:
+            continue
+    return pids
+
+
 # The arms from URDF the tests build (protocol/urdf_robot.py), as [robot] tables: the example files' robots.
 IIWA = {"urdf": "kuka_iiwa/model.urdf", "tool": [0.0, 0.05, 0.1]}
 PANDA = {

@@ -18,7 +18,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from conftest import LIVE, RecordingNode, free_port, run_config, swarm_pids
+from conftest import LIVE, RecordingNode, actor_pids, free_port, run_config, swarm_pids
 from kinswarm.actors.simulator.actor import SimActor
 from kinswarm.protocol.messages import Cmd, EpochDone, EpochStart
 
@@ -96,7 +96,7 @@ def test_a_run_that_failed_with_good_checkpoints_resumes_saying_what_failed(tmp_
     out = tmp_path / "failed"
     proc = _start(out, chain4, "--max-restarts", "0", "--run-id", "fr")
     _wait("epoch 1's end", lambda: len(_rows(out)) >= 2, proc)
-    (a2,) = swarm_pids(f"agent a2 {out / 'config.json'}")  # its process, as ROLE ID CONFIG names it
+    (a2,) = actor_pids(out, "agent", "a2")
     os.kill(a2, signal.SIGKILL)  # a crash
     text, _ = proc.communicate(timeout=300)
     summary = json.loads((out / "summary.json").read_text())

@@ -1,7 +1,7 @@
-"""One host's Zenoh network as a hub: the supervisor's session is the router, every actor its client. Connections grow
-linearly with the swarm (a 32-agent chain starts, runs and holds at most 4 TCP connections a process on average), and
-only the run can speak on it: a stranger's session without the run's secret cannot join, so liveliness tokens it
-declares on the run's keys change nothing."""
+"""One host's Zenoh network as a hub: the hub (a process the supervisor starts) is the router, every actor and the
+supervisor its clients. Connections grow linearly with the swarm (a 32-agent chain starts, runs and holds at most 4 TCP
+connections a process on average), and only the run can speak on it: a stranger's session without the run's secret
+cannot join, so liveliness tokens it declares on the run's keys change nothing."""
 
 from __future__ import annotations
 
@@ -74,7 +74,7 @@ def test_a_chain_of_32_agents_starts_runs_and_holds_few_connections(tmp_path: Pa
         at = clock.read()
         if at is not None and at[0] >= 0:
             pids = process_tree(proc.pid)
-            if len(pids) == n + 2:  # the supervisor, the sim and the agents
+            if len(pids) == n + 4:  # the supervisor, its hub and zygote, the sim and the agents
                 sample = tcp_connections(pids)
         time.sleep(0.2)
     clock.close()
@@ -83,7 +83,7 @@ def test_a_chain_of_32_agents_starts_runs_and_holds_few_connections(tmp_path: Pa
     summary = json.loads((out / "summary.json").read_text())
     assert not summary["error"] and len(summary["final_error"]) == 1
     assert sample is not None, "never saw every actor process at a step"
-    # a hub: each actor holds one connection (to the supervisor), the supervisor one per actor; a mesh held N^2
+    # a hub: each actor and the supervisor hold one connection (to the hub), the hub one each; a mesh held N^2
     assert sum(sample.values()) / len(sample) <= 4, sample
     assert sorted(sample.values())[-2] <= 2, sample  # nobody but the hub holds more than a couple
     left = [p for p in process_tree(proc.pid) if p != proc.pid and os.path.exists(f"/proc/{p}")]

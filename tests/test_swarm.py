@@ -228,7 +228,7 @@ def test_ctrl_c_stops_everything(tmp_path, chain4, endpoint):
             if m.exists() and m.read_text().count("\n") >= 1:
                 break
             time.sleep(0.1)
-        assert len(swarm_pids(str(out))) == 7  # supervisor + zygote + sim + 4 agents
+        assert len(swarm_pids(str(out))) == 8  # supervisor + hub + zygote + sim + 4 agents
         p.send_signal(signal.SIGINT)
         time.sleep(0.3)  # into the shutdown (it waits up to 3 s for the actors' byes)
         p.send_signal(signal.SIGINT)  # an impatient second Ctrl-C does not cut it short
@@ -249,9 +249,9 @@ def test_killed_supervisor_leaves_no_orphans(tmp_path, chain4, endpoint):
     p = start_long_run(chain4, endpoint, out)
     try:
         deadline = time.monotonic() + 60
-        while time.monotonic() < deadline and len(swarm_pids(str(out))) < 7:
+        while time.monotonic() < deadline and len(swarm_pids(str(out))) < 8:
             time.sleep(0.1)
-        assert len(swarm_pids(str(out))) == 7
+        assert len(swarm_pids(str(out))) == 8
         p.send_signal(signal.SIGKILL)
         p.wait(timeout=10)
         deadline = time.monotonic() + 15

@@ -123,7 +123,7 @@ def test_a_swarms_agents_share_the_zygotes_pages(tmp_path):
         pids = [q for q in swarm_pids(str(out)) if q != p.pid]
         names = {q: Path(f"/proc/{q}/comm").read_text().strip() for q in pids}
         agents = [q for q, n in names.items() if n.startswith("agent-")]
-        (zygote,) = [q for q, n in names.items() if not n.startswith(("agent-", "sim-"))]
+        (zygote,) = [q for q, n in names.items() if not n.startswith(("agent-", "sim-", "hub"))]
         assert sorted(names[q] for q in agents) == ["agent-a1", "agent-a2", "agent-a3", "agent-a4"]
         assert _ppid(zygote) == p.pid and all(_ppid(q) == zygote for q in agents)
         pss = [_pss_kb(q) / 1024 for q in agents]

@@ -14,6 +14,7 @@ supervisor stops it, and also when its supervisor dies in any way, so a hub is n
 from __future__ import annotations
 
 import contextlib
+import ctypes
 import subprocess
 import sys
 import threading
@@ -68,6 +69,9 @@ class Hub:
 
 def main(argv: list[str]) -> int:
     from kinswarm.actors.runtime.net import NetSpec, open_session, zenoh_reason
+
+    with contextlib.suppress(OSError):  # its name in ps and /proc/PID/comm, beside the actors' ROLE-ID
+        ctypes.CDLL("libc.so.6", use_errno=True).prctl(15, b"hub", 0, 0, 0)  # PR_SET_NAME
 
     try:
         session = open_session(NetSpec.from_json(Path(argv[0]).read_text()))
