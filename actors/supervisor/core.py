@@ -73,7 +73,8 @@ class Supervisor:
     # turns at loading the learner's compiled kernels), and an actor is ready only once its neighbours listen, so in
     # a large swarm the first become ready after minutes, then the rest in a burst. A fixed 60 s failed a 16-agent
     # chain at load 9-15; 60 s + 2 s an actor still failed a 100-agent chain at load ~130 whose agents were busy.
-    START_STALL_S = 60.0
+    # Agents queued on the kernels' lock behind another run's are idle: 60 s of that failed a start at load ~80.
+    START_STALL_S = 120.0
     START_BUSY_CPU_S = 1.0
 
     def __init__(
