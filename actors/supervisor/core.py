@@ -74,7 +74,8 @@ class Supervisor:
     # turns at loading the learner's compiled kernels), and an actor is ready only once its neighbours listen, so in
     # a large swarm the first become ready after minutes, then the rest in a burst. A fixed 60 s failed a 16-agent
     # chain at load 9-15; 60 s + 2 s an actor still failed a 100-agent chain at load ~130 whose agents were busy.
-    START_STALL_S = 60.0
+    # Agents queued on the kernels' lock behind another run's are idle: 60 s of that failed a start at load ~80.
+    START_STALL_S = 120.0
     START_BUSY_CPU_S = 1.0
 
     def __init__(
@@ -325,7 +326,10 @@ class Supervisor:
         ready = len(want & self.alive)
         if self.on_start is not None:
             self.on_start(ready, len(want))
-        deadline, cpu = time.monotonic() + self.START_STALL_S, self._starting_cpu(want)
+        # several hosts: an actor here is ready only once its neighbours on the other hosts listen, and those start
+        # when someone starts them there (`kinswarm up --wait`)
+        stall_s = max(self.START_STALL_S, self.hosts_wait_s) if self.multi else self.START_STALL_S
+        deadline, cpu = time.monotonic() + stall_s, self._starting_cpu(want)
         while ready < len(want):
             remaining = deadline - time.monotonic()
             if remaining <= 0:
@@ -334,19 +338,19 @@ class Supervisor:
                     log.info(
                         "starting: %d/%d actors ready, the others busy (%.0f CPU-s)", ready, len(want), now_cpu - cpu
                     )
-                    deadline, cpu = time.monotonic() + self.START_STALL_S, now_cpu
+                    deadline, cpu = time.monotonic() + stall_s, now_cpu
                     continue
                 late = [f"{role} {ident}" for role, ident in sorted(want - self.alive)]
                 more = f" and {len(late) - 8} more" if len(late) > 8 else ""
                 why = f"{ready}/{len(want)} ready; not: {', '.join(late[:8])}{more}"
-                raise SwarmError(f"starting: no actor became ready for {self.START_STALL_S:.0f} s, nor busy ({why})")
+                raise SwarmError(f"starting: no actor became ready for {stall_s:.0f} s, nor busy ({why})")
             try:
                 self._route(*await self.node.recv(timeout=remaining))
             except TimeoutError:
                 continue
             if (now := len(want & self.alive)) > ready:
                 ready = now
-                deadline, cpu = time.monotonic() + self.START_STALL_S, self._starting_cpu(want)
+                deadline, cpu = time.monotonic() + stall_s, self._starting_cpu(want)
                 log.info("starting: %d/%d actors ready", ready, len(want))
                 if self.on_start is not None:
                     self.on_start(ready, len(want))
