@@ -99,12 +99,21 @@ def tree(roots: Iterable[int]) -> dict[int, int]:
 
 
 def role_of(pid: int) -> str:
-    """sim, agent, supervisor (the `kinswarm run` or `up` process) or other (e.g. a zenoh helper)."""
+    """sim, agent, controller (an actor forked by the run's zygote is named ROLE-ID), hub (the host's Zenoh router),
+    zygote, supervisor (the `kinswarm run` or `up` process) or other (e.g. a zenoh helper)."""
     try:
         argv = Path(f"/proc/{pid}/cmdline").read_bytes().split(b"\0")
+        comm = Path(f"/proc/{pid}/comm").read_text().strip()
     except OSError:
         return "gone"
     words = [a.decode(errors="replace") for a in argv]
+    for role in ("agent", "sim", "controller"):
+        if comm.startswith(role + "-"):
+            return role
+    if comm == "hub" or "kinswarm.actors.runtime.hub" in words:
+        return "hub"
+    if "--zygote" in words:
+        return "zygote"
     if "kinswarm.actors.run.main" in words:
         i = words.index("kinswarm.actors.run.main")
         return words[i + 1] if i + 1 < len(words) else "actor"

@@ -58,21 +58,17 @@ def test_scale_bench_smoke(tmp_path, monkeypatch, capsys):
     assert sorted((r["n"], r["topology"]) for r in rows) == [(4, "chain"), (4, "tree"), (8, "chain"), (8, "tree")]
     for r in rows:
         assert set(r) == set(scale.ROW_KEYS)
-        if r["result"] != "ok":
-            # the one failure allowed: the supervisor's fixed start-up deadline, which a loaded machine can miss (it is
-            # the benchmark's job to show it as a row); the row still says what had started
-            assert r["result"].startswith("failed: not alive after"), r["result"]
-            assert r["processes"] >= 2
-            continue
+        assert r["result"] == "ok", r["result"]  # no fixed start-up deadline: a loaded machine starts later, not never
         n = r["n"]
-        # the supervisor, the sim and one process per agent, each with its own Zenoh session, all connected
-        assert r["processes"] == n + 2 and r["actors"] == n + 1 and r["sessions"] == n + 2
-        assert r["tcp_total"] >= 2 * (n + 1) and r["tcp_per_process"] == pytest.approx(r["tcp_total"] / (n + 2), 0.05)
+        # the supervisor, its hub and zygote, the sim and one process per agent; all but the zygote hold a Zenoh
+        # session, and each client one connection to the hub (counted at both ends)
+        assert r["processes"] == n + 4 and r["actors"] == n + 1 and r["sessions"] == n + 3
+        assert r["tcp_total"] >= 2 * (n + 2) and r["tcp_per_process"] == pytest.approx(r["tcp_total"] / (n + 4), 0.05)
         assert 0 < r["first_step_s"] <= r["summary_s"] <= r["exit_s"]  # exit: ended once the summary is written
         assert r["steps_per_s"] > 0 and r["cpu_ms_per_step"] > 0 and r["cpu_total_s"] > 0
         assert r["agent_rss_mb"] > 10 and 0 < r["agent_pss_mb"] <= r["agent_rss_mb"] and r["sim_pss_mb"] > 0
         roles = sorted(p["role"] for p in r["per_process"])
-        assert roles == sorted(["supervisor", "sim", *["agent"] * n])
+        assert roles == sorted(["supervisor", "hub", "zygote", "sim", *["agent"] * n])
     # nothing of the runs outlives the benchmark
     left = []
     for pid in os.listdir("/proc"):
