@@ -62,6 +62,7 @@ def tmpfs(size: str) -> Iterator[Path]:
         where.rmdir()
 
 
+@pytest.mark.slow  # a reference run, a failed run and its resume: minutes on 2 cores (`pytest -m slow`)
 @pytest.mark.timeout(600)
 def test_a_run_on_a_full_disk_fails_in_one_line_and_resumes_once_there_is_room(tmp_path):
     """Process placement: the agents' checkpoints and the supervisor's records fill a 1 MiB tmpfs. The run fails in
@@ -91,6 +92,7 @@ def test_a_run_on_a_full_disk_fails_in_one_line_and_resumes_once_there_is_room(t
         assert "after it failed (" in resume["detail"] and "No space left on device" in resume["detail"], resume
 
 
+@pytest.mark.slow  # a reference run, a failed run and its resume: minutes on 2 cores (`pytest -m slow`)
 @pytest.mark.timeout(600)
 def test_a_run_whose_directory_is_made_read_only_fails_in_one_line_and_resumes_once_writable():
     """The run directory made read-only (chmod a-w) while the run trains, the run's user without root's override: the

@@ -90,6 +90,7 @@ def test_a_supervisor_paused_3_s_finishes_with_the_clean_runs_final_errors(tmp_p
     assert swarm_pids(str(out)) == []
 
 
+@pytest.mark.slow  # a failed run and its resume against a reference: minutes on 2 cores (`pytest -m slow`)
 @pytest.mark.timeout(600)
 def test_a_run_that_failed_with_good_checkpoints_resumes_saying_what_failed(tmp_path, chain4, clean_final_errors):
     # No restart allowed: an agent killed after two epochs fails the run (its checkpoints are good)

@@ -252,6 +252,7 @@ def finished(p: subprocess.Popen) -> None:
     assert "Traceback" not in out, out
 
 
+@pytest.mark.slow  # several whole runs and resumes: minutes on 2 cores (`pytest -m slow`)
 @pytest.mark.timeout(900)
 def test_a_moved_or_copied_run_resumes_as_a_run_of_its_own_and_leaves_the_original_alone(tmp_path):
     """Process placement, its agents in processes of their own: they find their checkpoints in the directory they were
@@ -316,6 +317,7 @@ def signalled_after(argv: list[str], metrics: Path, k: int, sig: signal.Signals,
     return err
 
 
+@pytest.mark.slow  # several whole runs and resumes: minutes on 2 cores (`pytest -m slow`)
 @pytest.mark.timeout(900)
 def test_a_run_stopped_by_sigterm_then_ctrl_c_during_its_resume_resumes_to_the_uninterrupted_result(tmp_path):
     """SIGTERM mid-run exits 143, Ctrl-C during the `--resume` 130; each leaves the run resumable as a killed one, and

@@ -42,6 +42,7 @@ def test_run_files_keep_the_reach(tmp_path):
         assert sum(hops) / len(hops) * link_length("tree", n) == pytest.approx(12.0)
 
 
+@pytest.mark.slow  # four process runs of the benchmark: minutes on 2 cores (`pytest -m slow`)
 @pytest.mark.timeout(900)
 def test_scale_bench_smoke(tmp_path, monkeypatch, capsys):
     monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))  # the runs' directories, and nothing left outside
