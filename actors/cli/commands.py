@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import argparse
 import asyncio
-import contextlib
 import dataclasses
 import logging
 import os
@@ -17,6 +16,7 @@ from pathlib import Path
 from typing import Any
 
 import zenoh
+from kinswarm.actors.cli.output import Output, OutputGone
 from kinswarm.actors.cli.parser import build_parser, joined, sets_of
 from kinswarm.actors.deploy.plan import Plan, PlanError, load_plan
 from kinswarm.actors.report import error_line
@@ -148,55 +148,6 @@ def main(argv: list[str] | None = None) -> int:
         return interrupted_code(e)
     except OutputGone as e:
         return e.exit()
-
-
-class OutputGone(Exception):
-    """What this command prints cannot be written: a reader that stopped reading (`| head -1`), a full disk."""
-
-    def __init__(self, error: OSError) -> None:
-        super().__init__(str(error))
-        self.error = error
-
-    def exit(self) -> int:
-        """One line (none for a closed pipe: its reader had what it wanted), stdout let go, the exit code."""
-        where = _stdout_name()
-        with contextlib.suppress(OSError):  # what is still buffered would fail again as the interpreter exits
-            devnull = os.open(os.devnull, os.O_WRONLY)
-            os.dup2(devnull, sys.__stdout__.fileno())
-            os.close(devnull)
-        if isinstance(self.error, BrokenPipeError):
-            return 128 + signal.SIGPIPE
-        print(f"kinswarm: error: cannot write the output to {where}: {self.error.strerror}", file=sys.stderr)
-        return 1
-
-
-def _stdout_name() -> str:
-    try:
-        return os.readlink("/proc/self/fd/1")
-    except OSError:
-        return "stdout"
-
-
-class Output:
-    """sys.stdout whose OSErrors are OutputGone: told apart from the OSErrors of the run's own files."""
-
-    def __init__(self, inner: Any) -> None:
-        self.inner = inner
-
-    def write(self, text: str) -> int:
-        try:
-            return self.inner.write(text)
-        except OSError as e:
-            raise OutputGone(e) from None
-
-    def flush(self) -> None:
-        try:
-            self.inner.flush()
-        except OSError as e:
-            raise OutputGone(e) from None
-
-    def __getattr__(self, name: str) -> Any:
-        return getattr(self.inner, name)
 
 
 def interrupted_code(e: KeyboardInterrupt | None = None, by: str = "") -> int:

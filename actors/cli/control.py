@@ -23,6 +23,7 @@ import sys
 import time
 from pathlib import Path
 
+from kinswarm.actors.cli.output import Output, OutputGone
 from kinswarm.actors.run.config import ConfigError, RunConfig, load_run_config
 from kinswarm.actors.run.rundir import failed_start, run_state
 from kinswarm.actors.runtime import NetSpec, Node, open_session, setup_logging
@@ -329,13 +330,20 @@ def main(argv: list[str]) -> int:
     p = argparse.ArgumentParser(prog="kinswarm", description="A swarm of per-joint learning agents over Zenoh.")
     sub = p.add_subparsers(dest="command", required=True)
     add_control_commands(sub)
+    out = sys.stdout = Output(sys.stdout)  # a closed pipe or a full disk: one line or none, as in the whole CLI
     try:
         a = p.parse_args(joined(argv))
         setup_logging(a.log_level)
-        return run_command(a)
+        code = run_command(a)
+        out.flush()
+        return code
     except (SpecError, ConfigError, ControlError, ValueError) as e:
         print(f"kinswarm: error: {e}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("kinswarm: interrupted", file=sys.stderr)
         return 130
+    except OutputGone as e:
+        return e.exit()
+    finally:
+        sys.stdout = out.inner
