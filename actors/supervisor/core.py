@@ -441,7 +441,9 @@ class Supervisor:
             self.stalls.on_silent()
         elif key == STATUS:
             assert self.waking is not None
-            if self.waking.ticked():
+            # In the single placement every actor shares this process and its session: a late tick is its loop busy
+            # with their steps, and a pause stops them all alike with no link between them to lapse.
+            if self.waking.ticked() and self.cfg.placement != "single":
                 self._woke(now)
             self.later(self.STATUS_EVERY, STATUS)
             self.waking.expect(self.STATUS_EVERY)
