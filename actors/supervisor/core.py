@@ -177,12 +177,15 @@ class Supervisor:
             # a crashed run's clock still reads where its sim died: not this run's until its own sim writes one
             self.clock.path.unlink(missing_ok=True)
             self.placement.attach(node.mailbox.push_local)
-            self.later(self.STATUS_EVERY, STATUS)
-            self.waking.expect(self.STATUS_EVERY)
             if self.multi:
                 self.hosts.start()
             try:
                 await self.placement.start(self.local, restore=self.resumed is not None and self.resumed.restore)
+                # the status tick, and the wake guard that reads its lateness, from here: the mailbox is handled from
+                # the readiness wait on. Armed before the start, a 100-agent start's forks (13 s at load 8) read as
+                # the supervisor having been stopped
+                self.later(self.STATUS_EVERY, STATUS)
+                self.waking.expect(self.STATUS_EVERY)
                 await self._wait_ready(self.local)
                 if self.lead:
                     await self._wait_alive(self.expected, timeout=self.hosts_wait_s, what="the other hosts' actors")
@@ -455,7 +458,13 @@ class Supervisor:
         may have been put while its links were down."""
         assert self.waking is not None
         slept = self.waking.slept
-        log.warning("the supervisor did not run for %.1f s (stopped or starved): asking again for its replies", slept)
+        # while a swarm starts, a loaded machine starves every process for seconds: worth a line in the log, not a
+        # warning on a newcomer's terminal; once training, it is on the run's record too
+        log.log(
+            logging.WARNING if self.training else logging.INFO,
+            "the supervisor did not run for %.1f s (stopped or starved): asking again for its replies",
+            slept,
+        )
         if self.training:
             self.event(
                 "woke", "supervisor", f"did not run for {slept:.1f} s (stopped or starved)", seconds=round(slept, 3)

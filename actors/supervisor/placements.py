@@ -221,6 +221,9 @@ class ProcessPlacement:
             await self.zygote.start()
         for actor in actors:
             self.spawn(actor, restore=restore and actor[0] == "agent")
+            # a fork blocks for the zygote's answer (milliseconds; a hundred of them, seconds on a loaded machine):
+            # the loop's other tasks and callbacks run between two
+            await asyncio.sleep(0)
 
     def spawn(self, actor: ActorId, restore: bool = False) -> None:
         """The one spawn path: the zygote forks a process running `kinswarm.actors.run.main`'s `main`."""
