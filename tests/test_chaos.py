@@ -170,6 +170,8 @@ def test_the_supervisors_events_are_at_the_sims_step(tmp_path, chain4):
     assert restored["checkpoint_epoch"] >= restored["newest_saved"] >= 0
 
 
+# the soak's quick size is ~3 minutes of a 2-core machine: in the slow suite; the chaos tests below stay in the default
+@pytest.mark.slow
 @pytest.mark.timeout(300)
 def test_quick_chaos_holds_every_invariant(tmp_path, capsys):
     """About a minute of every fault kind at once (a fault every 1-2 s, each kind at least once, one crash resumed),

@@ -241,6 +241,7 @@ def test_split_over_two_hosts_learns_what_single_learns(hosts: Hosts, tmp_path: 
     assert sorted(p.name for p in (tmp_path / "limbs" / "agents").glob("a?.npz")) == ["a2.npz", "a3.npz", "a4.npz"]
 
 
+@pytest.mark.slow  # ~25 s; a chain split over two hosts (above) stays in the default
 @pytest.mark.timeout(240)
 def test_a_fleet_split_over_two_hosts_learns_what_single_learns(hosts: Hosts, tmp_path: Path) -> None:
     plan = _net_plan(tmp_path, hosts, epochs=2, steps=100, sets=("run.fleet=3",), **LOCKSTEP)
@@ -269,6 +270,7 @@ def test_three_hosts_relay_through_the_leader(hosts: Hosts, tmp_path: Path) -> N
     assert [p.name for p in (tmp_path / "tips" / "agents").glob("a?.npz")] == ["a4.npz"]
 
 
+@pytest.mark.slow  # ~40 s; the other two-host runs stay in the default
 @pytest.mark.timeout(300)
 def test_a_cut_host_pauses_the_run_which_resumes_and_completes(hosts: Hosts, tmp_path: Path) -> None:
     """The hosts' routers (their supervisors) reconnect after the cut and carry every cross-host message; with

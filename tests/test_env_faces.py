@@ -39,7 +39,8 @@ def _quiet():
 
 
 # -- PettingZoo -------------------------------------------------------------------------------------------------------
-@pytest.mark.parametrize("name", EXAMPLES)
+# chain4 in the default suite; the other robots (~12 s each) in the slow suite
+@pytest.mark.parametrize("name", [n if n == "chain4" else pytest.param(n, marks=pytest.mark.slow) for n in EXAMPLES])
 def test_pettingzoo_render_state_and_max_cycles(name: str) -> None:
     def aec(render_mode: str | None = "rgb_array"):
         return aec_env(example(name), steps=STEPS, render_mode=render_mode)

@@ -323,6 +323,7 @@ def test_quick_grasp_experiment(tmp_path):
     assert "frozen (`--learn off --explore off`) it ends good in" in (out / "report.md").read_text()
 
 
+@pytest.mark.slow  # ~25 s on top of `all --quick`
 def test_quick_adapt_experiment(tmp_path):
     """The adaptation report's smoke version: every controller on every condition, the live case, and the model
     fault unknown to the laws that assume the model (deterministic: the rule cannot reach with a1 reversed)."""
@@ -435,6 +436,7 @@ def test_quick_reach3d_experiment(tmp_path):
     assert "## Points: frozen on 5 unseen goals" in text and "quick" in text
 
 
+@pytest.mark.slow  # ~35 s on top of `all --quick`
 @pytest.mark.timeout(300)
 def test_quick_pose3d_experiment(tmp_path):
     """The pose report's smoke version: the turn-state swarm and every control, both test sets; the swarm's runs are

@@ -216,6 +216,8 @@ def test_spread_goals_refuse_a_moving_goal(tmp_path, capsys):
     assert "fleet_goals" in err and "moves" in err and len(err.splitlines()) == 1
 
 
+# ~45 s: slow suite; tests/test_faults.py's kills keep the restart path in the default
+@pytest.mark.slow
 def test_an_agent_killed_in_a_fleet_is_restarted_for_every_robot(tmp_path):
     """kill acts on the agent, so on that joint of every robot: it is back from its checkpoint (its parent standing in
     meanwhile, when the restart takes longer than a step: timing), and the fleet's run goes on to its end."""

@@ -216,9 +216,12 @@ def test_a_fleet_runs_each_kind(tmp_path):
 
 
 # independent is the paper's Learner with no visible agent (the same state, checkpointed by the same code as fuzzy's,
-# whose kill and restore tests/test_faults.py runs in the default suite): its ~35 s run is in the slow suite
+# whose kill and restore tests/test_faults.py runs in the default suite): its ~35 s run is in the slow suite, and
+# tabular's (~70 s on a loaded machine) with it
 @pytest.mark.timeout(600)
-@pytest.mark.parametrize("name", [pytest.param("independent", marks=pytest.mark.slow), "tabular"])
+@pytest.mark.parametrize(
+    "name", [pytest.param("independent", marks=pytest.mark.slow), pytest.param("tabular", marks=pytest.mark.slow)]
+)
 def test_a2_killed_mid_run_is_restored_from_its_checkpoint(tmp_path, name):
     """`kinswarm fault RUN kill a2` on a live run: a2 is restarted and restores its newest checkpoint (the state it
     restored hashes as the checkpoint did), and the run goes on to its end. A restart loads the compiled kernel anew

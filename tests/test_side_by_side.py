@@ -82,6 +82,8 @@ def faults_of(run_dir: Path) -> list[str]:
     return [f"{r['event']} {r['target']}" for r in rows if r["event"] == "fault"]
 
 
+# ~1.5 minutes: slow suite; three runs started at once (below) keep side by side runs in the default
+@pytest.mark.slow
 @pytest.mark.timeout(600)
 def test_status_and_fault_reach_each_run_from_its_id(tmp_path):
     procs = [start(tmp_path, run_id, epochs=10_000, steps=50) for run_id in IDS]  # ended by the test

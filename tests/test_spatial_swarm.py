@@ -21,7 +21,11 @@ def _run(file: Path, placement: str, out: Path) -> dict:
     return json.loads((out / "summary.json").read_text())
 
 
-@pytest.mark.parametrize("name", ["iiwa", "iiwa-pose", "panda", "xarm6"])
+# the iiwa in the default suite; the panda and the xarm6 (~14 s each) in the slow suite
+@pytest.mark.parametrize(
+    "name",
+    ["iiwa", "iiwa-pose", pytest.param("panda", marks=pytest.mark.slow), pytest.param("xarm6", marks=pytest.mark.slow)],
+)
 def test_a_urdf_arm_trains_alike_in_both_placements(tmp_path, name):
     single = _run(EXAMPLES / f"{name}.toml", "single", tmp_path / "single")
     process = _run(EXAMPLES / f"{name}.toml", "process", tmp_path / "process")

@@ -54,6 +54,8 @@ def _kill_then_freeze_root(out: Path, seconds: str | None) -> float:
     return time.monotonic()
 
 
+# ~1.2 minutes: slow suite; a stall past the limit (below) keeps the stall path in the default
+@pytest.mark.slow
 @pytest.mark.timeout(240)
 def test_a_frozen_root_is_a_stall_seen_recorded_and_over_after_the_thaw(tmp_path):
     out = tmp_path / "r"
