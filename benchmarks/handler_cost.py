@@ -170,10 +170,10 @@ async def measure(
 PARTS = (
     ("decode", "kinswarm.actors.runtime.node", "Node", "decode"),
     ("send (encode, sign, put)", "kinswarm.actors.runtime.node", "Node", "send"),
-    ("begin (frame, task head)", "kinswarm.actors.step.passes", "AgentStep", "begin"),
-    ("finish (tips, view)", "kinswarm.actors.step.passes", "AgentStep", "finish"),
-    ("up (task aggregate)", "kinswarm.actors.step.passes", "AgentStep", "up"),
-    ("decide_from (S_i, reward)", "kinswarm.actors.step.passes", "AgentStep", "decide_from"),
+    ("begin (frame, task head)", "kinswarm.actors.step.passes", "AgentPasses", "begin"),
+    ("finish (tips, view)", "kinswarm.actors.step.passes", "AgentPasses", "finish"),
+    ("up (task aggregate)", "kinswarm.actors.step.passes", "AgentPasses", "up"),
+    ("decide_from (S_i, reward)", "kinswarm.actors.step.passes", "AgentPasses", "decide_from"),
     ("learner.decide", "kinswarm.actors.learning.learner", "Learner", "decide"),
     ("learner.observe", "kinswarm.actors.learning.learner", "Learner", "observe"),
 )

@@ -371,9 +371,9 @@ def needs_no_messages(spec: Spec, cfg: RunConfig) -> bool:
 
 
 def _run_inprocess(cfg: RunConfig, topo: Topology) -> RunResult:
-    """Run cfg in the `inprocess` placement (actors/supervisor/inprocess.py): its metrics, events and checkpoints in
+    """Run cfg in the `inprocess` placement (actors/run/inprocess.py): its metrics, events and checkpoints in
     cfg.out, as a swarm's."""
-    from kinswarm.actors.supervisor.inprocess import InProcessRun
+    from kinswarm.actors.run.inprocess import InProcessRun
     from kinswarm.actors.supervisor.recorder import Recorder
 
     return InProcessRun(cfg, topo).run(Recorder(Path(cfg.out)))

@@ -1,7 +1,7 @@
 """The robot in its world, one lockstep step after another, as plain calls: no messages, no clock, no Zenoh.
 
 The simulator actor (actor.py) drives it from its messages and its deadline; the in-process placement
-(actors/supervisor/inprocess.py) and the environments drive it in a plain loop. Per epoch:
+(actors/run/inprocess.py) and the environments drive it in a plain loop. Per epoch:
 
   start(goal, path, start)   the world at the start pose (or where the last epoch ended), the faults healed, the scene
                              reset, the tips read

@@ -5,14 +5,14 @@ every agent's Q-values and counts at the end."""
 from __future__ import annotations
 
 import numpy as np
-from kinswarm.actors.supervisor.inprocess import InProcessRun
+from kinswarm.actors.run.inprocess import InProcessRun
 from kinswarm.actors.tasks.base import StepView
 
 
 def watched(run: InProcessRun, epochs: int) -> tuple[list, list]:
     """Runs `epochs` epochs of `run` and closes it: [errors, aims, learned], and the events the run recorded."""
     aims: list[tuple[float, ...]] = []
-    for st in run.agents.values():  # what each agent's task makes of the goal, step by step
+    for st in run.swarm.agents.values():  # what each agent's task makes of the goal, step by step
         own = st.task.aim
 
         def aim(view: StepView, own=own) -> tuple[float, ...]:

@@ -151,7 +151,7 @@ def test_the_check_sees_a_cycle() -> None:
     assert cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
     edges = graph()
     assert "kinswarm.actors.step.passes" in edges["kinswarm.actors.agent.actor"]
-    assert "kinswarm.sim.robot" in edges["kinswarm.actors.supervisor.inprocess"]
+    assert "kinswarm.sim.robot" in edges["kinswarm.actors.run.inprocess"]
     # and a registry's names: the CLI reaches each experiment through `kinswarm.experiments`' table of names
     assert "kinswarm.experiments.peers" in edges["kinswarm.experiments"]
     assert "kinswarm.actors.policies.onnx" in edges["kinswarm.actors.learning.kinds"]

@@ -1,9 +1,10 @@
 """kinswarm.env: the peers' own checks (Gymnasium's check_env, PettingZoo's parallel_api_test and parallel_seed_test)
-on the examples, the env agreeing with the inprocess placement to the bit, goals, faults, seeding, rendering, and
-bad input refused in one line."""
+on the examples, the run's learners on the env giving an inprocess run's records to the bit, goals, faults, seeding,
+rendering, and bad input refused in one line."""
 
 from __future__ import annotations
 
+import json
 import warnings
 from pathlib import Path
 
@@ -11,9 +12,8 @@ import gymnasium
 import numpy as np
 import pytest
 from gymnasium.utils.env_checker import check_env
+from kinswarm.actors.cli.commands import main
 from kinswarm.actors.learning.kinds import JointLearner
-from kinswarm.actors.run.runfile import load_run
-from kinswarm.actors.supervisor.inprocess import InProcessRun
 from kinswarm.env import ENV_ID, KinswarmParallelEnv, gym_env, parallel_env
 from kinswarm.protocol.messages import Fault
 from pettingzoo.test import parallel_api_test, parallel_seed_test
@@ -92,7 +92,7 @@ def test_a_compound_agent_is_no_env_agent_but_its_part_runs() -> None:
             actions = {a: (t + i) % 3 for i, a in enumerate(par.agents)}
             _, rewards, *_ = par.step(actions)
             _, r, *_ = env.step(np.array(list(actions.values())))
-            paid = {c: given[1] for c, given in par.stepper.begun["hand"].children.items()}
+            paid = {c: given[1] for c, given in par.stepper.top["hand"].children.items()}
             for a in par.possible_agents:
                 assert rewards[a] == paid[f"{a[:2]}_1"]
             assert r == pytest.approx(sum(paid.values()) / 3)
@@ -102,7 +102,7 @@ def test_a_compound_agent_is_no_env_agent_but_its_part_runs() -> None:
         env.close()
 
 
-# -- the env and the swarm agree ---------------------------------------------------------------------------------------
+# -- the env gives the run's records -----------------------------------------------------------------------------------
 def _observe(learner: JointLearner, acts: list[int], step: int) -> None:
     if all(0 <= b < learner.n_actions for b in acts):
         learner.observe(acts)
@@ -110,17 +110,21 @@ def _observe(learner: JointLearner, acts: list[int], step: int) -> None:
         learner.resync(step)
 
 
-def drive(env: KinswarmParallelEnv, epochs: int) -> list[float]:
-    """The paper's learners on the env, as the inprocess placement calls them: the children's actions of the step
-    before, then the decision on S_i as built (infos' "state": float64, which the learner clips itself; the
-    observation is its float32 copy) and the reward; after the last move, the children's last actions."""
+def drive(env: KinswarmParallelEnv, epochs: int) -> list[dict]:
+    """The paper's learners on the env, as a user calls them: the children's actions of the step before, then the
+    decision on S_i as built (infos' "state": float64, which the learner clips itself; the observation is its float32
+    copy) and the reward; after the last move, the children's last actions. Each epoch as a run records it: its final
+    error, the error after each move, and each joint's states and actions (agents.jsonl's rounding)."""
     learners = env.stepper.learners()
-    finals = []
+    epochs_seen = []
     for epoch in range(epochs):
         obs, infos = env.reset()
         for learner in learners.values():
             learner.start_epoch(epoch, t=0)
         rewards: dict[str, float | None] = dict.fromkeys(learners, None)
+        errors: list[float] = []
+        states: dict[str, list[list[float]]] = {a: [] for a in learners}
+        chosen: dict[str, list[int]] = {a: [] for a in learners}
         while env.agents:
             actions = {}
             for a, learner in learners.items():
@@ -131,32 +135,41 @@ def drive(env: KinswarmParallelEnv, epochs: int) -> list[float]:
                 actions[a] = learner.decide(info["state"], rewards[a], avoid=avoid)  # S_i as built, float64
                 if not info["children"]:
                     learner.observe([])
+                states[a].append([round(float(x), 5) for x in info["state"]])
+                chosen[a].append(actions[a])
             obs, rewards, _, _, infos = env.step(actions)  # type: ignore[assignment]
+            errors.append(next(iter(infos.values()))["error"])
         for a, learner in learners.items():
             if infos[a]["children"]:
                 _observe(learner, infos[a]["children_actions"], env.stepper.steps)
-        finals.append(next(iter(infos.values()))["error"])
-    return finals
+        epochs_seen.append({"final_error": errors[-1], "errors": errors, "states": states, "actions": chosen})
+    return epochs_seen
 
 
 @pytest.mark.parametrize("name", ["chain4", "tree5", "grasp3"])
-def test_the_papers_learners_on_the_env_give_the_inprocess_runs_final_errors(name: str, tmp_path: Path) -> None:
+def test_the_papers_learners_on_the_env_give_the_inprocess_runs_records(name: str, tmp_path: Path) -> None:
+    """What a user relies on: the run's learners stepping `parallel_env` give what `kinswarm run --placement
+    inprocess` records of the same run file — every epoch's final error to the bit, the error after every move, and
+    every joint's state and action at every step."""
     epochs, steps = 2, 100
-    cfg = load_run(
-        example(name), [f"run.epochs={epochs}", f"run.steps={steps}", "run.placement=inprocess"], out=tmp_path
-    )
-    run = InProcessRun(cfg, cfg.topo())
-    try:
-        expected = [run.epoch(e, lambda *event: None).final_error for e in range(epochs)]
-    finally:
-        run.close()
+    out = tmp_path / "run"
+    args = ["run", example(name), "--placement", "inprocess", "--epochs", str(epochs), "--steps", str(steps)]
+    assert main([*args, "--set", "run.record_agents=true", "--no-progress", "--out", str(out)]) == 0
+    metrics = [json.loads(line) for line in (out / "metrics.jsonl").read_text().splitlines()]
+    traces = [json.loads(line) for line in (out / "agents.jsonl").read_text().splitlines()]
     env = parallel_env(example(name), epochs=epochs, steps=steps)
     try:
         got = drive(env, epochs)
     finally:
         env.close()
-    assert got == expected  # to the bit
-    assert len(set(got)) == epochs  # the learners moved the robot: the epochs ended apart
+    assert [e["final_error"] for e in got] == [m["final_error"] for m in metrics]  # to the bit
+    assert [[round(x, 5) for x in e["errors"]] for e in got] == [m["errors"] for m in metrics]
+    assert len(traces) == epochs * len(env.possible_agents)
+    for row in traces:
+        assert row["steps"] == list(range(steps))
+        assert got[row["epoch"]]["states"][row["agent"]] == row["states"], (row["epoch"], row["agent"])
+        assert got[row["epoch"]]["actions"][row["agent"]] == row["actions"], (row["epoch"], row["agent"])
+    assert len({e["final_error"] for e in got}) == epochs  # the learners moved the robot: the epochs ended apart
 
 
 # -- goals, faults, seeding, rendering ------------------------------------------------------------------------------

@@ -2,6 +2,11 @@
 
 Same loop as the tuning harness: links of 3, start (0, 10, 20, 30) deg, 1 deg per action, agents stepped
 leaf first each seeing its child's action, shaped reward, 500 steps x 60 epochs.
+
+It keeps this loop of its own, not the swarm's driver (actors/step/swarm.py): here an agent counts its child's action
+of the same step (`Learner.step`, leaf first) and is seeded [seed, i], where every placement's agent counts its
+children's actions a step late (they come up with the next step's pass) and is seeded by `agent_seed`; the driver
+cannot give these numbers.
 """
 
 import math

@@ -15,9 +15,9 @@ from kinswarm.actors.learning.learner import Learner
 from kinswarm.actors.learning.plasticity import MotorDirection
 from kinswarm.actors.learning.settings import PLASTICITY, LearnerSettings
 from kinswarm.actors.run.checkpoint import save_checkpoint
+from kinswarm.actors.run.inprocess import InProcessRun
 from kinswarm.actors.run.runfile import load_run
 from kinswarm.actors.step.learned import checkpoint_meta, restore_learner
-from kinswarm.actors.supervisor.inprocess import InProcessRun
 from kinswarm.sim import kinematics
 
 

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from conftest import run_config
 from kinswarm.actors.run.runfile import learner_settings, task_of
-from kinswarm.actors.step.passes import AgentStep, robot_passes
+from kinswarm.actors.step.passes import AgentPasses, robot_passes
 from kinswarm.protocol.messages import Task
 from kinswarm.sim import kinematics
 
@@ -17,7 +17,7 @@ def passes(cfg, angles, goal):
     -> root), then each agent's state S_i (its first six variables)."""
     topo, task = cfg.topo(), task_of(cfg)
     obs = {a: s.observation for a, s in learner_settings(task, cfg.learner, cfg.source).items()}
-    agents = {a: AgentStep(topo, a, task, obs.get(a), cfg.action_rad) for a in topo.order}
+    agents = {a: AgentPasses(topo, a, task, obs.get(a), cfg.action_rad) for a in topo.order}
     head = Task(epoch=0, step=0, goal=goal, tips=kinematics.tips(topo, angles), sense={})
     begun, views = robot_passes(agents, topo.order, head, angles, {}, 0, 0, {})
     tips = {a: views[a].tip for a in topo.order}  # the end effector below each agent, as the up pass brought it

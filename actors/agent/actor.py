@@ -16,7 +16,9 @@ Sending `up` before learning takes the learners of all but the root off the step
 pass goes on up. The parent learns exactly what it would with the actions a step earlier: its choice at t needs only
 the counts up to t-1 (Eq. 7) and the joint action of t-1 (Eq. 6). Messages for a newer step supersede an unfinished
 older one (the sim has moved on past its deadline). The task is the agent's `AgentTask` (actors/tasks/base.py):
-this file names none.
+this file names none. What an agent computes of the step is the step library's (actors/step/): the passes
+(`AgentPasses`), and its learner built, started, observing, learning and deciding through the driver's per-agent
+pieces (actors/step/swarm.py), as in the plain loops; this file buffers the messages and speaks the wire.
 """
 
 from __future__ import annotations
@@ -29,8 +31,8 @@ from kinswarm.actors.learning.kinds import JointLearner
 from kinswarm.actors.run.config import RunConfig
 from kinswarm.actors.run.runfile import kind_of, learner_settings, task_of
 from kinswarm.actors.runtime import Node
-from kinswarm.actors.step.passes import AgentStep, Begun, visible_actions
-from kinswarm.actors.step.seed import agent_seed
+from kinswarm.actors.step.passes import AgentPasses, TopDown, visible_actions
+from kinswarm.actors.step.swarm import agent_learner, drop_transition, learn_and_decide, observe_children, start_epoch
 from kinswarm.actors.step.trace import StepTrace
 from kinswarm.actors.tasks.base import StepView
 from kinswarm.protocol.keys import StepKey, agent_keys
@@ -46,7 +48,7 @@ Key = tuple[int, int]  # (epoch, step)
 @dataclass
 class _Step:
     key: Key
-    begun: Begun  # frame, link end, reading, goal, r(t-1), context (actors/step/passes.py)
+    top: TopDown  # frame, link end, reading, goal, r(t-1), context (actors/step/passes.py)
     waiting: frozenset[str]  # the live agents whose `up` this step needs: children, or adopted ones' children
     tips: dict[str, tuple[float, ...]]  # end effectors of adopted leaves, computed here
     ups: dict[str, Up] = field(default_factory=dict)  # by sender
@@ -77,13 +79,9 @@ class Agent:
         if self.spec.has_dof:
             settings = learner_settings(task, cfg.learner, cfg.source)[agent_id]
             obs = settings.observation
-            n_visible = sum(topo.agents[c].has_dof for c in self.spec.children)
-            seed = agent_seed(cfg.seed, agent_id)
-            kind, index = kind_of(cfg.learner, cfg.source), topo.dof_agents.index(agent_id)
-            self.learner = learner or kind.build(
-                settings, n_visible, seed, agent=agent_id, index=index, options=cfg.learner
-            )
-        self.passes = AgentStep(topo, agent_id, task, obs, cfg.action_rad)
+            kind = kind_of(cfg.learner, cfg.source)
+            self.learner = learner or agent_learner(cfg, topo, agent_id, kind, settings)
+        self.passes = AgentPasses(topo, agent_id, task, obs, cfg.action_rad)
         self.geom, self.visible = self.passes.geom, self.passes.visible
         self.trace = None  # what it saw and chose, for the recording (run.record_agents)
         if cfg.record_agents and obs is not None:
@@ -247,22 +245,20 @@ class Agent:
         self.last_begun = key
         if epoch != self.epoch:
             self.epoch = epoch
-            self.task.start_epoch()
-            if self.learner is not None:
-                self.learner.start_epoch(self.memory.epochs_before + epoch, t=step)
+            start_epoch(self.passes, self.learner, self.memory.epochs_before + epoch, step)
         elif self.learner is not None and key != (epoch, self.last_finished[1] + 1):
-            self.learner.resync(step)  # a missed step: no TD update across the gap
+            drop_transition(self.learner, step)  # a missed step: no TD update across the gap
         if adopted or self.standin.adopted:
             self.standin.announce(adopted)
 
-        begun = self.passes.begin(head, q.get(self.id, 0.0), own)
+        top = self.passes.begin(head, q.get(self.id, 0.0), own)
         tips: dict[str, tuple[float, ...]] = {}
         send, down, down_key = self.node.send, self.passes.down, self._down_key
-        for child, child_base in self.standin.frames_below(self.id, begun.end, q, tips):
-            send(down_key[child], down(begun, child, epoch, step, child_base))
+        for child, child_base in self.standin.frames_below(self.id, top.end, q, tips):
+            send(down_key[child], down(top, child, epoch, step, child_base))
         waits = self._waits if waiting is self._children else frozenset(waiting)
         ups_early = self.ups_early
-        self.current = _Step(key, begun, waits, tips, ups_early.pop(key, {}) if ups_early else {})
+        self.current = _Step(key, top, waits, tips, ups_early.pop(key, {}) if ups_early else {})
         if ups_early:
             self.ups_early = {kk: v for kk, v in ups_early.items() if kk > key}
         self._try_finish()
@@ -292,7 +288,7 @@ class Agent:
         d = self.decided
         last = d[1] if d is not None and d[0] == (epoch, step - 1) else None
         ups = {c: cur.ups[c] for c in cur.waiting}
-        tips, view = self.passes.finish(cur.begun, epoch, step, ups, last, cur.tips)
+        tips, view = self.passes.finish(cur.top, epoch, step, ups, last, cur.tips)
         if not self.is_root:  # first: the parent's state needs only the tips (and the task's aggregate)
             self.node.send(self._up_key, self.passes.up(view, tips))
         if self.learner is None:
@@ -301,28 +297,27 @@ class Agent:
             self.node.after_sending(lambda: self._learn(cur, view, tips))
 
     def _learn(self, cur: _Step, view: StepView, tips: dict[str, tuple[float, ...]]) -> None:
-        """The rest of the step once `up` has left: the state S_i, the TD update, a(t), and `cmd`."""
+        """The rest of the step once `up` has left: the state S_i, the children's actions of the step before, the TD
+        update and a(t) (the driver's `learn_and_decide`, as in the plain loops), and `cmd`."""
         assert self.learner is not None
-        epoch, step = view.epoch, view.step
-        self._observe(cur)
-        d = self.passes.decide_from(cur.begun, view)
-        action = self.learner.decide(d.state, d.reward, learn=self.cfg.learn, explore=self.cfg.explore, avoid=d.avoid)
+        epoch, step, cfg = view.epoch, view.step, self.cfg
+        children = self._children_actions(cur)
+        d = self.passes.decide_from(cur.top, view)
+        action, delta = learn_and_decide(
+            self.learner, self.passes, d, children, epoch, step, cfg.learn, cfg.explore, self.trace
+        )
         self.decided = (cur.key, action)
-        if self.trace is not None:
-            self.trace.add(epoch, step, d.state, action, self.learner)
-            if step == self.cfg.steps - 1:
-                self.node.send(self.keys.metrics("agent"), self.trace.take())
+        if self.trace is not None and step == cfg.steps - 1:
+            self.node.send(self.keys.metrics("agent"), self.trace.take())
         if self.visible:
             # a lost child's joint holds: to this agent's fictitious play it chose "keep"
             self.observing = (cur.key, frozenset(c for c in self.visible if c not in cur.ups))
-            if step == self.cfg.steps - 1:
+            if step == cfg.steps - 1:
                 self.closing = {k: v for k, v in self.closing.items() if k >= cur.key}
                 self._try_close()
-        else:
-            self.learner.observe([], learn=self.cfg.learn)
-        if step == self.cfg.steps - 1 and not self.is_root:  # the closing `up`, before the epoch can end
-            self.node.send(self._up_key, Up(epoch=epoch, step=self.cfg.steps, tips=tips, action=action))
-        self.node.send(self._cmd_key, Cmd(epoch=epoch, step=step, delta=self.passes.delta(action, d.scale)))
+        if step == cfg.steps - 1 and not self.is_root:  # the closing `up`, before the epoch can end
+            self.node.send(self._up_key, Up(epoch=epoch, step=cfg.steps, tips=tips, action=action))
+        self.node.send(self._cmd_key, Cmd(epoch=epoch, step=step, delta=delta))
         self._finished(cur)
 
     def _finished(self, cur: _Step) -> None:
@@ -330,22 +325,14 @@ class Agent:
         self.steps_done += 1
 
     # -- what the children did: fictitious play's counts ---------------------------------------------
-    def _observe(self, cur: _Step) -> None:
-        """Hand the learner its visible children's actions of the step before `cur`, which their `up` of
-        `cur` carried; without all of them (a child lost or restarted since) that transition is dropped."""
+    def _children_actions(self, cur: _Step) -> list[int] | None:
+        """The visible children's actions of the step before `cur`, which their `up` of `cur` carried (-1 for one
+        missing: a child lost or restarted since, and the transition is dropped); None when none are awaited."""
         obs, self.observing = self.observing, None
         epoch, step = cur.key
         if obs is None or obs[0] != (epoch, step - 1):
-            return  # none awaited: the epoch's first step, or after a gap (_try_begin resynced the learner)
-        acts = visible_actions(self.visible, {c: m.action for c, m in cur.ups.items()}, obs[1])
-        self._observed(acts, step)
-
-    def _observed(self, acts: list[int], step: int) -> None:
-        assert self.learner is not None
-        if all(0 <= a < self.learner.n_actions for a in acts):
-            self.learner.observe(acts, learn=self.cfg.learn)
-        else:
-            self.learner.resync(step)
+            return None  # the epoch's first step, or after a gap (_try_begin dropped the transition)
+        return visible_actions(self.visible, {c: m.action for c, m in cur.ups.items()}, obs[1])
 
     def _on_closing(self, child: str, m: Up) -> None:
         if self.learner is None or child not in self.visible or (m.epoch, m.step - 1) < self.last_finished:
@@ -361,4 +348,5 @@ class Agent:
             return
         self.observing = None
         del self.closing[obs[0]]
-        self._observed(visible_actions(self.visible, acts, obs[1]), obs[0][1] + 1)
+        assert self.learner is not None
+        observe_children(self.learner, visible_actions(self.visible, acts, obs[1]), obs[0][1] + 1, self.cfg.learn)

@@ -1,8 +1,9 @@
 """The step as the environments see it: a run file's robot, task and agents' passes, stepped one joint action at a
 time by whoever chooses the actions (no learners here). Both faces (parallel.py, robot_env.py) stand on it.
 
-It calls what the inprocess placement (actors/supervisor/inprocess.py) calls, in the same order, so a policy that
-acts as the run's learners act gets the run's numbers. The one shift: in the swarm the reward r(t-1) of a move
+It drives the step as the inprocess placement (actors/run/inprocess.py) does, through the same driver
+(actors/step/swarm.py): the same faults due, passes and learners, so a policy that acts as the run's learners act gets
+the run's numbers. The one shift: in the swarm the reward r(t-1) of a move
 arrives at the start of the next step t, when the root's task measures the new pose. Here `act` moves the robot and
 then runs that next step's passes at once, so the move's reward comes back with the observation it led to; the
 passes after the episode's last move run too (the swarm skips them: its epoch is over), so the last move is paid.
@@ -21,10 +22,10 @@ import tomli_w
 from kinswarm.actors.learning.kinds import JointLearner, LearnerKind
 from kinswarm.actors.learning.settings import LearnerSettings
 from kinswarm.actors.run.config import RunConfig
-from kinswarm.actors.run.runfile import kind_of, learner_settings, load_run, task_of
+from kinswarm.actors.run.runfile import load_run
 from kinswarm.actors.step.epoch import epoch_start
-from kinswarm.actors.step.passes import AgentStep, Begun, Decision, robot_passes
-from kinswarm.actors.step.seed import agent_seed
+from kinswarm.actors.step.passes import Decision, TopDown
+from kinswarm.actors.step.swarm import Swarm
 from kinswarm.protocol.faults import JOINT_FAULTS, check_fault
 from kinswarm.protocol.messages import Fault
 from kinswarm.protocol.scenario import load_scenario
@@ -84,25 +85,19 @@ class Stepper:
         self.draw = draw
         self.rng: np.random.Generator | None = None  # the episodes' draws since the last seeded start
         self.topo: Topology = cfg.topo()
-        self.task = task_of(cfg)
-        self.settings: dict[str, LearnerSettings] = learner_settings(self.task, cfg.learner, cfg.source)
-        self.kind: LearnerKind = kind_of(cfg.learner, cfg.source)
-        topo = self.topo
-        self.order = list(topo.order)
-        self.agents = {
-            a: AgentStep(
-                topo, a, self.task, self.settings[a].observation if a in self.settings else None, cfg.action_rad
-            )
-            for a in self.order
-        }
-        self.dof = list(topo.dof_agents)  # the agents with a joint: the env's agents, in the robot's DOF order
-        self.deciders = [a for a in reversed(self.order) if a in self.settings]  # leaves first, as the up pass
+        self.swarm = Swarm(cfg, self.topo)  # the run's agents and their passes, as the inprocess placement's
+        self.task = self.swarm.task
+        self.settings: dict[str, LearnerSettings] = self.swarm.settings
+        self.kind: LearnerKind = self.swarm.kind
+        self.agents = self.swarm.agents
+        self.dof = list(self.topo.dof_agents)  # the agents with a joint: the env's agents, in the robot's DOF order
+        self.deciders = self.swarm.deciders  # leaves first, as the up pass
         self._robot: Robot | None = self.build()
         self.episode = -1
         self.seed = cfg.seed
         self.last: dict[str, int] = {}  # each agent's action at the step before
         self.decisions: dict[str, Decision] = {}
-        self.begun: dict[str, Begun] = {}  # every agent's top-down pass of the step (the root's: the task's head)
+        self.top: dict[str, TopDown] = {}  # every agent's top-down pass of the step (the root's: the task's head)
         self.root_reward: float | None = None
         self.events: list[Event] = []  # the robot's events (faults applied, disturbances over) of the last call
         self.goal_length = len(self.task.goal(0, cfg.steps)[0])
@@ -153,18 +148,8 @@ class Stepper:
             self.decisions = {}
 
     def learners(self) -> dict[str, JointLearner]:
-        """The run's learners for each joint, built as the inprocess placement builds them (the same seeds)."""
-        return {
-            a: self.kind.build(
-                self.settings[a],
-                len(self.agents[a].visible),
-                agent_seed(self.cfg.seed, a),
-                agent=a,
-                index=self.dof.index(a),
-                options=self.cfg.learner,
-            )
-            for a in self.deciders
-        }
+        """The run's learners for each joint, built as every placement builds them (the same seeds)."""
+        return self.swarm.learners()
 
     # -- the whole robot: the Gymnasium face's observation, the parallel face's global state ----------------------
     def state_bounds(self) -> tuple[np.ndarray, np.ndarray]:
@@ -250,8 +235,7 @@ class Stepper:
         warning = self.robot.start(e_goal, path, e_start, keep_pose=keep)
         if warning:
             self.events.append((self.episode, 0, "start", "robot", warning))
-        for a in self.order:
-            self.agents[a].task.start_epoch()
+        self.swarm.start_epoch(self.episode)
         if faults is not None:
             self.apply(Fault("env-free", "free", ["all"], None, None, None, None, None))
             for f in faults:
@@ -314,19 +298,13 @@ class Stepper:
     # -- the passes ------------------------------------------------------------------------------------
     def _passes(self) -> None:
         """The step's scenario faults, then its top-down and bottom-up passes, as the inprocess placement runs them
-        (actors/supervisor/inprocess.py): what every joint decides from."""
-        robot, agents, epoch, t = self.robot, self.agents, self.episode, self.robot.t
-        if t < self.steps:
-            joint, _ = robot.due(epoch)  # the others were refused with the run file (placement inprocess)
-            for f in joint:
-                self.events.extend((epoch, t, *e) for e in robot.apply_fault(f)[0])
-        q, sense, head = robot.observations(epoch)
-        begun, views = robot_passes(agents, self.order, head, q, sense, epoch, t, self.last)
-        self.decisions = {}
-        for a in self.deciders:
-            self.decisions[a] = agents[a].decide_from(begun[a], views[a])
-        self.begun = begun
-        root = begun[self.topo.root]
+        (the driver, actors/step/swarm.py): what every joint decides from."""
+        robot, epoch, t = self.robot, self.episode, self.robot.t
+        self.events.extend((epoch, t, *e) for e in self.swarm.faults(robot, epoch))
+        step = self.swarm.passes(robot, epoch, self.last)
+        self.decisions = step.decisions
+        self.top = step.top
+        root = step.top[self.topo.root]
         self.root_reward = root.reward
         if root.reward is None and root.children:  # a compound root pays each child its own (grasp): their mean
             given = [r for _, r, _ in root.children.values() if r is not None]

@@ -216,7 +216,7 @@ class KinswarmParallelEnv(ParallelEnv):
             "error": st.error,
         }
         if self.reward_terms:
-            given = st.begun[a].reward
+            given = st.top[a].reward
             info["reward_terms"] = {
                 "task": _reward(given),
                 "local": _reward(d.reward) - _reward(given),

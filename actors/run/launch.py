@@ -262,8 +262,8 @@ def _finish(cfg: RunConfig, result: RunResult, progress: bool) -> dict:
 
 
 def _run_inprocess(cfg: RunConfig, topo: Topology, progress: bool, view: str | None) -> dict:
-    """The `inprocess` placement: the run as one plain loop (actors/supervisor/inprocess.py)."""
-    from kinswarm.actors.supervisor.inprocess import InProcessRun
+    """The `inprocess` placement: the run as one plain loop (actors/run/inprocess.py)."""
+    from kinswarm.actors.run.inprocess import InProcessRun
     from kinswarm.actors.supervisor.recorder import Recorder
 
     on_epoch, close_watchers, _ = _watchers(cfg, progress, view)

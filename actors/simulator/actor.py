@@ -22,6 +22,7 @@ from typing import Any
 import zenoh
 from kinswarm.actors.run.config import RunConfig
 from kinswarm.actors.runtime import Node
+from kinswarm.actors.step.swarm import faults_due
 from kinswarm.protocol.clock import ClockWriter, clock_path
 from kinswarm.protocol.faults import JOINT_FAULTS, describe
 from kinswarm.protocol.messages import (
@@ -370,10 +371,9 @@ class SimActor:
         self.node.send(self.keys.metrics("event"), event)
 
     def _apply_due(self, epoch: int) -> None:
-        joint, others = self.body.due(epoch)
-        for f in joint:
-            self.apply_fault(f)
-        for f in others:
+        """The scenario's entries due at this step: joint faults applied here (as every placement applies them: the
+        driver's `faults_due`), the others requested from the supervisor."""
+        for f in faults_due(self.body, epoch, self.apply_fault):
             self.node.log.info("scenario: requesting %s (%s)", describe(f), f.id)
             self.node.send(self.keys.fault("request"), f)
             # on the timeline at its exact step: the supervisor that applies it knows the step only roughly

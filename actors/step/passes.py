@@ -1,8 +1,8 @@
 """One agent's share of a step, as plain functions of what it holds: no messages in flight, no Zenoh, no asyncio.
 
-The agent actor (actors/agent/actor.py) calls these as its messages arrive; the in-process placement
-(actors/supervisor/inprocess.py), the env faces (actors/env/core.py), the benchmarks' in-process floor and the research
-loops call them in a plain loop. So the step is written once:
+The agent actor (actors/agent/actor.py) calls these as its messages arrive; the plain loops (the inprocess placement,
+the env faces, the benchmarks' in-process floor, the research loops) call them through the driver (swarm.py). So the
+step is written once:
 
   begin     the top-down pass: the head of the step (the task observation at the root, which its task turns into the
             goal and the reward r(t-1); a parent's `Down` elsewhere) and the joint's reading give the joint frame, the
@@ -33,8 +33,8 @@ KEEP = 1  # the action that holds the joint: actions 0, 1, 2 are decrease, keep,
 
 
 @dataclass(slots=True)
-class Begun:
-    """What an agent holds once its step has begun: its frame, its link's end, its reading, the goal, r(t-1), the
+class TopDown:
+    """What the top-down pass gave an agent at a step: its frame, its link's end, its reading, the goal, r(t-1), the
     context from above and its own readings (`sense`), and what differs for each child (the root's task decides)."""
 
     frame: Coords
@@ -57,9 +57,9 @@ class Decision:
     scale: float  # the factor on its action size
 
 
-class AgentStep:
-    """One agent's constants for the step (its place in the robot, its task, its learner's observation) and the
-    passes over them."""
+class AgentPasses:
+    """One agent's passes of a step over its constants (its place in the robot, its task, its learner's
+    observation)."""
 
     def __init__(
         self, topo: Topology, agent_id: str, task: TaskDef, obs: Observation | None, action_rad: float
@@ -83,7 +83,7 @@ class AgentStep:
             self.state_kind = obs.state
 
     # -- the top-down pass -------------------------------------------------------------------------
-    def begin(self, head: Task | Down, q: float, own: Readings) -> Begun:
+    def begin(self, head: Task | Down, q: float, own: Readings) -> TopDown:
         """The step begins: `head` is the task observation at the root, the parent's `Down` elsewhere; `q` the
         joint's encoder reading (0 for no joint), `own` its own readings (Obs.sense)."""
         children: Mapping[str, tuple[Coords, float | None, Readings]]
@@ -94,9 +94,9 @@ class AgentStep:
             base, goal, reward, context, children = head.base, head.goal, head.reward, head.sense, {}
         frame = self.geom.joint_frame(self.spec, base, q)
         end = self.geom.link_end(self.spec, frame)
-        return Begun(frame, end, q, goal, reward, context, children, {**context, **own} if own else context)
+        return TopDown(frame, end, q, goal, reward, context, children, {**context, **own} if own else context)
 
-    def down(self, b: Begun, child: str, epoch: int, step: int, base: Coords) -> Down:
+    def down(self, b: TopDown, child: str, epoch: int, step: int, base: Coords) -> Down:
         """What `child` is sent: its base frame, and the goal, r(t-1) and context (the root's task may give each child
         its own)."""
         goal, reward, context = b.children.get(child, (b.goal, b.reward, b.context))
@@ -105,7 +105,7 @@ class AgentStep:
     # -- the bottom-up pass ------------------------------------------------------------------------
     def finish(
         self,
-        b: Begun,
+        b: TopDown,
         epoch: int,
         step: int,
         ups: Mapping[str, Up],
@@ -132,7 +132,7 @@ class AgentStep:
         )
 
     # -- what the learner decides from -------------------------------------------------------------
-    def decide_from(self, b: Begun, view: StepView) -> Decision:
+    def decide_from(self, b: TopDown, view: StepView) -> Decision:
         """S_i, the reward, the moves to leave out and the action's scale."""
         tip, goal = view.tip, self.task.aim(view)  # the goal as its task has the agent aim (the task's, by default)
         s = self.geom.state(self.spec, b.frame, b.q, tip, goal, self.unsigned_g3, self.state_kind)
@@ -159,7 +159,7 @@ def visible_actions(visible: list[str], actions: Mapping[str, int], lost: frozen
 
 
 def robot_passes(
-    agents: Mapping[str, AgentStep],
+    agents: Mapping[str, AgentPasses],
     order: Sequence[str],
     head: Task,
     q: Mapping[str, float],
@@ -167,23 +167,23 @@ def robot_passes(
     epoch: int,
     step: int,
     last: Mapping[str, int],
-) -> tuple[dict[str, Begun], dict[str, StepView]]:
+) -> tuple[dict[str, TopDown], dict[str, StepView]]:
     """One step's two passes over the whole robot in one place, as the agents compute them apart (a plain loop's step:
-    the inprocess placement, the environments): top-down in the topology's `order` from the root's task observation
-    `head`, bottom-up in reverse. `q`, `sense`: each joint's reading and own readings; `last`: each agent's action at
-    the step before. Returns every agent's `Begun` and `StepView`."""
-    begun: dict[str, Begun] = {}
+    the driver, swarm.py): top-down in the topology's `order` from the root's task observation `head`, bottom-up in
+    reverse. `q`, `sense`: each joint's reading and own readings; `last`: each agent's action at
+    the step before. Returns every agent's `TopDown` and `StepView`."""
+    top: dict[str, TopDown] = {}
     for a in order:  # the top-down pass
         st = agents[a]
         parent = st.spec.parent
         if parent is not None:
-            head = agents[parent].down(begun[parent], a, epoch, step, begun[parent].end)  # type: ignore[assignment]
-        begun[a] = st.begin(head, q.get(a, 0.0), sense.get(a, {}))
+            head = agents[parent].down(top[parent], a, epoch, step, top[parent].end)  # type: ignore[assignment]
+        top[a] = st.begin(head, q.get(a, 0.0), sense.get(a, {}))
     ups: dict[str, Up] = {}
     views: dict[str, StepView] = {}
     for a in reversed(order):  # the bottom-up pass
         st = agents[a]
-        tips, views[a] = st.finish(begun[a], epoch, step, {c: ups[c] for c in st.spec.children}, last.get(a))
+        tips, views[a] = st.finish(top[a], epoch, step, {c: ups[c] for c in st.spec.children}, last.get(a))
         if st.spec.parent is not None:
             ups[a] = st.up(views[a], tips)
-    return begun, views
+    return top, views
