@@ -123,7 +123,7 @@ class Client:
                 key, payload = await self.node.recv(timeout=timeout)
             except TimeoutError:
                 raise ControlError(f"no status from run {k.run} at {self.connect} within {timeout:g} s") from None
-            if key.endswith("/metrics/joints"):
+            if key == k.metrics("joints"):
                 joints = self.node.decode(key, payload, JointStatus) or joints
             elif (status := self.node.decode(key, payload, SwarmStatus)) is not None:
                 yield status, joints

@@ -24,6 +24,7 @@ from kinswarm.actors.run.config import RunConfig
 from kinswarm.actors.runtime import Node
 from kinswarm.protocol.clock import ClockWriter, clock_path
 from kinswarm.protocol.faults import JOINT_FAULTS, describe
+from kinswarm.protocol.keys import GONE, UP, parse_token_change, token_change
 from kinswarm.protocol.messages import (
     Bye,
     Cmd,
@@ -90,9 +91,9 @@ class SimActor:
         self.heard: dict[str, float] = {}
         self.held = False
         self._paused = False
-        self._host_prefix = self.keys.host("")
+        self._host_prefix = self.keys.prefix("host")
         self._status: asyncio.TimerHandle | None = None
-        self._cmd_prefix = self.keys.cmd_all[:-1]
+        self._cmd_prefix = self.keys.prefix("cmd")
         # (epoch, step) for the supervisor's events on this host (protocol/clock.py); the actor that runs has one
         self.clock: ClockWriter | None = None
         if self.scenario is not None:
@@ -122,9 +123,9 @@ class SimActor:
         self.clock = ClockWriter(clock_path(self.cfg.out))
 
         def on_alive(sample: Any) -> None:  # zenoh thread
-            parsed = k.parse_alive(str(sample.key_expr))
-            if parsed is not None:
-                push(ALIVE, (b"+" if sample.kind == zenoh.SampleKind.PUT else b"-") + parsed[1].encode())
+            key = str(sample.key_expr)
+            if k.parse_alive(key) is not None:
+                push(ALIVE, token_change(UP if sample.kind == zenoh.SampleKind.PUT else GONE, key).encode())
 
         watch = node.session.liveliness().declare_subscriber(k.alive("agent", "*"), on_alive, history=True)
         for key in (k.metrics("event"), k.metrics("joints"), k.rep(node.role, node.ident)):
@@ -160,7 +161,7 @@ class SimActor:
         elif key == DEADLINE:
             self._on_watchdog()
         elif key == ALIVE:
-            self._on_alive(payload[1:].decode(), payload[:1] == b"+")
+            self._on_token(payload)
         elif key == STATUS:
             self._on_status()
         elif key == k.ctl("fault"):
@@ -254,7 +255,19 @@ class SimActor:
 
     def _on_cmd_sample(self, key: str, payload: bytes) -> None:  # Zenoh's thread (inline) or the loop
         if (m := self.node.decode(key, payload, Cmd)) is not None:
-            self._on_cmd(self.keys.last_chunk(key), m)
+            self._on_cmd(self._agent_of(key), m)
+
+    def _agent_of(self, key: str) -> str:
+        """The agent a cmd key names (parsed: protocol/keys.py)."""
+        step = self.keys.parse_step(key)
+        assert step is not None  # a key of this run's sim/cmd/*: Zenoh delivers only what it subscribed to
+        return step.agent
+
+    def _on_token(self, payload: bytes) -> None:
+        """An agent's liveliness token came or went."""
+        sign, key = parse_token_change(payload.decode())
+        if (actor := self.keys.parse_alive(key)) is not None:
+            self._on_alive(actor[1], sign == UP)
 
     def _on_cmd(self, agent: str, m: Cmd) -> None:
         e = self.epoch

@@ -47,9 +47,9 @@ class BaselineController:
                 if node.decode(key, payload, Stop) is not None:  # goodbye, as every actor says it: the supervisor
                     node.send(k.rep("bye", node.ident), Bye(steps=self.steps, rejected=node.rejected))  # waits for it
                     return
-            elif "/sim/obs/" in key:
+            elif (step := k.parse_step(key)) is not None and step.kind == "obs":
                 if (o := node.decode(key, payload, Obs)) is not None:
-                    self.q.setdefault((o.epoch, o.step), {})[k.last_chunk(key)] = o.q
+                    self.q.setdefault((o.epoch, o.step), {})[step.agent] = o.q
                     self._try((o.epoch, o.step))
 
     def _try(self, step: tuple[int, int]) -> None:

@@ -64,7 +64,7 @@ class FleetSim(SimActor):
                 self._on_cmd_sample(key, payload)
             elif key == ALIVE:
                 for lane in self.lanes:
-                    lane._on_alive(payload[1:].decode(), payload[:1] == b"+")
+                    lane._on_token(payload)
             elif key == k.ctl("fault"):
                 if (f := node.decode(key, payload, Fault)) is not None:
                     for lane in self.lanes:
@@ -84,7 +84,7 @@ class FleetSim(SimActor):
     def _on_cmd_sample(self, key: str, payload: Any) -> None:  # Zenoh's thread (inline) or the loop
         node = self.fleet_node
         if (batch := node.decode_batch(key, payload, Cmd)) is not None:
-            agent, lanes = self.keys.last_chunk(key), self.lanes
+            agent, lanes = self._agent_of(key), self.lanes
             with node.gathering():
                 for robot, m in zip(batch.robots, batch.items, strict=True):
                     lanes[robot]._on_cmd(agent, m)

@@ -28,7 +28,7 @@ from kinswarm.actors.run.runfile import task_of
 from kinswarm.actors.runtime import Node
 from kinswarm.actors.runtime.wake import WakeGuard
 from kinswarm.protocol.clock import ClockReader, clock_path
-from kinswarm.protocol.keys import Keys
+from kinswarm.protocol.keys import GONE, UP, Key, Keys, parse_token_change, token_change
 from kinswarm.protocol.messages import (
     AgentTrace,
     Bye,
@@ -171,10 +171,10 @@ class Supervisor:
             node.listen(k.host("*"))
 
         def on_alive(sample: Any) -> None:  # zenoh thread
-            parsed = self.keys.parse_alive(str(sample.key_expr))
-            if parsed is not None:
-                up = b"+" if sample.kind == zenoh.SampleKind.PUT else b"-"
-                node.mailbox.push(ALIVE, up + f"{parsed[0]}/{parsed[1]}".encode())
+            key = str(sample.key_expr)
+            if self.keys.parse_alive(key) is not None:
+                sign = UP if sample.kind == zenoh.SampleKind.PUT else GONE
+                node.mailbox.push(ALIVE, token_change(sign, key).encode())
 
         async with contextlib.AsyncExitStack() as stack:
             watch = self.session.liveliness().declare_subscriber(self.keys.alive_all, on_alive, history=True)
@@ -278,41 +278,46 @@ class Supervisor:
         if key.startswith("__"):
             self._own(key, payload)
             return None
-        kind = key[len(self.keys.root) + 1 :]
-        if kind == "metrics/epoch":
-            return node.decode(key, payload, EpochDone)
-        if kind.startswith("rep/agent/"):
-            return node.decode(key, payload, Saved)
-        if kind.startswith(("rep/bye/", "rep/sim/")):
-            if (bye := node.decode(key, payload, Bye)) is not None:
-                self.byes[self.keys.last_chunk(key)] = bye
-            return bye
-        if kind == "ctl/stop":
-            return node.decode(key, payload, Stop)
-        if kind == "metrics/event":
-            if (e := node.decode(key, payload, Event)) is not None:
-                if e.event == "restored":  # when it happened; which checkpoint's epoch, in a field of its own
-                    newest = self.epochs.saved.get(e.target, -1)  # a restart must restore this one (or a newer one)
-                    self.event(e.event, e.target, e.detail, checkpoint_epoch=e.epoch, newest_saved=newest)
-                else:
-                    self.recorder.event(e.epoch, e.step, e.event, e.target, e.detail)
-        elif kind == "metrics/agent":
-            if (tr := node.decode(key, payload, AgentTrace)) is not None:
-                self.recorder.agent(tr)
-        elif kind == "metrics/joints":
-            if (j := node.decode(key, payload, JointStatus)) is not None:
-                self._on_joints(j)
-        elif kind == "fault/request":
-            if (f := node.decode(key, payload, Fault)) is not None:
-                self.faults.on_request(f)
-        elif kind == "ctl/fault" and not self.lead:
-            if (f := node.decode(key, payload, Fault)) is not None:
-                self.faults.on_forwarded(f)
-        elif kind.startswith("ctl/host/"):
-            hb = node.decode(key, payload, Heartbeat)
-            if hb is not None and hb.host in self.plan.hosts and hb.host != self.host:
-                self.hosts.heard_from(hb.host)
+        match self.keys.parse(key):
+            case Key("metrics", ("epoch",)):
+                return node.decode(key, payload, EpochDone)
+            case Key("rep", ("agent", _)):
+                return node.decode(key, payload, Saved)
+            case Key("rep", ("bye" | "sim", ident)):
+                if (bye := node.decode(key, payload, Bye)) is not None:
+                    self.byes[ident] = bye
+                return bye
+            case Key("ctl", ("stop",)):
+                return node.decode(key, payload, Stop)
+            case Key("metrics", ("event",)):
+                self._on_event(node.decode(key, payload, Event))
+            case Key("metrics", ("agent",)):
+                if (tr := node.decode(key, payload, AgentTrace)) is not None:
+                    self.recorder.agent(tr)
+            case Key("metrics", ("joints",)):
+                if (j := node.decode(key, payload, JointStatus)) is not None:
+                    self._on_joints(j)
+            case Key("fault", ("request",)):
+                if (f := node.decode(key, payload, Fault)) is not None:
+                    self.faults.on_request(f)
+            case Key("ctl", ("fault",)) if not self.lead:
+                if (f := node.decode(key, payload, Fault)) is not None:
+                    self.faults.on_forwarded(f)
+            case Key("host", _):
+                hb = node.decode(key, payload, Heartbeat)
+                if hb is not None and hb.host in self.plan.hosts and hb.host != self.host:
+                    self.hosts.heard_from(hb.host)
         return None
+
+    def _on_event(self, e: Event | None) -> None:
+        """An actor's event, recorded; a restart's restore with the newest checkpoint its agent said it saved."""
+        if e is None:
+            return
+        if e.event == "restored":  # when it happened; which checkpoint's epoch, in a field of its own
+            newest = self.epochs.saved.get(e.target, -1)  # a restart must restore this one (or a newer one)
+            self.event(e.event, e.target, e.detail, checkpoint_epoch=e.epoch, newest_saved=newest)
+        else:
+            self.recorder.event(e.epoch, e.step, e.event, e.target, e.detail)
 
     def _own(self, key: str, payload: bytes) -> None:
         """The supervisor's own events, in the mailbox's order with the messages."""
@@ -320,8 +325,9 @@ class Supervisor:
         if key == ALIVE:
             assert self.waking is not None  # a loss heard as this process wakes is held a lease (runtime/wake.py)
             if (change := self.waking.token(payload.decode())) is not None:
-                role, ident = change[1:].split("/", 1)
-                self._alive_changed((role, ident), change[0] == "+")
+                sign, key = parse_token_change(change)
+                if (actor := self.keys.parse_alive(key)) is not None:
+                    self._alive_changed(actor, sign == UP)
         elif key == EXIT:
             actor, how = parse_exit(payload)
             self._on_exit(actor, how, now)
