@@ -41,7 +41,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from kinswarm.actors.run.runfile import load_run
+from kinswarm.actors.files.runfile import load_run
 from kinswarm.actors.supervisor.inprocess import InProcessRun
 from kinswarm.sim import kinematics
 

@@ -11,8 +11,8 @@ import gymnasium
 import numpy as np
 import pytest
 from gymnasium.utils.env_checker import check_env
+from kinswarm.actors.files.runfile import load_run
 from kinswarm.actors.learning.kinds import JointLearner
-from kinswarm.actors.run.runfile import load_run
 from kinswarm.actors.supervisor.inprocess import InProcessRun
 from kinswarm.env import ENV_ID, KinswarmParallelEnv, gym_env, parallel_env
 from kinswarm.protocol.messages import Fault

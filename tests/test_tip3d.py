@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 from conftest import ROOT
-from kinswarm.actors.run.runfile import load_run
+from kinswarm.actors.files.runfile import load_run
 from kinswarm.actors.supervisor.inprocess import InProcessRun
 from kinswarm.actors.tasks import reach3d, sensed
 from kinswarm.actors.tasks.base import StepView

@@ -25,9 +25,9 @@ import asyncio
 from dataclasses import dataclass, field
 from typing import Any
 
+from kinswarm.actors.files.config import RunConfig
+from kinswarm.actors.files.runfile import kind_of, learner_settings, task_of
 from kinswarm.actors.learning.kinds import JointLearner
-from kinswarm.actors.run.config import RunConfig
-from kinswarm.actors.run.runfile import kind_of, learner_settings, task_of
 from kinswarm.actors.runtime import Node
 from kinswarm.actors.step.passes import AgentStep, Begun, visible_actions
 from kinswarm.actors.step.seed import agent_seed

@@ -19,12 +19,12 @@ import zenoh
 from kinswarm.actors.cli.output import Output, OutputGone
 from kinswarm.actors.cli.parser import build_parser, joined, sets_of
 from kinswarm.actors.deploy.plan import Plan, PlanError, load_plan
+from kinswarm.actors.files.checkpoint import CheckpointError
+from kinswarm.actors.files.config import ConfigError, RunConfig, check_endpoint
+from kinswarm.actors.files.rundir import check_dir, reading_note
+from kinswarm.actors.files.runfile import load_run
 from kinswarm.actors.report import error_line
-from kinswarm.actors.run.checkpoint import CheckpointError
-from kinswarm.actors.run.config import ConfigError, RunConfig, check_endpoint
 from kinswarm.actors.run.launch import resume_swarm, run_swarm
-from kinswarm.actors.run.rundir import check_dir, reading_note
-from kinswarm.actors.run.runfile import load_run
 from kinswarm.actors.runtime import setup_logging
 from kinswarm.actors.runtime.net import zenoh_reason
 from kinswarm.actors.supervisor.result import RecordError
@@ -100,7 +100,7 @@ _RESUME_TAKES = {"resume", "listen", "no_progress", "view", "log_level", "comman
 
 def _resumed(a: argparse.Namespace) -> RunConfig:
     """`kinswarm run --resume RUN-DIR`: the run as config.json resolved it, or one line naming what is wrong."""
-    from kinswarm.actors.run.resume import check_resume
+    from kinswarm.actors.files.resume import check_resume
 
     if a.run_file is not None:
         raise ConfigError(f"--resume {a.resume}: continues the run as it was resolved: give no RUN-FILE ({a.run_file})")

@@ -24,8 +24,8 @@ import time
 from pathlib import Path
 
 from kinswarm.actors.cli.output import Output, OutputGone
-from kinswarm.actors.run.config import ConfigError, RunConfig, load_run_config
-from kinswarm.actors.run.rundir import failed_start, run_state
+from kinswarm.actors.files.config import ConfigError, RunConfig, load_run_config
+from kinswarm.actors.files.rundir import failed_start, run_state
 from kinswarm.actors.runtime import NetSpec, Node, open_session, setup_logging
 from kinswarm.actors.runtime.net import zenoh_reason
 from kinswarm.protocol.faults import FAULTS, check_fault, describe

@@ -19,8 +19,8 @@ import time
 from pathlib import Path
 
 from kinswarm.actors.deploy.plan import Plan, PlanError, load_credentials
-from kinswarm.actors.run.config import RunConfig, config_from_json
-from kinswarm.actors.run.rundir import check_out
+from kinswarm.actors.files.config import RunConfig, config_from_json
+from kinswarm.actors.files.rundir import check_out
 from kinswarm.actors.runtime import NetSpec, Node, open_session
 from kinswarm.protocol import codec
 from kinswarm.protocol.keys import Keys, every_run, run_of, shape

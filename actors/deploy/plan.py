@@ -35,7 +35,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from kinswarm.actors.run.config import AUTO_LISTEN, LEASE_RANGE_MS
+from kinswarm.actors.files.config import AUTO_LISTEN, LEASE_RANGE_MS
 from kinswarm.actors.runtime import LEASE_MS, NetSpec
 from kinswarm.protocol.keys import agent_denied, check_id, every_run, sim_denied
 from kinswarm.protocol.topology import Topology

@@ -20,7 +20,7 @@ import time
 from typing import Any
 
 import zenoh
-from kinswarm.actors.run.config import RunConfig
+from kinswarm.actors.files.config import RunConfig
 from kinswarm.actors.runtime import Node
 from kinswarm.protocol.clock import ClockWriter, clock_path
 from kinswarm.protocol.faults import JOINT_FAULTS, describe
@@ -220,7 +220,7 @@ class SimActor:
                 self.node.log.info("epoch %d's start came again: its EpochDone goes out again", e.epoch)
                 self.node.send(self.keys.metrics("epoch"), done)
             return
-        # The first start may be any epoch: a resumed run goes on after its checkpoint (actors/run/resume.py)
+        # The first start may be any epoch: a resumed run goes on after its checkpoint (actors/files/resume.py)
         if e.epoch != self.last_epoch + 1 and not (self.last_epoch < 0 <= e.epoch < self.cfg.epochs):
             self.node.log.warning("ignored EpochStart %d: the next epoch is %d", e.epoch, self.last_epoch + 1)
             return

@@ -8,7 +8,7 @@ robot's point or pose (sim/baseline.py); every law moves as the agents do (basel
 
 from __future__ import annotations
 
-from kinswarm.actors.run.config import RunConfig
+from kinswarm.actors.files.config import RunConfig
 from kinswarm.actors.runtime import Node
 from kinswarm.protocol.messages import Bye, Cmd, Obs, Stop, Task
 from kinswarm.protocol.topology import Topology

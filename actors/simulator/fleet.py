@@ -15,7 +15,7 @@ import asyncio
 import dataclasses
 from typing import Any
 
-from kinswarm.actors.run.config import RunConfig
+from kinswarm.actors.files.config import RunConfig
 from kinswarm.actors.runtime import Lane, Node
 from kinswarm.protocol.faults import JOINT_FAULTS, expand_targets
 from kinswarm.protocol.messages import Cmd, EpochDone, EpochStart, Event, Fault

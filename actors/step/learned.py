@@ -10,7 +10,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from kinswarm.actors.run.checkpoint import load_checkpoint
+from kinswarm.actors.files.checkpoint import load_checkpoint
 
 
 def checkpoint_meta(agent: str, kind: str, topology: str, epochs_before: int, epoch: int, seed: int) -> dict:

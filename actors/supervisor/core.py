@@ -22,9 +22,9 @@ from typing import Any
 
 import zenoh
 from kinswarm.actors.deploy.plan import Plan, local_plan
-from kinswarm.actors.run.config import RunConfig
-from kinswarm.actors.run.resume import Resume
-from kinswarm.actors.run.runfile import task_of
+from kinswarm.actors.files.config import RunConfig
+from kinswarm.actors.files.resume import Resume
+from kinswarm.actors.files.runfile import task_of
 from kinswarm.actors.runtime import Node
 from kinswarm.actors.runtime.wake import WakeGuard
 from kinswarm.protocol.clock import ClockReader, clock_path
@@ -112,7 +112,7 @@ class Supervisor:
         self.why_down: dict[str, tuple[float, str]] = {}  # actor -> (since when, why): what `status` says of it
         self._timers: set[asyncio.TimerHandle] = set()
         self.hostname = {h: h for h in self.plan.hosts} if self.multi else {self.host: socket.gethostname()}
-        self.resumed: Resume | None = None  # `--resume`: where the run goes on (actors/run/resume.py)
+        self.resumed: Resume | None = None  # `--resume`: where the run goes on (actors/files/resume.py)
         # every wait on the mailbox; a reply waited for is asked again every two leases while none comes
         self.replies = Replies(
             self._recv, self._route, self.hosts.paused_seconds, 2 * cfg.lease_ms / 1000, self._stop_requested

@@ -11,7 +11,7 @@ import signal
 import time
 from typing import TYPE_CHECKING
 
-from kinswarm.actors.run.config import placement_problem
+from kinswarm.actors.files.config import placement_problem
 from kinswarm.protocol.faults import (
     ALL,
     JOINT_FAULTS,

@@ -18,10 +18,10 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from kinswarm.actors.files.checkpoint import save_checkpoint
+from kinswarm.actors.files.config import RunConfig
+from kinswarm.actors.files.runfile import kind_of, learner_settings, task_of
 from kinswarm.actors.learning.kinds import JointLearner
-from kinswarm.actors.run.checkpoint import save_checkpoint
-from kinswarm.actors.run.config import RunConfig
-from kinswarm.actors.run.runfile import kind_of, learner_settings, task_of
 from kinswarm.actors.step.epoch import checkpoint_due, epoch_start
 from kinswarm.actors.step.learned import checkpoint_meta, learned_state, restore_learner
 from kinswarm.actors.step.passes import AgentStep, robot_passes, visible_actions

@@ -27,7 +27,7 @@ from kinswarm.actors.learning.settings import OBSERVATION_FIELDS
 from kinswarm.env import parallel_env
 
 if TYPE_CHECKING:
-    from kinswarm.actors.run.config import RunConfig
+    from kinswarm.actors.files.config import RunConfig
     from kinswarm.protocol.messages import Fault, FaultReply
 
 ROOT = Path(__file__).resolve().parents[2]

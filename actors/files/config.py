@@ -1,4 +1,4 @@
-"""The resolved run: what every actor of a run reads. `actors/run/runfile.py` (the one loader) resolves a run file
+"""The resolved run: what every actor of a run reads. `actors/files/runfile.py` (the one loader) resolves a run file
 into a RunConfig; the supervisor writes it to `<out>/config.json` (owner-only: it holds the run's secret) and every
 actor process reads it back here. Plain data over protocol specs: the simulator's actor imports this, and nothing of
 the agents'.
