@@ -217,7 +217,7 @@ def os_error(e: OSError) -> str:
 
 
 def _main(argv: list[str] | None) -> int:
-    from kinswarm.actors.cli.control import ControlError
+    from kinswarm.actors.control.client import ControlError
     from kinswarm.actors.deploy.hosts import DeployError
     from kinswarm.protocol.scenario import ScenarioError
 
