@@ -34,7 +34,7 @@ from kinswarm.actors.deploy.plan import free_endpoint
 from kinswarm.actors.files.config import AUTO_LISTEN, ConfigError, RunConfig, placement_problem
 from kinswarm.actors.files.resolved import write_resolved
 from kinswarm.actors.files.runfile import learner_settings, read_run_file, resolve, task_of
-from kinswarm.actors.learning.kinds import DEFAULT as DEFAULT_KIND
+from kinswarm.actors.policies.registry import DEFAULT as DEFAULT_KIND
 from kinswarm.actors.report import read_metrics, write_summary
 from kinswarm.actors.runtime import open_session, tap
 from kinswarm.actors.supervisor import RunResult, SinglePlacement, Supervisor

@@ -51,9 +51,9 @@ def _experiments() -> list[str]:
 
 
 def _learner_kinds() -> list[str]:
-    from kinswarm.actors.learning.kinds import KINDS
+    from kinswarm.actors.policies.registry import KINDS
 
-    return [k.module if "." in k.module else f"kinswarm.actors.learning.{k.module}" for k in KINDS.values()]
+    return [k.module for k in KINDS.values()]
 
 
 def _compiled() -> list[str]:
@@ -67,7 +67,7 @@ REGISTRIES: dict[str, Callable[[], list[str]]] = {
     "kinswarm.experiments": _experiments,
     "kinswarm.experiments.research.__main__": lambda: _package_modules("kinswarm.experiments.research"),
     "kinswarm.actors.learning": _compiled,
-    "kinswarm.actors.learning.kinds": _learner_kinds,
+    "kinswarm.actors.policies.registry": _learner_kinds,
     "kinswarm.actors.tasks": lambda: _package_modules("kinswarm.actors.tasks"),
     "kinswarm.sim.scenes": lambda: _package_modules("kinswarm.sim.scenes"),
 }
@@ -207,7 +207,8 @@ def test_the_check_sees_a_cycle() -> None:
     assert "kinswarm.sim.robot" in edges["kinswarm.actors.supervisor.inprocess"]
     # and a registry's names: the CLI reaches each experiment through `kinswarm.experiments`' table of names
     assert "kinswarm.experiments.peers" in edges["kinswarm.experiments"]
-    assert "kinswarm.actors.policies.onnx" in edges["kinswarm.actors.learning.kinds"]
+    assert "kinswarm.actors.policies.onnx" in edges["kinswarm.actors.policies.registry"]
+    assert "kinswarm.actors.learning.tabular" in edges["kinswarm.actors.policies.registry"]
     assert "kinswarm.sim.scenes.walls" in edges["kinswarm.sim.scenes"]
 
 

@@ -17,10 +17,11 @@ from kinswarm.actors.learning import jasm
 from kinswarm.actors.learning.fleet import EPISODE, LearnerLane
 from kinswarm.actors.learning.fuzzy import centres
 from kinswarm.actors.learning.independent import IndependentLearner
-from kinswarm.actors.learning.kinds import KINDS, JointLearner, kinds, learner_kind
+from kinswarm.actors.learning.kinds import JointLearner
 from kinswarm.actors.learning.learner import Learner
 from kinswarm.actors.learning.settings import LearnerSettings
 from kinswarm.actors.learning.tabular import TabularLearner
+from kinswarm.actors.policies.registry import KINDS, kinds, learner_kind
 from kinswarm.actors.step.seed import agent_seed
 from test_faults import Run
 

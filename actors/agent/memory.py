@@ -8,7 +8,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from kinswarm.actors.files.checkpoint import CheckpointError, digest, load_latest, save_checkpoint
-from kinswarm.actors.learning.kinds import DEFAULT
+from kinswarm.actors.policies.registry import DEFAULT
 from kinswarm.actors.step.learned import checkpoint_meta, learned_state, load_learned, restore_learner
 from kinswarm.protocol.messages import Checkpoint, Event, Saved
 

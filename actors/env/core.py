@@ -20,8 +20,9 @@ import numpy as np
 import tomli_w
 from kinswarm.actors.files.config import RunConfig
 from kinswarm.actors.files.runfile import kind_of, learner_settings, load_run, task_of
-from kinswarm.actors.learning.kinds import JointLearner, LearnerKind
+from kinswarm.actors.learning.kinds import JointLearner
 from kinswarm.actors.learning.settings import LearnerSettings
+from kinswarm.actors.policies.registry import LearnerKind
 from kinswarm.actors.step.epoch import epoch_start
 from kinswarm.actors.step.passes import AgentStep, Begun, Decision, robot_passes
 from kinswarm.actors.step.seed import agent_seed

@@ -20,7 +20,7 @@ kind = "free"
 kind = "reach"
 goal = [4.16, 6.18]
 
-[learner]                  # optional: kind (actors/learning/kinds.py; default "fuzzy") and LearnerSettings
+[learner]                  # optional: kind (actors/policies/registry.py; default "fuzzy") and LearnerSettings
 gamma = 0.9                # overrides (actors/learning/settings.py): the observation's fields, the learner's own
 ```
 
@@ -55,9 +55,9 @@ from kinswarm.actors.files.config import (
     placement_problem,
 )
 from kinswarm.actors.files.tables import PATH_KEYS, absolute, absolute_paths, copied, merged, plain, put, spec_error
-from kinswarm.actors.learning.kinds import DEFAULT, OWN_FIELDS, LearnerKind, learner_kind
 from kinswarm.actors.learning.settings import SPATIAL_STATES, LearnerSettings
 from kinswarm.actors.learning.state import OWN_EXTRAS
+from kinswarm.actors.policies.registry import DEFAULT, OWN_FIELDS, LearnerKind, learner_kind
 from kinswarm.actors.tasks import kinds, task_class
 from kinswarm.actors.tasks.base import TaskDef
 from kinswarm.protocol.keys import check_id
