@@ -55,11 +55,10 @@ class SimActor:
         self.cfg, self.topo, self.node, self.keys = cfg, topo, node, node.keys
         # Read before the world exists: a bad file fails the actor without leaking a PyBullet client.
         self.scenario = load_scenario(cfg.scenario, topo) if cfg.scenario else None
-        self.body = Robot(topo, cfg.scene_spec, cfg.action_rad, cfg.seed, self.scenario, self._world(topo))
-        self.world, self.scene, self.faults = self.body.world, self.body.scene, self.body.faults
-        self.robot = (
-            0  # which robot of a fleet this is (actors/simulator/fleet.py): a joint fault for another is not its
-        )
+        self.robot = Robot(topo, cfg.scene_spec, cfg.action_rad, cfg.seed, self.scenario, self._world(topo))
+        self.world, self.scene, self.faults = self.robot.world, self.robot.scene, self.robot.faults
+        # which robot of a fleet this is (actors/simulator/fleet.py): a joint fault for another is not its
+        self.robot_index = 0
         self.dof = topo.dof_agents
         self.dof_set = frozenset(self.dof)
         self._obs_first = [a for a in self.dof if a == topo.root]  # the root's reading goes out with the task
@@ -97,7 +96,7 @@ class SimActor:
         # (epoch, step) for the supervisor's events on this host (protocol/clock.py); the actor that runs has one
         self.clock: ClockWriter | None = None
         if self.scenario is not None:
-            late = [s for s in self.body.due_steps if s >= cfg.steps]
+            late = [s for s in self.robot.due_steps if s >= cfg.steps]
             if late:
                 node.log.warning(
                     "scenario %s: steps %s are beyond --steps %d, never reached", cfg.scenario, late, cfg.steps
@@ -150,7 +149,7 @@ class SimActor:
                 if timer is not None:
                     timer.cancel()
             watch.undeclare()
-            self.body.close()
+            self.robot.close()
             self.clock.close()
 
     def handle(self, key: str, payload: bytes) -> bool:
@@ -230,7 +229,7 @@ class SimActor:
         first = self.last_epoch < 0  # (a resumed run's first epoch has no pose of the last one to keep)
         self.epoch = e
         self.last_epoch = e.epoch
-        warning = self.body.start(e.goal, e.path, e.start, keep_pose=self.cfg.successive and not first)
+        warning = self.robot.start(e.goal, e.path, e.start, keep_pose=self.cfg.successive and not first)
         if warning:  # a start pose this robot cannot take: its home instead, said once
             self.node.log.warning("epoch %d: %s", e.epoch, warning)
         self.missed = 0
@@ -277,7 +276,7 @@ class SimActor:
             self.node.log.warning("rejected cmd for %r: not a joint of %s", agent, self.topo.name)
             return
         # Counted even for a locked joint (the step must not wait); _advance decides what moves.
-        self.cmds[agent] = self.body.clip(m.delta)
+        self.cmds[agent] = self.robot.clip(m.delta)
         self.late.pop(agent, None)
         self.waiting.discard(agent)
         if not self.waiting:
@@ -350,7 +349,7 @@ class SimActor:
                 epoch=epoch,
                 step=step,
                 q=self.world.joint_positions(),
-                delta=dict(self.body.applied),
+                delta=dict(self.robot.applied),
                 faults=self.faults.summary(),
                 late={a: n for a, n in self.late.items() if a not in self.down},
             ),
@@ -361,9 +360,9 @@ class SimActor:
     def apply_fault(self, f: Fault) -> None:
         """Apply a joint fault now (it takes effect at the current step's increments); others are ignored,
         they are for the supervisor and the runtimes."""
-        if f.fault not in JOINT_FAULTS or f.robot not in (None, self.robot):
+        if f.fault not in JOINT_FAULTS or f.robot not in (None, self.robot_index):
             return
-        events, refused = self.body.apply_fault(f)
+        events, refused = self.robot.apply_fault(f)
         for problem in refused:
             self.node.log.warning(problem)
         if self.epoch is None and self.last_epoch < 0:
@@ -383,7 +382,7 @@ class SimActor:
         self.node.send(self.keys.metrics("event"), event)
 
     def _apply_due(self, epoch: int) -> None:
-        joint, others = self.body.due(epoch)
+        joint, others = self.robot.due(epoch)
         for f in joint:
             self.apply_fault(f)
         for f in others:
@@ -396,13 +395,13 @@ class SimActor:
     def _publish_step(self) -> None:
         e = self.epoch
         assert e is not None
-        body, k, send = self.body, self.keys, self.node.send
+        robot, k, send = self.robot, self.keys, self.node.send
         if self.scenario is not None:
             self._apply_due(e.epoch)
-        q, sense, task = body.observations(e.epoch)  # what the encoders read and the agents sense
+        q, sense, task = robot.observations(e.epoch)  # what the encoders read and the agents sense
         # The root begins once it holds both the task and its own reading: put them back to back, so they
         # reach it in one burst (one wake-up); the others' readings are needed only a hop later.
-        t = body.t
+        t = robot.t
         if self.clock is not None:
             self.clock.set(e.epoch, t)
         for a in self._obs_first:
@@ -420,11 +419,11 @@ class SimActor:
     def _advance(self) -> None:
         e = self.epoch
         assert e is not None
-        for name, target, detail in self.body.move(self.cmds):
+        for name, target, detail in self.robot.move(self.cmds):
             self._event(name, target, detail)
         self.longest_step = max(self.longest_step, time.perf_counter() - self.step_started)
         self.total_steps += 1
-        if self.body.t < e.steps:
+        if self.robot.t < e.steps:
             if self.paused:
                 self.held = True
                 return
@@ -432,8 +431,8 @@ class SimActor:
             return
         seconds = time.perf_counter() - self.started
         if self.clock is not None:
-            self.clock.set(e.epoch, self.body.t)
-        self._done(self.body.done(e.epoch, e.steps, self.missed, seconds, self.longest_step))
+            self.clock.set(e.epoch, self.robot.t)
+        self._done(self.robot.done(e.epoch, e.steps, self.missed, seconds, self.longest_step))
         self.epoch = None
 
     def _done(self, m: EpochDone) -> None:
@@ -448,13 +447,13 @@ class SimActor:
     @property
     def applied(self) -> dict[str, float]:
         """The increments the last step applied, by joint."""
-        return self.body.applied
+        return self.robot.applied
 
     @property
     def t(self) -> int:
         """The running step of the epoch."""
-        return self.body.t
+        return self.robot.t
 
     def goal(self) -> tuple[float, ...]:
         """The goal of the running step."""
-        return self.body.goal()
+        return self.robot.goal()

@@ -124,7 +124,7 @@ class _SimLane(SimActor):
     def __init__(self, cfg: RunConfig, topo: Topology, node: Node, fleet: FleetSim) -> None:
         self.fleet = fleet
         super().__init__(cfg, topo, node)
-        self.robot = node.robot  # type: ignore[attr-defined]
+        self.robot_index = node.robot  # type: ignore[attr-defined]
         self._own: set[str] = set()  # joints with a fault on this robot alone: their events are this lane's to send
 
     def _world(self, topo: Topology) -> World:
@@ -136,7 +136,7 @@ class _SimLane(SimActor):
         return World(topo, beside=self.fleet.lanes[robot - robot % PER_CLIENT].world)
 
     def apply_fault(self, f: Fault) -> None:
-        if f.robot == self.robot and f.fault in JOINT_FAULTS:
+        if f.robot == self.robot_index and f.fault in JOINT_FAULTS:
             targets = expand_targets(f.targets, list(self.dof))
             self._own.update(targets)
             super().apply_fault(f)
