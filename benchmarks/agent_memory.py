@@ -33,7 +33,7 @@ from pathlib import Path
 # benchmarks/ is this script's directory, so first on sys.path
 from step_rate import free_port
 
-ROLE_ARG = "kinswarm.actors.run.main"  # an actor's command line: python -m kinswarm.actors.run.main ROLE ID ...
+ROLE_ARG = "kinswarm.actors.process.main"  # an actor's command line: python -m kinswarm.actors.process.main ROLE ID ...
 
 
 def chain_file(n: int, path: Path) -> Path:

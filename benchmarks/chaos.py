@@ -8,7 +8,7 @@ at once, then the invariants a user counts on, checked from what the run left be
 
 Both runs (fault-free, then chaos, same seed and settings) are `kinswarm run` child processes. Faults go in as a user
 sends them: the first of each kind through `kinswarm fault RUN ...` itself, the others through the same client
-(kinswarm.actors.cli.control.Client: one request, one reply, as `kinswarm fault` does). At random times (exponential,
+(kinswarm.actors.control.client.Client: one request, one reply, as `kinswarm fault` does). At random times (exponential,
 mean --every seconds) and overlapping, on random agents and joints:
 
 - process: kill, freeze (0.3-3 s), restart;
@@ -279,7 +279,7 @@ class Chaos:
         if error:
             self.refused.append(f"{kind} {target}: {error}")
             return
-        from kinswarm.actors.cli.control import make_fault
+        from kinswarm.actors.control.client import make_fault
         from kinswarm.protocol.faults import describe
 
         f = make_fault(kind, [target], **{k: (int(v) if k == "steps" else v) for k, v in params.items()})

@@ -44,11 +44,11 @@ class Control:
     def __init__(self, out: Path) -> None:
         self.out = out
         self.loop = asyncio.new_event_loop()
-        self.client: Any = None  # kinswarm.actors.cli.control.Client, entered
+        self.client: Any = None  # kinswarm.actors.control.client.Client, entered
 
     def fault(self, kind: str, target: str, params: dict[str, float]) -> tuple[bool, str]:
         """(delivered, the supervisor's error or ''); a run between its crash and its resume is not reached."""
-        from kinswarm.actors.cli.control import Client, ControlError, make_fault, run_config_at, tool_net
+        from kinswarm.actors.control.client import Client, ControlError, make_fault, run_config_at, tool_net
 
         async def one() -> tuple[bool, str]:
             if self.client is None:  # one session for many faults; a new one after a crash (a new endpoint)
@@ -72,7 +72,7 @@ class Control:
             self.client = None
 
     def pids(self) -> dict[str, int]:
-        from kinswarm.actors.cli.control import Client, ControlError, run_config_at, tool_net
+        from kinswarm.actors.control.client import Client, ControlError, run_config_at, tool_net
 
         async def one() -> dict[str, int]:
             try:

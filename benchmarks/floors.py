@@ -41,8 +41,8 @@ import tempfile
 import time
 from pathlib import Path
 
+from kinswarm.actors.files.runfile import load_run
 from kinswarm.actors.run.inprocess import InProcessRun
-from kinswarm.actors.run.runfile import load_run
 from kinswarm.sim import kinematics
 
 # benchmarks/ is this script's directory, so first on sys.path

@@ -2,7 +2,7 @@
 
     python benchmarks/handler_cost.py [--epochs 3] [--steps 500] [--sink] [--profile a4/down] [--top 25]
 
-The four agents of examples/chain4.toml are built as the `process` placement builds them (actors/run/main.py), each
+The four agents of examples/chain4.toml are built as the `process` placement builds them (actors/process/main.py), each
 with a Node of its own on a Zenoh session of its own: every step message an agent sends is encoded, signed and put
 as in `process` (nobody hears the put; with `--sink` a session of its own listens, so each put travels over TCP),
 and this script hands the same bytes to the addressee's step handler (`Agent._on_step`: decode with MAC and
@@ -33,7 +33,7 @@ from typing import Any
 
 import zenoh
 from kinswarm.actors.agent.actor import Agent
-from kinswarm.actors.run.runfile import load_run
+from kinswarm.actors.files.runfile import load_run
 from kinswarm.actors.runtime import NetSpec, Node, open_session
 from kinswarm.protocol import codec
 from kinswarm.protocol.keys import Keys

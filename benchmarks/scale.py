@@ -114,8 +114,8 @@ def role_of(pid: int) -> str:
         return "hub"
     if "--zygote" in words:
         return "zygote"
-    if "kinswarm.actors.run.main" in words:
-        i = words.index("kinswarm.actors.run.main")
+    if "kinswarm.actors.process.main" in words:
+        i = words.index("kinswarm.actors.process.main")
         return words[i + 1] if i + 1 < len(words) else "actor"
     if "kinswarm.actors.cli" in words or any(w.endswith("/kinswarm") for w in words):
         return "supervisor"

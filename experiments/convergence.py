@@ -23,7 +23,7 @@ PAPER_LITERAL = {"s": 0.35, "T_max": 100.0, "lr": 0.1}  # §5.1's printed values
 PAPER_SETTLED = {0.35: "≈ 20", 0.75: "≈ 3"}
 
 
-# The controls for the paper's two design choices (actors/learning/kinds.py) on the shaped-reward rows' runs: the
+# The controls for the paper's two design choices (actors/policies/registry.py) on the shaped-reward rows' runs: the
 # same fuzzy Q-learning without a model of the children (no JASM), and JASM over a plain Q-table on the same grid.
 CONTROLS = {"independent": "no JASM", "tabular": "no fuzzy interpolation"}
 
@@ -152,9 +152,9 @@ def _controls(per: dict[str, Any], tail: int) -> list[str]:
     settling epoch and the mean errors, then a paired count over (s, seed) of which ends the epochs closer."""
     out = [
         "The paper's learner against each of its two design choices taken away (`--set learner.kind=...`, "
-        "actors/learning/kinds.py): `independent`, the same fuzzy Q-learning with each agent's Q over its own actions "
-        "only (no JASM, the joint action model by fictitious play); `tabular`, JASM over a plain Q-table on the same "
-        "grid (no fuzzy interpolation). Shaped reward, the same seeds; in brackets the paper's learner.",
+        "actors/policies/registry.py): `independent`, the same fuzzy Q-learning with each agent's Q over its own "
+        "actions only (no JASM, the joint action model by fictitious play); `tabular`, JASM over a plain Q-table on "
+        "the same grid (no fuzzy interpolation). Shaped reward, the same seeds; in brackets the paper's learner.",
         "",
     ]
     last = f"last{tail}_mean_error"

@@ -20,10 +20,10 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from kinswarm.actors.files.checkpoint import load_checkpoint
 from kinswarm.actors.learning.fuzzy import FuzzyPartition
 from kinswarm.actors.learning.learner import Learner
 from kinswarm.actors.learning.settings import N_ACTIONS, LearnerSettings
-from kinswarm.actors.run.checkpoint import load_checkpoint
 
 from .common import Context, Report, mean_std, plt_module, pm, run_specs
 from .swarm import Spec, chain_topology

@@ -7,7 +7,7 @@ placement (the same Supervisor, actors and wire, in one process), with an observ
 actor exists, so nothing is missed. A spec in `process` placement (what process faults need: an agent's process
 stopped or killed) runs through `kinswarm run`'s own launcher (launch.run_swarm), one OS process per actor.
 
-Each run is a `Spec`: a run file and overrides of its fields, resolved by the one loader (actors/run/runfile.py). It
+Each run is a `Spec`: a run file and overrides of its fields, resolved by the one loader (actors/files/runfile.py). It
 lives in its own directory with `spec.json`, and is reused when that directory already holds a finished run of the
 same resolved run, or of the same run with more epochs (the first epochs of a longer run are bit-identical to a
 shorter run: lockstep and seeded RNGs).
@@ -31,11 +31,11 @@ from typing import Any
 
 import numpy as np
 from kinswarm.actors.deploy.plan import free_endpoint
-from kinswarm.actors.learning.kinds import DEFAULT as DEFAULT_KIND
+from kinswarm.actors.files.config import AUTO_LISTEN, ConfigError, RunConfig, placement_problem
+from kinswarm.actors.files.resolved import write_resolved
+from kinswarm.actors.files.runfile import learner_settings, read_run_file, resolve, task_of
+from kinswarm.actors.policies.registry import DEFAULT as DEFAULT_KIND
 from kinswarm.actors.report import read_metrics, write_summary
-from kinswarm.actors.run.config import AUTO_LISTEN, ConfigError, RunConfig, placement_problem
-from kinswarm.actors.run.resolved import write_resolved
-from kinswarm.actors.run.runfile import learner_settings, read_run_file, resolve, task_of
 from kinswarm.actors.runtime import open_session, tap
 from kinswarm.actors.supervisor import RunResult, SinglePlacement, Supervisor
 from kinswarm.protocol import codec

@@ -176,6 +176,6 @@ def _figures(
 
 
 def resolved_path() -> list[tuple[float, float]]:
-    from kinswarm.actors.run.runfile import task_of
+    from kinswarm.actors.files.runfile import task_of
 
     return task_of(resolved(TRACK)).goal(0, STEPS)[1]

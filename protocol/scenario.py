@@ -13,8 +13,8 @@ target = ["a2", "a3"]    # an agent id, a list of them, or "all"
 ```
 
 The sim applies joint faults (lock, free, disturb, and reverse, scale, deadzone, offset, lag in the robot's model)
-itself and forwards the others to the supervisor. When the run file is resolved (actors/run/runfile.py), every entry is
-checked against the run too: a step or epoch it never reaches, a process fault its placement cannot apply (`single`
+itself and forwards the others to the supervisor. When the run file is resolved (actors/files/runfile.py), every entry
+is checked against the run too: a step or epoch it never reaches, a process fault its placement cannot apply (`single`
 cannot freeze), a fault on agents a baseline run does not have.
 """
 

@@ -21,7 +21,7 @@ compound = false                # true: no DOF, only encapsulates children (the 
 
 Trees, not only chains: an agent may have several children, and every leaf is an end effector.
 Agents are listed parents-first in `Topology.order`; angles are stored in radians. What the robot is asked to do
-(`[task]`) and what surrounds it (`[scene]`) are other tables of the run file (actors/run/runfile.py, scene.py).
+(`[task]`) and what surrounds it (`[scene]`) are other tables of the run file (actors/files/runfile.py, scene.py).
 """
 
 from __future__ import annotations

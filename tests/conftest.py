@@ -19,8 +19,8 @@ from typing import Any
 import pytest
 from hypothesis import settings
 from hypothesis_timeout import pytest_timeout_set_timer  # noqa: F401  # the hook: a hung property ends at its timeout
-from kinswarm.actors.run.config import RunConfig
-from kinswarm.actors.run.runfile import load_run
+from kinswarm.actors.files.config import RunConfig
+from kinswarm.actors.files.runfile import load_run
 from kinswarm.actors.runtime import Mailbox, NetSpec
 from kinswarm.protocol.keys import Keys
 

@@ -11,7 +11,7 @@ import sys
 import time
 from pathlib import Path
 
-from kinswarm.actors.run.config import load_run_config
+from kinswarm.actors.files.config import load_run_config
 from kinswarm.actors.runtime import NetSpec, Node, open_session
 from kinswarm.protocol.keys import Keys
 from kinswarm.protocol.messages import Fault, FaultReply

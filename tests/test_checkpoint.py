@@ -1,6 +1,6 @@
 import numpy as np
 import pytest
-from kinswarm.actors.run.checkpoint import CheckpointError, load_checkpoint, save_checkpoint
+from kinswarm.actors.files.checkpoint import CheckpointError, load_checkpoint, save_checkpoint
 
 
 def arrays():
@@ -52,7 +52,7 @@ def test_foreign_npz_and_wrong_agent(tmp_path):
 
 
 def test_a_torn_newest_checkpoint_falls_back_to_the_previous_one(tmp_path):
-    from kinswarm.actors.run.checkpoint import load_latest, previous
+    from kinswarm.actors.files.checkpoint import load_latest, previous
 
     p = tmp_path / "a1.npz"
     save_checkpoint(p, arrays(), {"agent": "a1", "run_epoch": 4})

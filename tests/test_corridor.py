@@ -13,10 +13,10 @@ import numpy as np
 import pytest
 from conftest import EXAMPLES, run_config
 from kinswarm.actors.cli.commands import main as cli_main
+from kinswarm.actors.files.runfile import task_of
 from kinswarm.actors.learning.fuzzy import FuzzyPartition
 from kinswarm.actors.learning.learner import Learner
 from kinswarm.actors.learning.settings import LearnerSettings
-from kinswarm.actors.run.runfile import task_of
 from kinswarm.actors.tasks.base import StepView
 from kinswarm.actors.tasks.corridor import CorridorAgent, corridor_reward
 from kinswarm.actors.tasks.reach import next_waypoint, path_distance

@@ -7,7 +7,7 @@ import math
 
 import pytest
 from conftest import EXAMPLES, run_config
-from kinswarm.actors.run.runfile import task_of
+from kinswarm.actors.files.runfile import task_of
 from kinswarm.actors.tasks.corridor import _follow_leader_behind, follow_leader_distance
 from kinswarm.actors.tasks.reach import path_distance
 from kinswarm.protocol.spec import SpecError

@@ -22,7 +22,7 @@ from typing import Any
 import pytest
 import zenoh
 from kinswarm.actors.deploy.plan import PlanError, acl, load_plan, local_plan
-from kinswarm.actors.run.config import RunConfig
+from kinswarm.actors.files.config import RunConfig
 from kinswarm.actors.run.launch import run_swarm
 from kinswarm.actors.runtime import NetSpec
 from kinswarm.protocol.robots import load_robot

@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 from conftest import run_config
 from kinswarm.actors.cli.commands import main as cli_main
-from kinswarm.actors.run.config import PLACEMENT_FAULTS
+from kinswarm.actors.files.config import PLACEMENT_FAULTS
 from kinswarm.actors.supervisor.placements import ProcessPlacement, SinglePlacement
 from kinswarm.protocol.faults import LINK_FAULTS, PROCESS_FAULTS
 from kinswarm.protocol.scenario import ScenarioError

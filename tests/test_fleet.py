@@ -11,10 +11,10 @@ import numpy as np
 import pytest
 from conftest import EXAMPLES, LOCKSTEP_ARGS, free_port, run_config, swarm_pids
 from kinswarm.actors.cli.commands import main as cli_main
-from kinswarm.actors.cli.control import ControlError, make_fault
+from kinswarm.actors.control.client import ControlError, make_fault
+from kinswarm.actors.files.runfile import learner_settings, task_of
 from kinswarm.actors.learning.fleet import EPISODE, LearnerLane
 from kinswarm.actors.learning.learner import Learner
-from kinswarm.actors.run.runfile import learner_settings, task_of
 from kinswarm.actors.runtime import Node
 from kinswarm.actors.step.seed import agent_seed
 from kinswarm.protocol.messages import Batch, Cmd, Obs

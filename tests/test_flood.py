@@ -24,7 +24,7 @@ import pytest
 import zenoh
 from conftest import LOCKSTEP_ARGS, free_port, tool_net
 from kinswarm.actors.cli.commands import _resolve, build_parser
-from kinswarm.actors.run.config import RunConfig
+from kinswarm.actors.files.config import RunConfig
 from kinswarm.actors.run.launch import run_swarm
 from kinswarm.actors.runtime import open_session
 from kinswarm.actors.supervisor.epochs import EpochLoop

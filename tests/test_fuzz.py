@@ -25,8 +25,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from kinswarm.actors.cli import commands as cli
 from kinswarm.actors.deploy.plan import PlanError, load_plan
-from kinswarm.actors.run.config import ConfigError
-from kinswarm.actors.run.runfile import read_run_file, resolve
+from kinswarm.actors.files.config import ConfigError
+from kinswarm.actors.files.runfile import read_run_file, resolve
 from kinswarm.protocol import codec
 from kinswarm.protocol.messages import MESSAGE_TYPES, SCHEMA_VERSION
 from kinswarm.protocol.robots import load_robot

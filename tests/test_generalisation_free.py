@@ -8,9 +8,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from kinswarm.actors.files.config import RunConfig
+from kinswarm.actors.files.runfile import learner_settings, load_run, task_of
 from kinswarm.actors.learning.fuzzy import memberships_1d
-from kinswarm.actors.run.config import RunConfig
-from kinswarm.actors.run.runfile import learner_settings, load_run, task_of
 from kinswarm.experiments.common import Context
 from kinswarm.experiments.generalisation import protocol
 from kinswarm.experiments.generalisation.protocol import (

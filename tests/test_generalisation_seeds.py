@@ -10,8 +10,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from kinswarm.actors.files.runfile import learner_settings, task_of
 from kinswarm.actors.learning.fuzzy import memberships_1d
-from kinswarm.actors.run.runfile import learner_settings, task_of
 from kinswarm.experiments import generalisation
 from kinswarm.experiments.common import Context
 from kinswarm.experiments.generalisation import protocol

@@ -8,8 +8,8 @@ from pathlib import Path
 
 import pytest
 from conftest import run_config
+from kinswarm.actors.files.runfile import task_of
 from kinswarm.actors.learning.state import goal_along_motion
-from kinswarm.actors.run.runfile import task_of
 from kinswarm.actors.tasks.grasp_reward import (
     Contacts,
     GraspParams,

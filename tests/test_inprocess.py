@@ -110,7 +110,7 @@ def test_a_baseline_law_is_refused_in_process(tmp_path, monkeypatch, capsys) -> 
 @pytest.mark.parametrize("kind", ["independent", "tabular"])
 def test_the_learner_kinds_come_out_the_same_in_process(kind: str, tmp_path: Path, monkeypatch) -> None:
     """The controls run in every placement alike: the same final errors as single, checkpoints of their kind."""
-    from kinswarm.actors.run.checkpoint import load_checkpoint
+    from kinswarm.actors.files.checkpoint import load_checkpoint
 
     monkeypatch.chdir(ROOT)
     args = ["run", "examples/chain4.toml", "--epochs", "2", "--set", f"learner.kind={kind}"]

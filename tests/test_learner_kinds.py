@@ -12,15 +12,16 @@ import numpy as np
 import pytest
 from conftest import EXAMPLES, LOCKSTEP_ARGS, free_port, run_config, swarm_pids
 from kinswarm.actors.cli.commands import main as cli_main
+from kinswarm.actors.files.runfile import learner_settings, task_of
 from kinswarm.actors.learning import jasm
 from kinswarm.actors.learning.fleet import EPISODE, LearnerLane
 from kinswarm.actors.learning.fuzzy import centres
 from kinswarm.actors.learning.independent import IndependentLearner
-from kinswarm.actors.learning.kinds import KINDS, JointLearner, kinds, learner_kind
+from kinswarm.actors.learning.kinds import JointLearner
 from kinswarm.actors.learning.learner import Learner
 from kinswarm.actors.learning.settings import LearnerSettings
 from kinswarm.actors.learning.tabular import TabularLearner
-from kinswarm.actors.run.runfile import learner_settings, task_of
+from kinswarm.actors.policies.registry import KINDS, kinds, learner_kind
 from kinswarm.actors.step.seed import agent_seed
 from test_faults import Run
 

@@ -11,12 +11,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 from conftest import ROOT
+from kinswarm.actors.files.checkpoint import save_checkpoint
+from kinswarm.actors.files.runfile import load_run
 from kinswarm.actors.learning.learner import Learner
 from kinswarm.actors.learning.plasticity import MotorDirection
 from kinswarm.actors.learning.settings import PLASTICITY, LearnerSettings
-from kinswarm.actors.run.checkpoint import save_checkpoint
 from kinswarm.actors.run.inprocess import InProcessRun
-from kinswarm.actors.run.runfile import load_run
 from kinswarm.actors.step.learned import checkpoint_meta, restore_learner
 from kinswarm.sim import kinematics
 

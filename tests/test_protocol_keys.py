@@ -1,6 +1,7 @@
-"""The step's keys, declared once (protocol/keys.py `STEP`): every key an actor sends on parses back to its kind and
-agent, nothing else parses as a step key, and the access control of a deploy plan denies the sim and each agent
-exactly the step keys the declaration says are not theirs."""
+"""Every key, declared once (protocol/keys.py `KEYS`, the step's among them in `STEP`): every key an actor sends on
+parses back to its kind and names, nothing else parses as a step key, the access control of a deploy plan denies the
+sim and each agent exactly the keys the declaration says are not theirs, and a liveliness token's change reads back
+as it was made."""
 
 from __future__ import annotations
 
@@ -8,7 +9,24 @@ from pathlib import Path
 
 import pytest
 import zenoh
-from kinswarm.protocol.keys import STEP, Keys, StepKey, agent_denied, agent_keys, sim_denied, step_key
+from kinswarm.protocol.keys import (
+    GONE,
+    HELD,
+    KEYS,
+    STEP,
+    UP,
+    Key,
+    Keys,
+    StepKey,
+    agent_denied,
+    agent_keys,
+    parse_token_change,
+    run_of,
+    shape,
+    sim_denied,
+    step_key,
+    token_change,
+)
 from kinswarm.protocol.robots import load_robot
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
@@ -70,3 +88,41 @@ def test_the_sim_and_each_agent_are_denied_what_is_not_theirs(topo) -> None:
         assert all(_hits(denied, key) for key in sim_sends), a
         others = every_agent_key - {*step, *stand_in}
         assert others and all(_hits(denied, key) for key in others), a
+
+
+@pytest.mark.parametrize("kind", sorted(KEYS))
+def test_every_kind_s_key_parses_back_to_its_kind_and_names(kind: str) -> None:
+    k = Keys("run-1")
+    names = tuple(f"n{i}" for i in range(KEYS[kind][0].count("{}")))
+    key = k.key(kind, *names)
+    assert key == f"{k.root}/{shape(kind, *names)}" and k.parse(key) == Key(kind, names)
+    assert key.startswith(k.prefix(kind)) and run_of(key) == "run-1"
+    assert Keys("run-2").parse(key) is None  # another run's
+
+
+def test_the_named_keys_are_the_declared_ones() -> None:
+    k = Keys("r")
+    assert k.parse(k.rep("bye", "a2")) == Key("rep", ("bye", "a2"))
+    assert k.parse(k.host("h1")) == Key("host", ("h1",)) and k.parse(k.ctl("stop")) == Key("ctl", ("stop",))
+    assert k.parse_alive(k.alive("agent", "a3")) == ("agent", "a3") and k.parse_alive(k.ctl("stop")) is None
+    assert k.parse(k.ctl("*")) is None and k.parse("ks/r/ctl/host/h1/x") is None and k.parse("__alive__") is None
+    assert set(STEP) == {"down", "up", "cmd", "obs", "task"} and all(STEP[s] == KEYS[s] for s in STEP)
+    assert all(k.step(kind, "a1").startswith(k.step_prefixes) for kind in STEP)
+    assert not any(k.key(kind, "x", "y").startswith(k.step_prefixes) for kind in KEYS if kind not in STEP)
+
+
+@pytest.mark.parametrize("sign", [UP, GONE, HELD])
+def test_a_token_change_reads_back(sign: str) -> None:
+    key = Keys("r").alive("agent", "a2")
+    assert parse_token_change(token_change(sign, key)) == (sign, key)
+
+
+def test_the_run_s_keys_are_denied_to_the_sim_and_the_agents_as_declared(topo) -> None:
+    """Beyond the step: the control keys are the supervisors' (and a tool's), fault requests a tool's or the sim's;
+    replies, metrics and tokens anyone's of the run."""
+    sim, a = sim_denied(), agent_denied(topo, topo.order[1])
+    for key in ("ctl/stop", "ctl/epoch", "ctl/host/h1", "ctl/setup/p"):
+        assert _hits(sim, key) and _hits(a, key), key
+    assert _hits(a, "fault/request") and not _hits(sim, "fault/request")
+    for key in ("rep/agent/a2", "rep/bye/a2", "metrics/event", "metrics/epoch"):
+        assert not _hits(sim, key) and not _hits(a, key), key

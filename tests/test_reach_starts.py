@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 from kinswarm.actors.cli.commands import main
-from kinswarm.actors.run.runfile import load_run, task_of
+from kinswarm.actors.files.runfile import load_run, task_of
 from kinswarm.protocol.spec import SpecError
 
 ROBOT = '[robot]\nname = "c"\n[robot.defaults]\nlink_length = 3.0\nlimits_deg = [-90.0, 120.0]\n' + "".join(

@@ -1,5 +1,5 @@
-"""Run files (actors/run/runfile.py): the one loader. Overrides, layered files, paths, the resolved file that makes the
-run again, and one clear line for every bad input."""
+"""Run files (actors/files/runfile.py): the one loader. Overrides, layered files, paths, the resolved file that makes
+the run again, and one clear line for every bad input."""
 
 from __future__ import annotations
 
@@ -11,9 +11,9 @@ import shutil
 import pytest
 from conftest import EXAMPLES, ROOT, free_port, run_config
 from kinswarm.actors.cli.commands import main as cli_main
-from kinswarm.actors.run.checkpoint import CheckpointError
-from kinswarm.actors.run.config import ConfigError
-from kinswarm.actors.run.runfile import load_run, parse_set, read_run_file, task_of
+from kinswarm.actors.files.checkpoint import CheckpointError
+from kinswarm.actors.files.config import ConfigError
+from kinswarm.actors.files.runfile import load_run, parse_set, read_run_file, task_of
 from kinswarm.actors.tasks import kinds
 from kinswarm.protocol.spec import SpecError
 
@@ -95,7 +95,7 @@ def test_every_field_is_checked_and_named(sets, where, what):
 
 def test_an_unknown_field_with_a_line_break_in_its_name_is_named_on_one_line():
     """Found by tests/test_fuzz.py: a table key "\n" (TOML allows it quoted) was printed as it is."""
-    from kinswarm.actors.run.runfile import resolve
+    from kinswarm.actors.files.runfile import resolve
 
     data = read_run_file(CHAIN4)
     data["run"] = {"\n": False}
@@ -315,9 +315,9 @@ def test_the_files_own_problem_stays_the_files(tmp_path):
 def test_the_resolved_file_holds_the_learner_settings_used(tmp_path, monkeypatch, file):
     """run.toml's [learner] was the overrides only (empty for the default run): a change of a default in the code
     changed what `kinswarm run run.toml` made. Now it holds the values used; the same settings come out of it."""
+    from kinswarm.actors.files.resolved import write_resolved
+    from kinswarm.actors.files.runfile import learner_settings
     from kinswarm.actors.learning.settings import TURN_LEARNER, LearnerSettings
-    from kinswarm.actors.run.resolved import write_resolved
-    from kinswarm.actors.run.runfile import learner_settings
 
     cfg = load_run(EXAMPLES / file, run_id="r", out=tmp_path)
     written = read_run_file(write_resolved(cfg, tmp_path / "run.toml"))["learner"]

@@ -13,7 +13,7 @@ from typing import Any
 
 import pytest
 from conftest import RecordingNode, fault_message, run_config
-from kinswarm.actors.run.config import RunConfig
+from kinswarm.actors.files.config import RunConfig
 from kinswarm.actors.runtime import Node, open_session
 from kinswarm.actors.simulator.actor import SimActor
 from kinswarm.protocol.keys import Keys

@@ -9,8 +9,8 @@ import random
 import numpy as np
 import pytest
 from conftest import IIWA, PANDA, XARM6, urdf_robot
+from kinswarm.actors.files.runfile import load_run, task_of
 from kinswarm.actors.learning.state import goal_along_motion, plane_state
-from kinswarm.actors.run.runfile import load_run, task_of
 from kinswarm.actors.step.geometry import Spatial
 from kinswarm.protocol import codec, frames
 from kinswarm.protocol.messages import Down, EpochStart, Up

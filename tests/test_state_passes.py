@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 from conftest import run_config
-from kinswarm.actors.run.runfile import learner_settings, task_of
+from kinswarm.actors.files.runfile import learner_settings, task_of
 from kinswarm.actors.step.passes import AgentPasses, robot_passes
 from kinswarm.protocol.messages import Task
 from kinswarm.sim import kinematics

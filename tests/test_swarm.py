@@ -376,7 +376,7 @@ def test_bad_lease_is_a_clear_error(tmp_path, chain4, capsys, lease, why):
 
 
 def test_config_round_trip(tmp_path):
-    from kinswarm.actors.run.config import ConfigError, load_run_config
+    from kinswarm.actors.files.config import ConfigError, load_run_config
 
     cfg = run_config(EXAMPLES / "chain4.toml", run_id="x", out=str(tmp_path))
     cfg.write(tmp_path / "c.json")

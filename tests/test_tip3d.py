@@ -11,8 +11,8 @@ from pathlib import Path
 
 import pytest
 from conftest import ROOT
+from kinswarm.actors.files.runfile import load_run
 from kinswarm.actors.run.inprocess import InProcessRun
-from kinswarm.actors.run.runfile import load_run
 from kinswarm.actors.tasks import reach3d, sensed
 from kinswarm.actors.tasks.base import StepView
 from kinswarm.protocol.spec import SpecError

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 from conftest import EXAMPLES, ROOT, run_config
-from kinswarm.actors.run.runfile import task_of
+from kinswarm.actors.files.runfile import task_of
 from kinswarm.actors.tasks import kinds
 from kinswarm.actors.tasks.reach import reach_reward
 from kinswarm.actors.tasks.track import TrackAgent

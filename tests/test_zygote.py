@@ -1,7 +1,7 @@
-"""The `process` placement's zygote (actors/run/main.py `serve_zygote`, actors/supervisor/placements.py `Zygote`): it
-loads what the actors need without a Zenoh session, forks each actor into a session of the OS of its own, reports every
-end with its code, and takes its children with it when it ends; the actors it forks share its pages, so an agent of a
-swarm costs a fraction of a fresh interpreter's memory."""
+"""The `process` placement's zygote (actors/process/main.py `serve_zygote`, actors/supervisor/placements.py `Zygote`):
+it loads what the actors need without a Zenoh session, forks each actor into a session of the OS of its own, reports
+every end with its code, and takes its children with it when it ends; the actors it forks share its pages, so an agent
+of a swarm costs a fraction of a fresh interpreter's memory."""
 
 from __future__ import annotations
 

@@ -27,9 +27,9 @@ import asyncio
 from dataclasses import dataclass, field
 from typing import Any
 
+from kinswarm.actors.files.config import RunConfig
+from kinswarm.actors.files.runfile import kind_of, learner_settings, task_of
 from kinswarm.actors.learning.kinds import JointLearner
-from kinswarm.actors.run.config import RunConfig
-from kinswarm.actors.run.runfile import kind_of, learner_settings, task_of
 from kinswarm.actors.runtime import Node
 from kinswarm.actors.step.passes import AgentPasses, TopDown, visible_actions
 from kinswarm.actors.step.swarm import agent_learner, drop_transition, learn_and_decide, observe_children, start_epoch

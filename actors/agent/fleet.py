@@ -13,8 +13,8 @@ from __future__ import annotations
 
 from typing import Any
 
+from kinswarm.actors.files.config import RunConfig
 from kinswarm.actors.learning.fleet import LearnerLane
-from kinswarm.actors.run.config import RunConfig
 from kinswarm.actors.runtime import Lane, Node
 from kinswarm.protocol.topology import Topology
 

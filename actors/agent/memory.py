@@ -1,13 +1,14 @@
 """An agent's learned state across processes: a checkpoint on the supervisor's request, a start from another run's
-checkpoints (`--from`), and a restart's resume from this run's newest good one (actors/run/checkpoint.py: the files)."""
+checkpoints (`--from`), and a restart's resume from this run's newest good one (actors/files/checkpoint.py: the
+files)."""
 
 from __future__ import annotations
 
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from kinswarm.actors.learning.kinds import DEFAULT
-from kinswarm.actors.run.checkpoint import CheckpointError, digest, load_latest, save_checkpoint
+from kinswarm.actors.files.checkpoint import CheckpointError, digest, load_latest, save_checkpoint
+from kinswarm.actors.policies.registry import DEFAULT
 from kinswarm.actors.step.learned import checkpoint_meta, learned_state, load_learned, restore_learner
 from kinswarm.protocol.messages import Checkpoint, Event, Saved
 

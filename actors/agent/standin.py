@@ -12,7 +12,8 @@ from __future__ import annotations
 from collections.abc import Iterator
 from typing import TYPE_CHECKING, Any
 
-from kinswarm.actors.runtime.wake import WakeGuard  # noqa: F401  (the agent's, kept importable from here)
+from kinswarm.actors.runtime.wake import ALIVE, WakeGuard  # noqa: F401  (the agent's, kept importable from here)
+from kinswarm.protocol.keys import GONE, UP, parse_token_change, token_change
 from kinswarm.protocol.messages import Event, Up
 
 if TYPE_CHECKING:
@@ -32,24 +33,30 @@ class StandIn:
         self.child_by_tips: dict[str, dict[frozenset[str], str]] = {}
 
     def watch(self) -> Any:
-        """Subscribe to my descendants' liveliness tokens: `+a3` / `-a3` into the mailbox, in order."""
+        """Subscribe to my descendants' liveliness tokens: each change into the mailbox (`token_change`), in order."""
         if not self.descendants:
             return None
         node, k = self.agent.node, self.agent.keys
         push = node.mailbox.push
 
         def on_token(sample: Any) -> None:  # zenoh thread
-            parsed = k.parse_alive(str(sample.key_expr))
+            key = str(sample.key_expr)
+            parsed = k.parse_alive(key)
             if parsed is not None and parsed[1] in self.descendants:
-                up = sample.kind == sample.kind.PUT
-                push("__alive__", ("+" if up else "-").encode() + parsed[1].encode())
+                sign = UP if sample.kind == sample.kind.PUT else GONE
+                push(ALIVE, token_change(sign, key).encode())
 
         return node.session.liveliness().declare_subscriber(k.alive("agent", "*"), on_token, history=True)
 
     def on_token(self, change: str) -> None:
+        """A descendant's token came or went (`watch`'s change, as the agent's WakeGuard let it through)."""
         a = self.agent
-        lost = change[1:]
-        if change[0] == "+":
+        sign, key = parse_token_change(change)
+        parsed = a.keys.parse_alive(key)
+        if parsed is None:
+            return
+        lost = parsed[1]
+        if sign == UP:
             self.down.discard(lost)
             return
         self.down.add(lost)

@@ -12,6 +12,7 @@ import secrets
 import signal
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -19,12 +20,12 @@ import zenoh
 from kinswarm.actors.cli.output import Output, OutputGone
 from kinswarm.actors.cli.parser import build_parser, joined, sets_of
 from kinswarm.actors.deploy.plan import Plan, PlanError, load_plan
+from kinswarm.actors.files.checkpoint import CheckpointError
+from kinswarm.actors.files.config import ConfigError, RunConfig, check_endpoint
+from kinswarm.actors.files.rundir import check_dir, reading_note
+from kinswarm.actors.files.runfile import load_run
 from kinswarm.actors.report import error_line
-from kinswarm.actors.run.checkpoint import CheckpointError
-from kinswarm.actors.run.config import ConfigError, RunConfig, check_endpoint
 from kinswarm.actors.run.launch import resume_swarm, run_swarm
-from kinswarm.actors.run.rundir import check_dir, reading_note
-from kinswarm.actors.run.runfile import load_run
 from kinswarm.actors.runtime import setup_logging
 from kinswarm.actors.runtime.net import zenoh_reason
 from kinswarm.actors.supervisor.result import RecordError
@@ -32,6 +33,7 @@ from kinswarm.protocol.spec import SpecError
 from kinswarm.protocol.topology import Topology
 
 log = logging.getLogger("kinswarm")
+Ran = tuple[dict, RunConfig]  # a run's summary and config: what `run`, `baseline` and a leader's `up` report
 
 
 def _plan_run(plan: Plan, given: Path | None, sets: list[str | tuple[str, str]] = (), **kw: Any) -> RunConfig:
@@ -100,7 +102,7 @@ _RESUME_TAKES = {"resume", "listen", "no_progress", "view", "log_level", "comman
 
 def _resumed(a: argparse.Namespace) -> RunConfig:
     """`kinswarm run --resume RUN-DIR`: the run as config.json resolved it, or one line naming what is wrong."""
-    from kinswarm.actors.run.resume import check_resume
+    from kinswarm.actors.files.resume import check_resume
 
     if a.run_file is not None:
         raise ConfigError(f"--resume {a.resume}: continues the run as it was resolved: give no RUN-FILE ({a.run_file})")
@@ -216,8 +218,77 @@ def os_error(e: OSError) -> str:
     return f"{where}: {e.strerror or e}" if where else str(e.strerror or e)
 
 
+def _report(a: argparse.Namespace, argv: list[str]) -> int:
+    from kinswarm.actors.report import torn_rows, write_plots
+
+    _note(reading_note(a.run_dir, "report"))
+    for line in torn_rows(a.run_dir):
+        print(f"kinswarm: {line}", file=sys.stderr)
+    for path in write_plots(a.run_dir, log=a.log):
+        print(path)
+    return 0
+
+
+def _animate(a: argparse.Namespace, argv: list[str]) -> int:
+    from kinswarm.actors.report.animate import write_animation
+
+    _note(reading_note(a.run_dir, "animation"))
+    print(write_animation(a.run_dir, _epoch_list(a.epochs), a.out))
+    return 0
+
+
+def _host_up(a: argparse.Namespace, argv: list[str]) -> int | Ran:
+    """`kinswarm up`: the leader's run, reported as `run`'s; another host's share, one line (the leader has the
+    results)."""
+    summary, cfg = _up(a)
+    if "host" not in summary:
+        return summary, cfg
+    if summary.get("error"):
+        print(f"kinswarm: host {summary['host']} failed: {summary['error']}", file=sys.stderr)
+        return 1
+    print(f"kinswarm: host {summary['host']} done ({cfg.run_id})")
+    return interrupted_code(by=summary.get("interrupted_by", "")) if summary.get("interrupted") else 0
+
+
+def _train(a: argparse.Namespace, argv: list[str]) -> Ran:
+    """`kinswarm run` (or `run --resume RUN-DIR`) and `kinswarm baseline`: the run, every input checked first."""
+    if getattr(a, "resume", None) is not None:
+        cfg = _resumed(a)
+        if a.view:
+            from kinswarm.actors.report.recording import check_view
+
+            check_view(a.view)
+        progress = not a.no_progress and sys.stderr.isatty()
+        return resume_swarm(cfg, cfg.topo(), progress=progress, view=a.view), cfg
+    if a.run_file is None:
+        raise ConfigError("RUN-FILE: missing: give a run file (e.g. examples/chain4.toml), or --resume RUN-DIR")
+    cfg, topo = _resolve(a, None if a.command == "run" else a.law)
+    if a.view:  # the extra is there and the target makes sense, or one line before anything is spawned
+        from kinswarm.actors.report.recording import check_view
+
+        check_view(a.view)
+    return run_swarm(cfg, topo, progress=not a.no_progress and sys.stderr.isatty(), view=a.view), cfg
+
+
+#: each command's work: the parsed arguments and the command line in; an exit code, or a run to report, out
+COMMANDS: dict[str, Callable[[argparse.Namespace, list[str]], int | Ran]] = {
+    "run": _train,
+    "baseline": _train,
+    "report": _report,
+    "animate": _animate,
+    "view": lambda a, argv: _view(a),
+    "fault": lambda a, argv: _control(a),
+    "status": lambda a, argv: _control(a),
+    "experiment": _experiment,
+    "up": _host_up,
+    "down": lambda a, argv: _deploy_tool(a),
+    "router": lambda a, argv: _deploy_tool(a),
+    "certs": lambda a, argv: _deploy_tool(a),
+}
+
+
 def _main(argv: list[str] | None) -> int:
-    from kinswarm.actors.cli.control import ControlError
+    from kinswarm.actors.control.client import ControlError
     from kinswarm.actors.deploy.hosts import DeployError
     from kinswarm.protocol.scenario import ScenarioError
 
@@ -226,54 +297,7 @@ def _main(argv: list[str] | None) -> int:
     setup_logging(getattr(a, "log_level", "WARNING"))
     sys.setswitchinterval(0.0005)
     try:
-        if a.command == "report":
-            from kinswarm.actors.report import torn_rows, write_plots
-
-            _note(reading_note(a.run_dir, "report"))
-            for line in torn_rows(a.run_dir):
-                print(f"kinswarm: {line}", file=sys.stderr)
-            for path in write_plots(a.run_dir, log=a.log):
-                print(path)
-            return 0
-        if a.command == "animate":
-            from kinswarm.actors.report.animate import write_animation
-
-            _note(reading_note(a.run_dir, "animation"))
-            print(write_animation(a.run_dir, _epoch_list(a.epochs), a.out))
-            return 0
-        if a.command == "view":
-            return _view(a)
-        if a.command in ("fault", "status"):
-            return _control(a)
-        if a.command == "experiment":
-            return _experiment(a, argv)
-        if a.command in ("down", "router", "certs"):
-            return _deploy_tool(a)
-        if a.command == "up":
-            summary, cfg = _up(a)
-            if "host" in summary:  # another host's share: the leader has the results
-                if summary.get("error"):
-                    print(f"kinswarm: host {summary['host']} failed: {summary['error']}", file=sys.stderr)
-                    return 1
-                print(f"kinswarm: host {summary['host']} done ({cfg.run_id})")
-                return interrupted_code(by=summary.get("interrupted_by", "")) if summary.get("interrupted") else 0
-        elif getattr(a, "resume", None) is not None:
-            cfg = _resumed(a)
-            if a.view:
-                from kinswarm.actors.report.recording import check_view
-
-                check_view(a.view)
-            progress = not a.no_progress and sys.stderr.isatty()
-            summary = resume_swarm(cfg, cfg.topo(), progress=progress, view=a.view)
-        else:
-            if a.run_file is None:
-                raise ConfigError("RUN-FILE: missing: give a run file (e.g. examples/chain4.toml), or --resume RUN-DIR")
-            cfg, topo = _resolve(a, None if a.command == "run" else a.law)
-            if a.view:  # the extra is there and the target makes sense, or one line before anything is spawned
-                from kinswarm.actors.report.recording import check_view
-
-                check_view(a.view)
-            summary = run_swarm(cfg, topo, progress=not a.no_progress and sys.stderr.isatty(), view=a.view)
+        done = COMMANDS[a.command](a, argv)
     except (SpecError, ConfigError, CheckpointError, ScenarioError, ControlError, ValueError, DeployError) as e:
         print(f"kinswarm: error: {e}", file=sys.stderr)
         return 2
@@ -289,6 +313,13 @@ def _main(argv: list[str] | None) -> int:
     except KeyboardInterrupt as e:
         print("kinswarm: interrupted", file=sys.stderr)
         return interrupted_code(e)
+    if isinstance(done, int):
+        return done
+    return _reported(*done)
+
+
+def _reported(summary: dict, cfg: RunConfig) -> int:
+    """A run's last words: its final error, its lost tokens, how it failed; the exit code."""
     fe = summary["final_error"]
     if fe:
         last = fe[-20:]

@@ -9,7 +9,7 @@ import json
 from pathlib import Path
 
 from kinswarm.actors.cli.control import add_control_commands, joined  # noqa: F401  (joined: the CLI's, kept here)
-from kinswarm.actors.run.config import DEFAULT_LISTEN, PLACEMENTS
+from kinswarm.actors.files.config import DEFAULT_LISTEN, PLACEMENTS
 from kinswarm.actors.runtime import LEASE_MS
 
 

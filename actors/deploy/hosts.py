@@ -19,11 +19,11 @@ import time
 from pathlib import Path
 
 from kinswarm.actors.deploy.plan import Plan, PlanError, load_credentials
-from kinswarm.actors.run.config import RunConfig, config_from_json
-from kinswarm.actors.run.rundir import check_out
+from kinswarm.actors.files.config import RunConfig, config_from_json
+from kinswarm.actors.files.rundir import check_out
 from kinswarm.actors.runtime import NetSpec, Node, open_session
 from kinswarm.protocol import codec
-from kinswarm.protocol.keys import Keys
+from kinswarm.protocol.keys import Keys, every_run, run_of, shape
 from kinswarm.protocol.messages import Setup, Stop
 from kinswarm.protocol.topology import Topology
 
@@ -57,11 +57,9 @@ def fetch_setup(plan: Plan, host: str, wait_s: float) -> tuple[str, Setup]:
     told = False
     try:
         while True:
-            for reply in session.get(f"ks/*/ctl/setup/{plan.name}", timeout=2.0):
-                if reply.ok is None:
+            for reply in session.get(every_run(shape("setup", plan.name)), timeout=2.0):
+                if reply.ok is None or (run := run_of(str(reply.ok.key_expr))) is None:
                     continue
-                key = str(reply.ok.key_expr)
-                run = key.split("/")[1]
                 try:
                     return run, codec.decode(reply.ok.payload.to_bytes(), Setup, run, plan.digest)
                 except codec.DecodeError as e:

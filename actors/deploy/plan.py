@@ -35,9 +35,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from kinswarm.actors.run.config import AUTO_LISTEN, LEASE_RANGE_MS
+from kinswarm.actors.files.config import AUTO_LISTEN, LEASE_RANGE_MS
 from kinswarm.actors.runtime import LEASE_MS, NetSpec
-from kinswarm.protocol.keys import agent_denied, check_id, sim_denied
+from kinswarm.protocol.keys import agent_denied, check_id, every_run, sim_denied
 from kinswarm.protocol.topology import Topology
 
 MODES = ("peer", "client")
@@ -204,17 +204,17 @@ def acl(plan: Plan, topo: Topology) -> dict[str, Any]:
                 "messages": ["put", "delete"],
                 "flows": ["ingress"],
                 "permission": "deny",
-                "key_exprs": [f"ks/*/{k}" for k in keys],
+                "key_exprs": [every_run(k) for k in keys],
             }
         )
         subjects.append({"id": who, by: [who]})
         policies.append({"id": f"policy-{who}", "rules": [rid], "subjects": [who]})
 
-    supervisor_only = ["ctl/**", "fault/**"]
-    # the sim asks for a scenario's process and message faults on fault/request, as a user's `kinswarm fault` does
-    deny("sim", ["ctl/**", *sim_denied()])  # the step keys: declared once, with who publishes each (protocol/keys.py)
+    # every key is declared once with who publishes it (protocol/keys.py): the sim and each agent are denied the rest
+    # (the sim may ask for a scenario's faults on fault/request, as a user's `kinswarm fault` does; no agent may)
+    deny("sim", list(sim_denied()))
     for a in topo.order:
-        deny(f"agent-{a}", [*supervisor_only, *agent_denied(topo, a)])
+        deny(f"agent-{a}", list(agent_denied(topo, a)))
     return {"enabled": True, "default_permission": "allow", "rules": rules, "subjects": subjects, "policies": policies}
 
 

@@ -19,10 +19,11 @@ from typing import Any
 
 import numpy as np
 import tomli_w
-from kinswarm.actors.learning.kinds import JointLearner, LearnerKind
+from kinswarm.actors.files.config import RunConfig
+from kinswarm.actors.files.runfile import load_run
+from kinswarm.actors.learning.kinds import JointLearner
 from kinswarm.actors.learning.settings import LearnerSettings
-from kinswarm.actors.run.config import RunConfig
-from kinswarm.actors.run.runfile import load_run
+from kinswarm.actors.policies.registry import LearnerKind
 from kinswarm.actors.step.epoch import epoch_start
 from kinswarm.actors.step.passes import Decision, TopDown
 from kinswarm.actors.step.swarm import Swarm

@@ -1,6 +1,6 @@
 """The learning core: fuzzy Q-learning with joint action selection (paper §4), in numpy, its per-step arithmetic
 compiled with numba (kernels.py); what an agent observes (observation.py); the learner kinds a run chooses from and
-the protocol they meet (kinds.py: fuzzy, independent, tabular).
+the protocol they meet (kinds.py; the registry a run chooses them from: actors/policies/registry.py).
 
 The parts that run compiled code (FuzzyPartition, SparseFuzzyQ and the learners) are imported when first asked for,
 so that a process that only reads settings or states (the supervisor, the command line) does not load numba
@@ -9,7 +9,7 @@ so that a process that only reads settings or states (the supervisor, the comman
 from importlib import import_module
 
 from .jasm import boltzmann, expected_values, explore_probability, probabilities, select_action, temperature
-from .kinds import JointLearner, kinds, learner_kind
+from .kinds import JointLearner
 from .observation import Observation
 from .settings import STATE_NAMES, LearnerSettings, StateVariable
 from .state import agent_state, goal_along_motion, joint_frame, link_end
@@ -47,8 +47,6 @@ __all__ = [
     "explore_probability",
     "goal_along_motion",
     "joint_frame",
-    "kinds",
-    "learner_kind",
     "link_end",
     "memberships_1d",
     "probabilities",

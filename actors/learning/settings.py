@@ -4,7 +4,7 @@ Two kinds of field, kept in one flat table because that is what the run file's [
 - the observation's (OBSERVATION_FIELDS: state, g3, ranges, extra_state): what S_i holds, the task's to give
   (observation.py; `settings.observation` is that part alone);
 - the learner's own: the fuzzy grid over the observation (n_sets, slope, top_k) and the learning (gamma, lr*,
-  T_max, s, epsilon*, count_*). Which of them a learner kind takes: actors/learning/kinds.py.
+  T_max, s, epsilon*, count_*). Which of them a learner kind takes: actors/policies/registry.py.
 
 What a task adds (the corridor's clearance and collision variables, a grasp finger's fine steps, reward constants,
 reflexes such as the shield or the tabu) lives with the task (actors/tasks/); the task hands its state variables to

@@ -177,7 +177,7 @@ def build(
     index: int,
     options: Mapping[str, Any],
 ) -> OnnxPolicy:
-    """The kind's builder (actors/learning/kinds.py): the agent's file, its observation's bounds, its index."""
+    """The kind's builder (actors/policies/registry.py): the agent's file, its observation's bounds, its index."""
     return OnnxPolicy(policy_file(options.get("policy"), agent), settings.observation.bounds, index)
 
 

@@ -19,10 +19,10 @@ import os
 from pathlib import Path
 from typing import Any
 
+from kinswarm.actors.files.config import RunConfig, load_run_config
 from kinswarm.actors.report.arm import arm_axes, arm_points, draw_axes, floor_shadow, joint_points
 from kinswarm.actors.report.figure import save_figure
 from kinswarm.actors.report.timeline import Span, active_at_end, fault_spans, label_groups, one_per_command
-from kinswarm.actors.run.config import RunConfig, load_run_config
 from kinswarm.protocol import frames
 from kinswarm.protocol.topology import Topology
 
@@ -326,7 +326,7 @@ def summarize(run_dir: Path, extra: dict[str, Any]) -> dict[str, Any]:
 
 def _goal(cfg: RunConfig, rows: list[dict[str, Any]]) -> tuple[float, float]:
     """The goal of the run's last epoch (the task's goal schedule)."""
-    from kinswarm.actors.run.runfile import task_of
+    from kinswarm.actors.files.runfile import task_of
 
     epoch = rows[-1]["epoch"] if rows else 0
     return task_of(cfg).goal(epoch, cfg.steps)[0]
@@ -334,7 +334,7 @@ def _goal(cfg: RunConfig, rows: list[dict[str, Any]]) -> tuple[float, float]:
 
 def cfg_start(cfg: RunConfig, epoch: int, topo: Topology) -> dict[str, float]:
     """The joint angles epoch `epoch` started from: the task's start pose, else the robot's home."""
-    from kinswarm.actors.run.runfile import task_of
+    from kinswarm.actors.files.runfile import task_of
 
     return task_of(cfg).start(epoch) or topo.initial_angles()
 

@@ -9,10 +9,10 @@ import math
 from pathlib import Path
 from typing import Any
 
+from kinswarm.actors.files.config import ConfigError, load_run_config
 from kinswarm.actors.report import error_line, events_by_epoch, read_events, read_jsonl, read_metrics
 from kinswarm.actors.report.arm import arm_axes, arm_points, joint_points
 from kinswarm.actors.report.timeline import fault_spans, faulty_at, label_groups
-from kinswarm.actors.run.config import ConfigError, load_run_config
 
 MAX_EPOCHS = 6  # the first, the last, and the latest epochs with events up to this many
 FRAMES_PER_EPOCH = 60  # a 500-step epoch is drawn every 9th step
@@ -70,7 +70,7 @@ def write_animation(
         raise ConfigError(f"{run_dir}: no poses for epoch(s) {missing}; the run recorded {have[0]}-{have[-1]}")
     spans = fault_spans(events)
     dof = topo.dof_agents
-    from kinswarm.actors.run.runfile import task_of
+    from kinswarm.actors.files.runfile import task_of
 
     task = task_of(cfg)
     start = {a: math.degrees(v) for a, v in topo.initial_angles().items()}

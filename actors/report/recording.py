@@ -21,10 +21,10 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from kinswarm.actors.files.config import ConfigError, RunConfig, load_run_config
 from kinswarm.actors.report import events_by_epoch, read_events, read_jsonl, read_metrics
 from kinswarm.actors.report.arm import arm_points, joint_points
 from kinswarm.actors.report.timeline import fault_spans, faulty_at
-from kinswarm.actors.run.config import ConfigError, RunConfig, load_run_config
 
 log = logging.getLogger("kinswarm.view")
 APP = "kinswarm"
@@ -59,7 +59,7 @@ class Recorder:
     def __init__(self, cfg: RunConfig, stream: Any) -> None:
         self.rr = rerun_module()
         self.cfg, self.topo, self.stream = cfg, cfg.topo(), stream
-        from kinswarm.actors.run.runfile import task_of
+        from kinswarm.actors.files.runfile import task_of
 
         self.task = task_of(cfg)
         self.dof = self.topo.dof_agents

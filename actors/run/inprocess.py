@@ -5,7 +5,7 @@ robot moves. The driver is the one the agent and simulator actors take their pie
 agent, so a run gives the same `final_error` lists, metrics and records as the other placements for the same seed;
 it is the fastest way to run an experiment that needs no messages.
 
-What has no meaning without processes and messages is refused before the run starts (actors/run/runfile.py): process
+What has no meaning without processes and messages is refused before the run starts (actors/files/runfile.py): process
 and link faults (kill, freeze, drop, ...), fleets, the model-based controllers and several hosts.
 """
 
@@ -17,8 +17,8 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from kinswarm.actors.run.checkpoint import save_checkpoint
-from kinswarm.actors.run.config import RunConfig
+from kinswarm.actors.files.checkpoint import save_checkpoint
+from kinswarm.actors.files.config import RunConfig
 from kinswarm.actors.step.epoch import checkpoint_due, epoch_start
 from kinswarm.actors.step.learned import checkpoint_meta, learned_state, restore_learner
 from kinswarm.actors.step.swarm import Swarm, actions, commands

@@ -17,10 +17,10 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from kinswarm.actors.deploy.plan import Plan, PlanError, local_plan
-from kinswarm.actors.run.config import AUTO_LISTEN, ENDPOINT, ConfigError, RunConfig
-from kinswarm.actors.run.resolved import write_resolved
-from kinswarm.actors.run.resume import Resume, prepare_resume, settle
-from kinswarm.actors.run.rundir import Claim, claim, reclaim
+from kinswarm.actors.files.config import AUTO_LISTEN, ENDPOINT, ConfigError, RunConfig
+from kinswarm.actors.files.resolved import write_resolved
+from kinswarm.actors.files.resume import Resume, prepare_resume, settle
+from kinswarm.actors.files.rundir import Claim, claim, reclaim
 from kinswarm.actors.runtime import NetSpec, open_session
 from kinswarm.actors.runtime.hub import Hub
 from kinswarm.actors.runtime.net import zenoh_reason

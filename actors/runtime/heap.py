@@ -7,7 +7,7 @@ long-lived object in each full collection: measured on a 4-agent chain held in o
 length in whichever step handler it fell. `freeze_setup()` collects the setup's garbage once and moves what is left
 out of the collector's view (gc.freeze): later collections walk only what the run itself keeps. Objects are freed by
 reference counting as before; what the setup built in cycles stays until the process ends, which for an actor
-process is what it would anyway. Only for a process that runs one actor until it leaves (actors/run/main.py): a
+process is what it would anyway. Only for a process that runs one actor until it leaves (actors/process/main.py): a
 process that runs many swarms one after another (a test session, the `single` placement inside a notebook) would
 keep each one's cycles.
 """

@@ -79,8 +79,8 @@ class Node(LinkFaults, Gathering):
         self._rejected_keys: set[str] = set()  # keys whose first rejection was logged (at most LOGGED_KEYS)
         # link faults: empty on the fast path (the one check); touched only on the loop
         self._link_faults: dict[str, LinkFault] = {}
-        self._step_prefixes = (f"{keys.root}/sim/", f"{keys.root}/a/")
-        self._periodic_prefixes = tuple(f"{keys.root}/{k}" for k in ("ctl/host/", "metrics/status", "metrics/joints"))
+        self._step_prefixes = keys.step_prefixes
+        self._periodic_prefixes = (keys.prefix("host"), keys.metrics("status"), keys.metrics("joints"))
         self.fault_rng = random.Random(f"link-faults/{ident}")  # seeded from the ident: faulted runs are reproducible
         self.link_counts: dict[str, int] = dict.fromkeys(LINK_COUNTS, 0)  # what the faults did, for reports
         self.on_fault_expired: Callable[[str], None] | None = None  # told the description when one expires

@@ -15,10 +15,12 @@ import time
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
+from kinswarm.protocol.keys import GONE, HELD, UP, parse_token_change, token_change
+
 if TYPE_CHECKING:
     from .node import Node
 
-ALIVE = "__alive__"  # the mailbox key a held loss comes back on, as b"?" + the peer's name
+ALIVE = "__alive__"  # the mailbox key a held loss comes back on: its token's change, HELD (protocol/keys.py)
 
 
 class WakeGuard:
@@ -36,7 +38,7 @@ class WakeGuard:
         self.due = math.inf  # when the ticker should next run (none before watch() or expect())
         self.woke = -math.inf  # when the ticker last found itself late by more than half a lease
         self.slept = 0.0  # how long this process did not run, at that wake
-        self.held: set[str] = set()  # peers whose token went as this process woke, not back yet
+        self.held: set[str] = set()  # the tokens (their keys) that went as this process woke, not back yet
         self._later = later
 
     async def watch(self) -> None:
@@ -63,26 +65,26 @@ class WakeGuard:
         return now - self.due > self.lease / 2 or now - self.woke < self.lease
 
     def token(self, change: str) -> str | None:
-        """The change to act on ('+a5', '-a5'), or None while a loss is held. '?a5': a held loss's lease is up."""
-        sign, peer = change[0], change[1:]
-        if sign == "+":
+        """The change to act on (a token came, UP, or went, GONE: protocol/keys.py `token_change`), or None while a
+        loss is held. HELD: a held loss's lease is up."""
+        sign, peer = parse_token_change(change)
+        if sign == UP:
             self.held.discard(peer)
             return change
-        if sign == "?":
+        if sign == HELD:
             if peer not in self.held:
                 return None  # it came back
             self.held.discard(peer)
-            return "-" + peer
+            return token_change(GONE, peer)
         if not self.just_woke():
             return change
         if peer not in self.held:
             self.held.add(peer)
-            self.node.log.info("%s's token went as this process woke from a stall: a loss if still gone in %.1f s",
+            self.node.log.info("token %s went as this process woke from a stall: a loss if still gone in %.1f s",
                                peer, self.lease)  # fmt: skip
+            again = token_change(HELD, peer).encode()
             if self._later is not None:
-                self._later(self.lease, b"?" + peer.encode())
+                self._later(self.lease, again)
             else:
-                asyncio.get_running_loop().call_later(
-                    self.lease, self.node.mailbox.push_local, ALIVE, b"?" + peer.encode()
-                )
+                asyncio.get_running_loop().call_later(self.lease, self.node.mailbox.push_local, ALIVE, again)
         return None

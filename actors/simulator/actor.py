@@ -20,11 +20,12 @@ import time
 from typing import Any
 
 import zenoh
-from kinswarm.actors.run.config import RunConfig
+from kinswarm.actors.files.config import RunConfig
 from kinswarm.actors.runtime import Node
 from kinswarm.actors.step.swarm import faults_due
 from kinswarm.protocol.clock import ClockWriter, clock_path
 from kinswarm.protocol.faults import JOINT_FAULTS, describe
+from kinswarm.protocol.keys import GONE, UP, parse_token_change, token_change
 from kinswarm.protocol.messages import (
     Bye,
     Cmd,
@@ -55,11 +56,10 @@ class SimActor:
         self.cfg, self.topo, self.node, self.keys = cfg, topo, node, node.keys
         # Read before the world exists: a bad file fails the actor without leaking a PyBullet client.
         self.scenario = load_scenario(cfg.scenario, topo) if cfg.scenario else None
-        self.body = Robot(topo, cfg.scene_spec, cfg.action_rad, cfg.seed, self.scenario, self._world(topo))
-        self.world, self.scene, self.faults = self.body.world, self.body.scene, self.body.faults
-        self.robot = (
-            0  # which robot of a fleet this is (actors/simulator/fleet.py): a joint fault for another is not its
-        )
+        self.robot = Robot(topo, cfg.scene_spec, cfg.action_rad, cfg.seed, self.scenario, self._world(topo))
+        self.world, self.scene, self.faults = self.robot.world, self.robot.scene, self.robot.faults
+        # which robot of a fleet this is (actors/simulator/fleet.py): a joint fault for another is not its
+        self.robot_index = 0
         self.dof = topo.dof_agents
         self.dof_set = frozenset(self.dof)
         self._obs_first = [a for a in self.dof if a == topo.root]  # the root's reading goes out with the task
@@ -91,13 +91,13 @@ class SimActor:
         self.heard: dict[str, float] = {}
         self.held = False
         self._paused = False
-        self._host_prefix = self.keys.host("")
+        self._host_prefix = self.keys.prefix("host")
         self._status: asyncio.TimerHandle | None = None
-        self._cmd_prefix = self.keys.cmd_all[:-1]
+        self._cmd_prefix = self.keys.prefix("cmd")
         # (epoch, step) for the supervisor's events on this host (protocol/clock.py); the actor that runs has one
         self.clock: ClockWriter | None = None
         if self.scenario is not None:
-            late = [s for s in self.body.due_steps if s >= cfg.steps]
+            late = [s for s in self.robot.due_steps if s >= cfg.steps]
             if late:
                 node.log.warning(
                     "scenario %s: steps %s are beyond --steps %d, never reached", cfg.scenario, late, cfg.steps
@@ -123,9 +123,9 @@ class SimActor:
         self.clock = ClockWriter(clock_path(self.cfg.out))
 
         def on_alive(sample: Any) -> None:  # zenoh thread
-            parsed = k.parse_alive(str(sample.key_expr))
-            if parsed is not None:
-                push(ALIVE, (b"+" if sample.kind == zenoh.SampleKind.PUT else b"-") + parsed[1].encode())
+            key = str(sample.key_expr)
+            if k.parse_alive(key) is not None:
+                push(ALIVE, token_change(UP if sample.kind == zenoh.SampleKind.PUT else GONE, key).encode())
 
         watch = node.session.liveliness().declare_subscriber(k.alive("agent", "*"), on_alive, history=True)
         for key in (k.metrics("event"), k.metrics("joints"), k.rep(node.role, node.ident)):
@@ -150,7 +150,7 @@ class SimActor:
                 if timer is not None:
                     timer.cancel()
             watch.undeclare()
-            self.body.close()
+            self.robot.close()
             self.clock.close()
 
     def handle(self, key: str, payload: bytes) -> bool:
@@ -161,7 +161,7 @@ class SimActor:
         elif key == DEADLINE:
             self._on_watchdog()
         elif key == ALIVE:
-            self._on_alive(payload[1:].decode(), payload[:1] == b"+")
+            self._on_token(payload)
         elif key == STATUS:
             self._on_status()
         elif key == k.ctl("fault"):
@@ -220,7 +220,7 @@ class SimActor:
                 self.node.log.info("epoch %d's start came again: its EpochDone goes out again", e.epoch)
                 self.node.send(self.keys.metrics("epoch"), done)
             return
-        # The first start may be any epoch: a resumed run goes on after its checkpoint (actors/run/resume.py)
+        # The first start may be any epoch: a resumed run goes on after its checkpoint (actors/files/resume.py)
         if e.epoch != self.last_epoch + 1 and not (self.last_epoch < 0 <= e.epoch < self.cfg.epochs):
             self.node.log.warning("ignored EpochStart %d: the next epoch is %d", e.epoch, self.last_epoch + 1)
             return
@@ -230,7 +230,7 @@ class SimActor:
         first = self.last_epoch < 0  # (a resumed run's first epoch has no pose of the last one to keep)
         self.epoch = e
         self.last_epoch = e.epoch
-        warning = self.body.start(e.goal, e.path, e.start, keep_pose=self.cfg.successive and not first)
+        warning = self.robot.start(e.goal, e.path, e.start, keep_pose=self.cfg.successive and not first)
         if warning:  # a start pose this robot cannot take: its home instead, said once
             self.node.log.warning("epoch %d: %s", e.epoch, warning)
         self.missed = 0
@@ -255,7 +255,19 @@ class SimActor:
 
     def _on_cmd_sample(self, key: str, payload: bytes) -> None:  # Zenoh's thread (inline) or the loop
         if (m := self.node.decode(key, payload, Cmd)) is not None:
-            self._on_cmd(self.keys.last_chunk(key), m)
+            self._on_cmd(self._agent_of(key), m)
+
+    def _agent_of(self, key: str) -> str:
+        """The agent a cmd key names (parsed: protocol/keys.py)."""
+        step = self.keys.parse_step(key)
+        assert step is not None  # a key of this run's sim/cmd/*: Zenoh delivers only what it subscribed to
+        return step.agent
+
+    def _on_token(self, payload: bytes) -> None:
+        """An agent's liveliness token came or went."""
+        sign, key = parse_token_change(payload.decode())
+        if (actor := self.keys.parse_alive(key)) is not None:
+            self._on_alive(actor[1], sign == UP)
 
     def _on_cmd(self, agent: str, m: Cmd) -> None:
         e = self.epoch
@@ -265,7 +277,7 @@ class SimActor:
             self.node.log.warning("rejected cmd for %r: not a joint of %s", agent, self.topo.name)
             return
         # Counted even for a locked joint (the step must not wait); _advance decides what moves.
-        self.cmds[agent] = self.body.clip(m.delta)
+        self.cmds[agent] = self.robot.clip(m.delta)
         self.late.pop(agent, None)
         self.waiting.discard(agent)
         if not self.waiting:
@@ -338,7 +350,7 @@ class SimActor:
                 epoch=epoch,
                 step=step,
                 q=self.world.joint_positions(),
-                delta=dict(self.body.applied),
+                delta=dict(self.robot.applied),
                 faults=self.faults.summary(),
                 late={a: n for a, n in self.late.items() if a not in self.down},
             ),
@@ -349,9 +361,9 @@ class SimActor:
     def apply_fault(self, f: Fault) -> None:
         """Apply a joint fault now (it takes effect at the current step's increments); others are ignored,
         they are for the supervisor and the runtimes."""
-        if f.fault not in JOINT_FAULTS or f.robot not in (None, self.robot):
+        if f.fault not in JOINT_FAULTS or f.robot not in (None, self.robot_index):
             return
-        events, refused = self.body.apply_fault(f)
+        events, refused = self.robot.apply_fault(f)
         for problem in refused:
             self.node.log.warning(problem)
         if self.epoch is None and self.last_epoch < 0:
@@ -373,7 +385,7 @@ class SimActor:
     def _apply_due(self, epoch: int) -> None:
         """The scenario's entries due at this step: joint faults applied here (as every placement applies them: the
         driver's `faults_due`), the others requested from the supervisor."""
-        for f in faults_due(self.body, epoch, self.apply_fault):
+        for f in faults_due(self.robot, epoch, self.apply_fault):
             self.node.log.info("scenario: requesting %s (%s)", describe(f), f.id)
             self.node.send(self.keys.fault("request"), f)
             # on the timeline at its exact step: the supervisor that applies it knows the step only roughly
@@ -383,13 +395,13 @@ class SimActor:
     def _publish_step(self) -> None:
         e = self.epoch
         assert e is not None
-        body, k, send = self.body, self.keys, self.node.send
+        robot, k, send = self.robot, self.keys, self.node.send
         if self.scenario is not None:
             self._apply_due(e.epoch)
-        q, sense, task = body.observations(e.epoch)  # what the encoders read and the agents sense
+        q, sense, task = robot.observations(e.epoch)  # what the encoders read and the agents sense
         # The root begins once it holds both the task and its own reading: put them back to back, so they
         # reach it in one burst (one wake-up); the others' readings are needed only a hop later.
-        t = body.t
+        t = robot.t
         if self.clock is not None:
             self.clock.set(e.epoch, t)
         for a in self._obs_first:
@@ -407,11 +419,11 @@ class SimActor:
     def _advance(self) -> None:
         e = self.epoch
         assert e is not None
-        for name, target, detail in self.body.move(self.cmds):
+        for name, target, detail in self.robot.move(self.cmds):
             self._event(name, target, detail)
         self.longest_step = max(self.longest_step, time.perf_counter() - self.step_started)
         self.total_steps += 1
-        if self.body.t < e.steps:
+        if self.robot.t < e.steps:
             if self.paused:
                 self.held = True
                 return
@@ -419,8 +431,8 @@ class SimActor:
             return
         seconds = time.perf_counter() - self.started
         if self.clock is not None:
-            self.clock.set(e.epoch, self.body.t)
-        self._done(self.body.done(e.epoch, e.steps, self.missed, seconds, self.longest_step))
+            self.clock.set(e.epoch, self.robot.t)
+        self._done(self.robot.done(e.epoch, e.steps, self.missed, seconds, self.longest_step))
         self.epoch = None
 
     def _done(self, m: EpochDone) -> None:
@@ -435,13 +447,13 @@ class SimActor:
     @property
     def applied(self) -> dict[str, float]:
         """The increments the last step applied, by joint."""
-        return self.body.applied
+        return self.robot.applied
 
     @property
     def t(self) -> int:
         """The running step of the epoch."""
-        return self.body.t
+        return self.robot.t
 
     def goal(self) -> tuple[float, ...]:
         """The goal of the running step."""
-        return self.body.goal()
+        return self.robot.goal()

@@ -8,7 +8,7 @@ robot's point or pose (sim/baseline.py); every law moves as the agents do (basel
 
 from __future__ import annotations
 
-from kinswarm.actors.run.config import RunConfig
+from kinswarm.actors.files.config import RunConfig
 from kinswarm.actors.runtime import Node
 from kinswarm.protocol.messages import Bye, Cmd, Obs, Stop, Task
 from kinswarm.protocol.topology import Topology
@@ -47,9 +47,9 @@ class BaselineController:
                 if node.decode(key, payload, Stop) is not None:  # goodbye, as every actor says it: the supervisor
                     node.send(k.rep("bye", node.ident), Bye(steps=self.steps, rejected=node.rejected))  # waits for it
                     return
-            elif "/sim/obs/" in key:
+            elif (step := k.parse_step(key)) is not None and step.kind == "obs":
                 if (o := node.decode(key, payload, Obs)) is not None:
-                    self.q.setdefault((o.epoch, o.step), {})[k.last_chunk(key)] = o.q
+                    self.q.setdefault((o.epoch, o.step), {})[step.agent] = o.q
                     self._try((o.epoch, o.step))
 
     def _try(self, step: tuple[int, int]) -> None:

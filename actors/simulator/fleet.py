@@ -15,7 +15,7 @@ import asyncio
 import dataclasses
 from typing import Any
 
-from kinswarm.actors.run.config import RunConfig
+from kinswarm.actors.files.config import RunConfig
 from kinswarm.actors.runtime import Lane, Node
 from kinswarm.protocol.faults import JOINT_FAULTS, expand_targets
 from kinswarm.protocol.messages import Cmd, EpochDone, EpochStart, Event, Fault
@@ -64,7 +64,7 @@ class FleetSim(SimActor):
                 self._on_cmd_sample(key, payload)
             elif key == ALIVE:
                 for lane in self.lanes:
-                    lane._on_alive(payload[1:].decode(), payload[:1] == b"+")
+                    lane._on_token(payload)
             elif key == k.ctl("fault"):
                 if (f := node.decode(key, payload, Fault)) is not None:
                     for lane in self.lanes:
@@ -84,7 +84,7 @@ class FleetSim(SimActor):
     def _on_cmd_sample(self, key: str, payload: Any) -> None:  # Zenoh's thread (inline) or the loop
         node = self.fleet_node
         if (batch := node.decode_batch(key, payload, Cmd)) is not None:
-            agent, lanes = self.keys.last_chunk(key), self.lanes
+            agent, lanes = self._agent_of(key), self.lanes
             with node.gathering():
                 for robot, m in zip(batch.robots, batch.items, strict=True):
                     lanes[robot]._on_cmd(agent, m)
@@ -124,7 +124,7 @@ class _SimLane(SimActor):
     def __init__(self, cfg: RunConfig, topo: Topology, node: Node, fleet: FleetSim) -> None:
         self.fleet = fleet
         super().__init__(cfg, topo, node)
-        self.robot = node.robot  # type: ignore[attr-defined]
+        self.robot_index = node.robot  # type: ignore[attr-defined]
         self._own: set[str] = set()  # joints with a fault on this robot alone: their events are this lane's to send
 
     def _world(self, topo: Topology) -> World:
@@ -136,7 +136,7 @@ class _SimLane(SimActor):
         return World(topo, beside=self.fleet.lanes[robot - robot % PER_CLIENT].world)
 
     def apply_fault(self, f: Fault) -> None:
-        if f.robot == self.robot and f.fault in JOINT_FAULTS:
+        if f.robot == self.robot_index and f.fault in JOINT_FAULTS:
             targets = expand_targets(f.targets, list(self.dof))
             self._own.update(targets)
             super().apply_fault(f)

@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING
 from kinswarm.protocol.messages import EpochStart
 
 if TYPE_CHECKING:
-    from kinswarm.actors.run.config import RunConfig
+    from kinswarm.actors.files.config import RunConfig
     from kinswarm.actors.tasks.base import TaskDef
 
 

@@ -1,6 +1,6 @@
 """A learner's learned state as a checkpoint holds it: the arrays and where its random generator is
 (`learned_state`, `load_learned`), what the checkpoint records beside them (`checkpoint_meta`), and another run's
-checkpoint loaded as a start (`restore_learner`). The files themselves: actors/run/checkpoint.py. The agent actor
+checkpoint loaded as a start (`restore_learner`). The files themselves: actors/files/checkpoint.py. The agent actor
 (actors/agent/memory.py) and the inprocess loop write and read checkpoints through these, so they are the same."""
 
 from __future__ import annotations
@@ -10,7 +10,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from kinswarm.actors.run.checkpoint import load_checkpoint
+from kinswarm.actors.files.checkpoint import load_checkpoint
 
 
 def checkpoint_meta(agent: str, kind: str, topology: str, epochs_before: int, epoch: int, seed: int) -> dict:

@@ -28,9 +28,10 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
-from kinswarm.actors.learning.kinds import JointLearner, LearnerKind
+from kinswarm.actors.files.runfile import kind_of, learner_settings, task_of
+from kinswarm.actors.learning.kinds import JointLearner
 from kinswarm.actors.learning.settings import LearnerSettings
-from kinswarm.actors.run.runfile import kind_of, learner_settings, task_of
+from kinswarm.actors.policies.registry import LearnerKind
 from kinswarm.actors.tasks.base import StepView
 from kinswarm.protocol.messages import Fault
 from kinswarm.protocol.topology import Topology
@@ -40,7 +41,7 @@ from .seed import agent_seed
 from .trace import StepTrace
 
 if TYPE_CHECKING:  # the robot is duck-typed here: an agent's process loads no physics engine for this module
-    from kinswarm.actors.run.config import RunConfig
+    from kinswarm.actors.files.config import RunConfig
     from kinswarm.sim.robot import Event, Robot
 
 Acted = dict[str, tuple[int, float]]  # joint -> (a(t), the joint's increment, before the robot clips it)

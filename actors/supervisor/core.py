@@ -4,8 +4,9 @@ policy (restarts.py), keeps several hosts in step (hosts.py), and stops everythi
 
 One mailbox, handled in order on the loop: the run's messages, and the supervisor's own events — an actor's end, a
 restart or thaw coming due, a host's silence, the status tick — posted there by callbacks and timers. Every wait is
-on that mailbox (with a deadline), none polls. `run()` owns every resource it opens (an AsyncExitStack) and every
-timer it arms, and leaves none behind.
+on that mailbox (with a deadline), none polls (replies.py: the waits, and the replies asked for again; readiness.py:
+the start). Each part owns its state: the supervisor reads it, and changes it only through the part's methods.
+`run()` owns every resource it opens (an AsyncExitStack) and every timer it arms, and leaves none behind.
 """
 
 from __future__ import annotations
@@ -13,7 +14,6 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
-import os
 import socket
 import time
 from collections.abc import Callable
@@ -22,13 +22,13 @@ from typing import Any
 
 import zenoh
 from kinswarm.actors.deploy.plan import Plan, local_plan
-from kinswarm.actors.run.config import RunConfig
-from kinswarm.actors.run.resume import Resume
-from kinswarm.actors.run.runfile import task_of
+from kinswarm.actors.files.config import RunConfig
+from kinswarm.actors.files.resume import Resume
+from kinswarm.actors.files.runfile import task_of
 from kinswarm.actors.runtime import Node
 from kinswarm.actors.runtime.wake import WakeGuard
 from kinswarm.protocol.clock import ClockReader, clock_path
-from kinswarm.protocol.keys import Keys
+from kinswarm.protocol.keys import GONE, UP, Key, Keys, parse_token_change, token_change
 from kinswarm.protocol.messages import (
     AgentTrace,
     Bye,
@@ -47,7 +47,9 @@ from .epochs import EpochLoop
 from .faults import THAW, FaultRouter
 from .hosts import GRACE, SILENT, HostError, HostWatch
 from .placements import EXIT, ActorId, Placement, parse_exit
+from .readiness import Readiness
 from .recorder import Recorder
+from .replies import Replies
 from .restarts import RestartBudgetSpent, RestartPolicy
 from .result import NoMessage, RunResult, SwarmError
 from .stalls import SIM_SILENT, StallError, StallWatch
@@ -69,14 +71,6 @@ def actors_of(cfg: RunConfig, topo: Topology) -> list[ActorId]:
 class Supervisor:
     STATUS_EVERY = 0.5  # seconds between SwarmStatus messages
     hosts_wait_s = 600.0  # how long the leader waits for the other hosts' actors (`kinswarm up --wait`)
-    # A start fails only when it stalls: for START_STALL_S no actor became ready and the processes still starting
-    # used less than START_BUSY_CPU_S of CPU between them. N fresh interpreters share the machine's cores (and take
-    # turns at loading the learner's compiled kernels), and an actor is ready only once its neighbours listen, so in
-    # a large swarm the first become ready after minutes, then the rest in a burst. A fixed 60 s failed a 16-agent
-    # chain at load 9-15; 60 s + 2 s an actor still failed a 100-agent chain at load ~130 whose agents were busy.
-    # Agents queued on the kernels' lock behind another run's are idle: 60 s of that failed a start at load ~80.
-    START_STALL_S = 120.0
-    START_BUSY_CPU_S = 1.0
 
     def __init__(
         self,
@@ -110,21 +104,19 @@ class Supervisor:
         self.restarts = RestartPolicy(self.agents, cfg.max_restarts, cfg.restart_window_s)
         self.faults = FaultRouter(self)
         self.hosts = HostWatch(self)
-        self.epochs = EpochLoop(self)
+        self.epochs = EpochLoop(self, self._epoch_done)  # whether it trains, the epoch, the checkpoints saved
         self.stalls = StallWatch(self)
-        self.training = False  # liveliness changes are events only once the swarm is up
-        self.epoch = -1
+        self.starting = Readiness(self.alive, self._handle, lambda: self.placement.pids, self.host_of)
         self.joints: JointStatus | None = None
         self.byes: dict[str, Bye] = {}
-        self.saved: dict[str, int] = {}  # agent -> the epoch of the newest checkpoint it said it saved
         self.why_down: dict[str, tuple[float, str]] = {}  # actor -> (since when, why): what `status` says of it
         self._timers: set[asyncio.TimerHandle] = set()
         self.hostname = {h: h for h in self.plan.hosts} if self.multi else {self.host: socket.gethostname()}
-        self.resumed: Resume | None = None  # `--resume`: where the run goes on (actors/run/resume.py)
-        # What a reply the run waits for is asked again with, while it waits (expect's `ask`): a pause of this process
-        # or of the replier, or a cut, lapses the Zenoh links between them, and what was put meanwhile is lost.
-        self.asking: Callable[[], None] | None = None
-        self.resend_s = 2 * cfg.lease_ms / 1000  # how often it is asked again while no reply comes
+        self.resumed: Resume | None = None  # `--resume`: where the run goes on (actors/files/resume.py)
+        # every wait on the mailbox; a reply waited for is asked again every two leases while none comes
+        self.replies = Replies(
+            self._recv, self._route, self.hosts.paused_seconds, 2 * cfg.lease_ms / 1000, self._stop_requested
+        )
         self.waking: WakeGuard | None = None  # this process's own stalls (run())
         self.on_start: Callable[[int, int], None] | None = None  # told (ready, of) as this host's actors come up
 
@@ -141,6 +133,25 @@ class Supervisor:
         )
         self._timers.add(handle)
         return handle
+
+    async def _recv(self, timeout: float | None) -> tuple[str, bytes]:
+        assert self.node is not None
+        return await self.node.recv(timeout=timeout)
+
+    async def _handle(self, timeout: float | None) -> None:
+        """Handle the next mailbox item (TimeoutError after `timeout` s)."""
+        self._route(*await self._recv(timeout))
+
+    def _stop_requested(self, stop: Stop) -> None:
+        """A Stop on ctl/stop while the leader waits: someone ran `kinswarm down`."""
+        if self.lead:
+            raise _Down(f"stop requested ({stop.reason})")
+
+    def _epoch_done(self, done: EpochDone) -> None:
+        if self.on_epoch is not None:
+            self.on_epoch(done)
+        self.result.epochs.append(done)
+        self.recorder.epoch(done)
 
     # -- the run ---------------------------------------------------------------------------------
     async def run(self) -> RunResult:
@@ -160,10 +171,10 @@ class Supervisor:
             node.listen(k.host("*"))
 
         def on_alive(sample: Any) -> None:  # zenoh thread
-            parsed = self.keys.parse_alive(str(sample.key_expr))
-            if parsed is not None:
-                up = b"+" if sample.kind == zenoh.SampleKind.PUT else b"-"
-                node.mailbox.push(ALIVE, up + f"{parsed[0]}/{parsed[1]}".encode())
+            key = str(sample.key_expr)
+            if self.keys.parse_alive(key) is not None:
+                sign = UP if sample.kind == zenoh.SampleKind.PUT else GONE
+                node.mailbox.push(ALIVE, token_change(sign, key).encode())
 
         async with contextlib.AsyncExitStack() as stack:
             watch = self.session.liveliness().declare_subscriber(self.keys.alive_all, on_alive, history=True)
@@ -186,12 +197,17 @@ class Supervisor:
                 # the supervisor having been stopped
                 self.later(self.STATUS_EVERY, STATUS)
                 self.waking.expect(self.STATUS_EVERY)
-                await self._wait_ready(self.local)
+                # several hosts: an actor here is ready only once its neighbours on the other hosts listen, and those
+                # start when someone starts them there (`kinswarm up --wait`)
+                stall_s = Readiness.START_STALL_S
+                if self.multi:
+                    stall_s = max(stall_s, self.hosts_wait_s)
+                await self.starting.ready(self.local, stall_s, self.on_start)
                 if self.lead:
-                    await self._wait_alive(self.expected, timeout=self.hosts_wait_s, what="the other hosts' actors")
+                    await self.starting.alive_within(self.expected, self.hosts_wait_s, "the other hosts' actors")
                     await self.epochs.train()
                 else:
-                    await self._serve()
+                    await self.epochs.follow()
             except asyncio.CancelledError:
                 self.result.interrupted = True
                 log.warning("interrupted: stopping the swarm")
@@ -211,7 +227,7 @@ class Supervisor:
         """Explicit, in order: Stop to every actor (the leader), their Byes (3 s), the placement stopped (frozen ones
         woken, SIGTERM, SIGKILL), every timer cancelled, the records closed."""
         assert self.node is not None
-        self.training = False
+        self.epochs.end()
         try:
             if self.lead:
                 self.node.send(self.keys.ctl("stop"), Stop(reason=self._stop_reason()))
@@ -234,146 +250,28 @@ class Supervisor:
     def _stop_reason(self) -> str:
         return "interrupted" if self.result.interrupted else "failed" if self.result.error else "done"
 
-    async def _serve(self) -> None:
-        """Another host's share: keep it alive (restarts, forwarded faults, heartbeats) until the leader's Stop."""
-        self.training = True
-        log.info("host %s: %d actors up; serving the leader's run %s", self.host, len(self.local), self.cfg.run_id)
-        stop = await self.expect(Stop, lambda m: True, timeout=float("inf"))
-        self.event("stop", self.host, f"the leader says: {stop.reason}")
-
-    # -- the mailbox -----------------------------------------------------------------------------
-    async def expect(
-        self,
-        kind: type,
-        match: Callable[[Any], bool],
-        timeout: float,
-        stretch: bool = True,
-        any_item: bool = False,
-        ask: Callable[[], None] | None = None,
-    ) -> Any:
-        """Handle the mailbox until a message of `kind` satisfying `match` (any item at all with `any_item`); a
-        partition stops the deadline's clock. `ask` sends the request the awaited message answers once more: every
-        `resend_s` while none comes, when an actor's token comes back and when this process wakes from a stall (its
-        answer may have been put while a link was down). Repliers answer a repeated request again, changing nothing."""
-        assert self.node is not None
-        deadline = time.monotonic() + timeout
-        paused0 = self.hosts.paused_seconds(time.monotonic())
-        asking, self.asking = self.asking, ask
-        next_ask = time.monotonic() + self.resend_s
-        try:
-            while True:
-                now = time.monotonic()
-                remaining = deadline - now + (self.hosts.paused_seconds(now) - paused0 if stretch else 0.0)
-                if remaining <= 0:
-                    raise NoMessage(f"no {kind.__name__} within {timeout:.0f} s")
-                if ask is not None:
-                    if now >= next_ask:
-                        ask()
-                        next_ask = now + self.resend_s
-                    remaining = min(remaining, next_ask - now)
-                try:
-                    key, payload = await self.node.recv(timeout=None if remaining == float("inf") else remaining)
-                except TimeoutError:
-                    continue
-                m = self._route(key, payload)
-                if isinstance(m, Stop) and self.lead and kind is not Stop:
-                    raise _Down(f"stop requested ({m.reason})")
-                if isinstance(m, kind) and match(m):
-                    return m
-                if any_item:
-                    return None
-        finally:
-            self.asking = asking
-
-    def ask_again(self, why: str) -> None:
-        """Send the awaited reply's request again now (an actor's token came back, or this process woke)."""
-        if self.asking is not None:
-            log.info("asking again for the reply awaited: %s", why)
-            self.asking()
-
     async def _collect_byes(self, timeout: float) -> None:
-        assert self.node is not None
+        """Every live actor's Bye, for `timeout` s at most; the leader's Stop sent again every lease meanwhile (a Stop
+        put while a link was down is lost)."""
         want = {ident for role, ident in self.expected if (role, ident) in self.alive}
-        deadline = time.monotonic() + timeout
-        next_ask = time.monotonic() + self.cfg.lease_ms / 1000
-        while not want <= set(self.byes) and time.monotonic() < deadline:
-            now = time.monotonic()
-            if self.lead and now >= next_ask:  # a Stop put while a link was down is lost: once more, a lease on
-                self.node.send(self.keys.ctl("stop"), Stop(reason=self._stop_reason()))
-                next_ask = now + self.cfg.lease_ms / 1000
-            try:
-                key, payload = await self.node.recv(timeout=max(0.0, min(deadline, next_ask) - now))
-            except TimeoutError:
-                continue
-            with contextlib.suppress(SwarmError, RestartBudgetSpent, HostError, StallError):  # leaving anyway
-                self._route(key, payload)
 
-    async def _wait_alive(self, expected: list[ActorId], timeout: float, what: str = "") -> None:
-        if what and not set(expected) <= self.alive:
-            hosts = sorted({self.host_of(a) for a in set(expected) - self.alive})
-            log.warning("waiting for %s (on %s): start `kinswarm up PLAN --host NAME` there", what, ", ".join(hosts))
-        try:
-            async with asyncio.timeout(timeout):
-                while not set(expected) <= self.alive:
-                    assert self.node is not None
-                    self._route(*await self.node.recv())
-        except TimeoutError:
-            raise SwarmError(f"not alive after {timeout:.0f} s: {sorted(set(expected) - self.alive)}") from None
+        def stop() -> None:
+            assert self.node is not None
+            self.node.send(self.keys.ctl("stop"), Stop(reason=self._stop_reason()))
 
-    async def _wait_ready(self, expected: list[ActorId]) -> None:
-        """Until every actor of `expected` is alive (wired, matched, its token up), telling `on_start` as they come;
-        a SwarmError once the start stalls (START_STALL_S with no actor become ready and the starting processes
-        idle), never after a fixed time."""
-        assert self.node is not None
-        want = set(expected)
-        ready = len(want & self.alive)
-        if self.on_start is not None:
-            self.on_start(ready, len(want))
-        # several hosts: an actor here is ready only once its neighbours on the other hosts listen, and those start
-        # when someone starts them there (`kinswarm up --wait`)
-        stall_s = max(self.START_STALL_S, self.hosts_wait_s) if self.multi else self.START_STALL_S
-        deadline, cpu = time.monotonic() + stall_s, self._starting_cpu(want)
-        while ready < len(want):
-            remaining = deadline - time.monotonic()
-            if remaining <= 0:
-                now_cpu = self._starting_cpu(want)
-                if now_cpu is not None and cpu is not None and now_cpu - cpu >= self.START_BUSY_CPU_S:
-                    log.info(
-                        "starting: %d/%d actors ready, the others busy (%.0f CPU-s)", ready, len(want), now_cpu - cpu
-                    )
-                    deadline, cpu = time.monotonic() + stall_s, now_cpu
-                    continue
-                late = [f"{role} {ident}" for role, ident in sorted(want - self.alive)]
-                more = f" and {len(late) - 8} more" if len(late) > 8 else ""
-                why = f"{ready}/{len(want)} ready; not: {', '.join(late[:8])}{more}"
-                raise SwarmError(f"starting: no actor became ready for {stall_s:.0f} s, nor busy ({why})")
-            try:
-                self._route(*await self.node.recv(timeout=remaining))
-            except TimeoutError:
-                continue
-            if (now := len(want & self.alive)) > ready:
-                ready = now
-                deadline, cpu = time.monotonic() + stall_s, self._starting_cpu(want)
-                log.info("starting: %d/%d actors ready", ready, len(want))
-                if self.on_start is not None:
-                    self.on_start(ready, len(want))
-
-    def _starting_cpu(self, want: set[ActorId]) -> float | None:
-        """CPU seconds used so far by the processes of the actors of `want` not yet alive (Linux: /proc/PID/stat);
-        None where actors share this process (the single placement) or /proc cannot tell."""
-        pids = self.placement.pids
-        mine = os.getpid()
-        own = [pids[ident] for role, ident in want - self.alive if pids.get(ident, mine) != mine]
-        if not own:
-            return None
-        total = 0
-        for pid in own:
-            try:  # utime and stime: fields 14 and 15, counted after the command's closing parenthesis
-                fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
-                total += int(fields[11]) + int(fields[12])
-            except (OSError, IndexError, ValueError):  # gone (its end is an event of its own), or no /proc
-                continue
-        return total / os.sysconf("SC_CLK_TCK")
+        leaving = (SwarmError, RestartBudgetSpent, HostError, StallError)  # an item's error: the run leaves anyway
+        ask = stop if self.lead else None
+        with contextlib.suppress(NoMessage):
+            await self.replies.until(
+                lambda m: want <= set(self.byes),
+                timeout,
+                what="Bye",
+                stretch=False,
+                ask=ask,
+                every=self.cfg.lease_ms / 1000,
+                stops=False,
+                quiet=leaving,
+            )
 
     def _route(self, key: str, payload: bytes) -> Any:
         """Handle one mailbox item: the supervisor's own events and what it consumes itself; return EpochDone,
@@ -383,41 +281,46 @@ class Supervisor:
         if key.startswith("__"):
             self._own(key, payload)
             return None
-        kind = key[len(self.keys.root) + 1 :]
-        if kind == "metrics/epoch":
-            return node.decode(key, payload, EpochDone)
-        if kind.startswith("rep/agent/"):
-            return node.decode(key, payload, Saved)
-        if kind.startswith(("rep/bye/", "rep/sim/")):
-            if (bye := node.decode(key, payload, Bye)) is not None:
-                self.byes[self.keys.last_chunk(key)] = bye
-            return bye
-        if kind == "ctl/stop":
-            return node.decode(key, payload, Stop)
-        if kind == "metrics/event":
-            if (e := node.decode(key, payload, Event)) is not None:
-                if e.event == "restored":  # when it happened; which checkpoint's epoch, in a field of its own
-                    newest = self.saved.get(e.target, -1)  # a restart must restore this one (or a newer one)
-                    self.event(e.event, e.target, e.detail, checkpoint_epoch=e.epoch, newest_saved=newest)
-                else:
-                    self.recorder.event(e.epoch, e.step, e.event, e.target, e.detail)
-        elif kind == "metrics/agent":
-            if (tr := node.decode(key, payload, AgentTrace)) is not None:
-                self.recorder.agent(tr)
-        elif kind == "metrics/joints":
-            if (j := node.decode(key, payload, JointStatus)) is not None:
-                self._on_joints(j)
-        elif kind == "fault/request":
-            if (f := node.decode(key, payload, Fault)) is not None:
-                self.faults.on_request(f)
-        elif kind == "ctl/fault" and not self.lead:
-            if (f := node.decode(key, payload, Fault)) is not None:
-                self.faults.on_forwarded(f)
-        elif kind.startswith("ctl/host/"):
-            hb = node.decode(key, payload, Heartbeat)
-            if hb is not None and hb.host in self.plan.hosts and hb.host != self.host:
-                self.hosts.heard_from(hb.host)
+        match self.keys.parse(key):
+            case Key("metrics", ("epoch",)):
+                return node.decode(key, payload, EpochDone)
+            case Key("rep", ("agent", _)):
+                return node.decode(key, payload, Saved)
+            case Key("rep", ("bye" | "sim", ident)):
+                if (bye := node.decode(key, payload, Bye)) is not None:
+                    self.byes[ident] = bye
+                return bye
+            case Key("ctl", ("stop",)):
+                return node.decode(key, payload, Stop)
+            case Key("metrics", ("event",)):
+                self._on_event(node.decode(key, payload, Event))
+            case Key("metrics", ("agent",)):
+                if (tr := node.decode(key, payload, AgentTrace)) is not None:
+                    self.recorder.agent(tr)
+            case Key("metrics", ("joints",)):
+                if (j := node.decode(key, payload, JointStatus)) is not None:
+                    self._on_joints(j)
+            case Key("fault", ("request",)):
+                if (f := node.decode(key, payload, Fault)) is not None:
+                    self.faults.on_request(f)
+            case Key("ctl", ("fault",)) if not self.lead:
+                if (f := node.decode(key, payload, Fault)) is not None:
+                    self.faults.on_forwarded(f)
+            case Key("host", _):
+                hb = node.decode(key, payload, Heartbeat)
+                if hb is not None and hb.host in self.plan.hosts and hb.host != self.host:
+                    self.hosts.heard_from(hb.host)
         return None
+
+    def _on_event(self, e: Event | None) -> None:
+        """An actor's event, recorded; a restart's restore with the newest checkpoint its agent said it saved."""
+        if e is None:
+            return
+        if e.event == "restored":  # when it happened; which checkpoint's epoch, in a field of its own
+            newest = self.epochs.saved.get(e.target, -1)  # a restart must restore this one (or a newer one)
+            self.event(e.event, e.target, e.detail, checkpoint_epoch=e.epoch, newest_saved=newest)
+        else:
+            self.recorder.event(e.epoch, e.step, e.event, e.target, e.detail)
 
     def _own(self, key: str, payload: bytes) -> None:
         """The supervisor's own events, in the mailbox's order with the messages."""
@@ -425,8 +328,9 @@ class Supervisor:
         if key == ALIVE:
             assert self.waking is not None  # a loss heard as this process wakes is held a lease (runtime/wake.py)
             if (change := self.waking.token(payload.decode())) is not None:
-                role, ident = change[1:].split("/", 1)
-                self._alive_changed((role, ident), change[0] == "+")
+                sign, key = parse_token_change(change)
+                if (actor := self.keys.parse_alive(key)) is not None:
+                    self._alive_changed(actor, sign == UP)
         elif key == EXIT:
             actor, how = parse_exit(payload)
             self._on_exit(actor, how, now)
@@ -461,16 +365,16 @@ class Supervisor:
         # while a swarm starts, a loaded machine starves every process for seconds: worth a line in the log, not a
         # warning on a newcomer's terminal; once training, it is on the run's record too
         log.log(
-            logging.WARNING if self.training else logging.INFO,
+            logging.WARNING if self.epochs.training else logging.INFO,
             "the supervisor did not run for %.1f s (stopped or starved): asking again for its replies",
             slept,
         )
-        if self.training:
+        if self.epochs.training:
             self.event(
                 "woke", "supervisor", f"did not run for {slept:.1f} s (stopped or starved)", seconds=round(slept, 3)
             )
         self.stalls.woke(now)
-        self.ask_again("the supervisor woke")
+        self.replies.ask_again("the supervisor woke")
 
     def _on_joints(self, j: JointStatus) -> None:
         self.joints = j
@@ -487,22 +391,22 @@ class Supervisor:
         else:
             self.alive.discard(actor)
             self.why_down.setdefault(actor[1], (time.monotonic(), "its liveliness token went away"))
-        if self.training and actor[0] != "supervisor":
+        if self.epochs.training and actor[0] != "supervisor":
             if changed:
                 self.event("alive" if up else "lost", actor[1], "liveliness token " + ("back" if up else "gone"))
                 if not up:
                     self.result.tokens_lost[actor[1]] = self.result.tokens_lost.get(actor[1], 0) + 1
             if up:  # its links were down a while: a reply it put meanwhile is lost
-                self.ask_again(f"{actor[0]} {actor[1]}'s token is back")
+                self.replies.ask_again(f"{actor[0]} {actor[1]}'s token is back")
 
     def _on_exit(self, actor: ActorId, how: str, now: float) -> None:
         role, ident = actor
-        if not self.training:  # starting up: nothing to restart from yet
+        if not self.epochs.training:  # starting up: nothing to restart from yet
             raise SwarmError(f"{role} {ident} {how}; its log ends:\n{self.placement.log_tail(actor)}")
         if role != "agent":
             raise SwarmError(f"{role} {ident} on {self.host} {how}; its log ends:\n{self.placement.log_tail(actor)}")
         self.event("exited", ident, how)
-        self.faults.frozen.pop(ident, None)
+        self.faults.exited(ident)
         delay = self.restarts.on_exit(ident, now)
         self.why_down[ident] = (now, f"{how}; restart {self.restarts.total(ident)} due {delay:.1f} s after")
         self.later(delay, RESPAWN, ident.encode())
@@ -516,7 +420,7 @@ class Supervisor:
             at = (self.joints.epoch, self.joints.step)
         if at is None or at[0] < 0:  # the sim has run no step yet (of this run, or of this resumed run)
             first = self.resumed.epoch if self.resumed is not None else 0
-            return max(self.epoch, first), 0
+            return max(self.epochs.epoch, first), 0
         return at
 
     def event(self, event: str, target: str, detail: str, at: tuple[int, int] | None = None, **extra: object) -> None:
@@ -540,7 +444,7 @@ class Supervisor:
         if stalled := self.stalls.status(now):
             faults.setdefault("sim", []).append(stalled)
         status = SwarmStatus(
-            epoch=self.epoch,
+            epoch=self.epochs.epoch,
             epochs=self.cfg.epochs,
             role=roles,
             alive={i: int((roles[i], i) in self.alive) for i in ids},

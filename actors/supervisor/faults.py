@@ -11,7 +11,7 @@ import signal
 import time
 from typing import TYPE_CHECKING
 
-from kinswarm.actors.run.config import placement_problem
+from kinswarm.actors.files.config import placement_problem
 from kinswarm.protocol.faults import (
     ALL,
     JOINT_FAULTS,
@@ -48,7 +48,7 @@ class FaultRouter:
             error = f"{f.fault}: robot {f.robot}: this run's fleet has {sup.cfg.fleet} (robots 0..{sup.cfg.fleet - 1})"
         if not error and f.fault in PROCESS_FAULTS and f.fault not in sup.placement.supports:
             error = placement_problem(f.fault, sup.cfg.placement) or f"{f.fault}: not in this run's placement"
-        if not error and f.fault in PROCESS_FAULTS and f.fault != "thaw" and not sup.training:
+        if not error and f.fault in PROCESS_FAULTS and f.fault != "thaw" and not sup.epochs.training:
             # an actor that ends while the swarm starts fails the run (nothing to restart from yet)
             error = f"{f.fault}: the swarm is not training (its actors are starting, or it is ending); try again"
         if not error and f.fault in JOINT_FAULTS:
@@ -125,6 +125,10 @@ class FaultRouter:
         if forwarded:
             detail += f"; forwarded: {', '.join(forwarded)}"
         return detail + (f"; not running: {', '.join(skipped)}" if skipped else "")
+
+    def exited(self, agent: str) -> None:
+        """`agent` ended: frozen no more (its restart runs)."""
+        self.frozen.pop(agent, None)
 
     def on_thaw_due(self, agent: str) -> None:
         """A freeze's time is up (unless it was thawed, or frozen again for longer, since)."""

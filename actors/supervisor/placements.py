@@ -1,8 +1,8 @@
 """Where actors live. The wire, the messages and the lockstep are the same in both placements, so the same seed
 gives the same run:
   process  one OS process per actor, each with its own Zenoh session connected to the supervisor's endpoint, forked
-           from the run's zygote (actors/run/main.py: a fresh interpreter that loaded what every actor needs once and
-           never opens a session), so the actors share those pages;
+           from the run's zygote (actors/process/main.py: a fresh interpreter that loaded what every actor needs once
+           and never opens a session), so the actors share those pages;
   single   every actor a task in this process, sharing the supervisor's session.
 An actor's end is an event, not a poll: the zygote reports a child's end on its pipe, a task calls back when it is
 done; either posts an `EXIT` item into the supervisor's mailbox (`attach`), where it is handled in order.
@@ -22,8 +22,8 @@ from pathlib import Path
 from typing import Any
 
 import zenoh
-from kinswarm.actors.run.config import RunConfig
-from kinswarm.actors.run.main import build_actor
+from kinswarm.actors.files.config import RunConfig
+from kinswarm.actors.process.main import build_actor
 from kinswarm.actors.runtime import Node
 from kinswarm.protocol.faults import PROCESS_FAULTS
 from kinswarm.protocol.keys import Keys
@@ -73,7 +73,7 @@ class Forked:
 
 
 class Zygote:
-    """The supervisor's side of the run's zygote (actors/run/main.py, `serve_zygote`: the conversation is described
+    """The supervisor's side of the run's zygote (actors/process/main.py, `serve_zygote`: the conversation is described
     there). `fork` returns the new actor's pid at once; ends arrive on the loop, through `on_exit`."""
 
     def __init__(self, config_path: Path, log: Path, on_exit: Callable[[int, int | None], None]) -> None:
@@ -92,7 +92,7 @@ class Zygote:
         """Start it and wait until it has loaded what the actors need (seconds; longer when numba compiles)."""
         self._loop = asyncio.get_running_loop()
         self._gone = self._loop.create_future()
-        argv = [sys.executable, "-m", "kinswarm.actors.run.main", "--zygote", str(self.config_path)]
+        argv = [sys.executable, "-m", "kinswarm.actors.process.main", "--zygote", str(self.config_path)]
         argv += ["--parent", str(os.getpid())]
         with open(self.log, "ab") as logf:
             self.proc = subprocess.Popen(
@@ -226,7 +226,7 @@ class ProcessPlacement:
             await asyncio.sleep(0)
 
     def spawn(self, actor: ActorId, restore: bool = False) -> None:
-        """The one spawn path: the zygote forks a process running `kinswarm.actors.run.main`'s `main`."""
+        """The one spawn path: the zygote forks a process running `kinswarm.actors.process.main`'s `main`."""
         role, ident = actor
         argv = [role, ident, str(self.config_path), "--net", str(self.nets(role, ident)), "--supervisor"]
         argv.append(self.supervisor)

@@ -69,7 +69,7 @@ class StallWatch:
 
     def judge(self, now: float, silent: bool = False) -> None:
         sup = self.sup
-        if not sup.training or sup.epochs.running is None or sup.hosts.missing:
+        if not sup.epochs.training or sup.epochs.running is None or sup.hosts.missing:
             self._end(now)  # between epochs, or paused: not a stall
             return
         stuck = sorted(a for a, t in self.late_since.items() if now - t >= self.bound)

@@ -11,8 +11,8 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from kinswarm.actors.learning.kinds import DEFAULT as DEFAULT_KIND
 from kinswarm.actors.learning.settings import LearnerSettings, StateVariable
+from kinswarm.actors.policies.registry import DEFAULT as DEFAULT_KIND
 
 from ..common import Context, frac_within, mean_std, run_specs, settings
 from ..goals import TEST_SIZE, halton, quadtree, training_order
@@ -130,7 +130,7 @@ SUCCESSIVE_REFERENCES = {"rule on g_perp, successive test goals": "rule"}  # on 
 # are run on it as well: the same swarms, the same goals.
 FREE_JOINTS = str(ROOT / "examples" / "chain4-free.toml")
 FREE_REFERENCES = {"rule on g_perp, successive test goals, joints free": "rule"}
-# The controls for the paper's two central design choices (actors/learning/kinds.py), each the recipe with one taken
+# The controls for the paper's two central design choices (actors/policies/registry.py), each the recipe with one taken
 # away: "independent" learns Q over its own actions only (no joint action model, no fictitious play: what JASM
 # buys), "tabular" a Q-table over the same grid, the state's nearest cell (no fuzzy interpolation: what the fuzzy
 # sets buy). Same settings, goals, seeds, training and frozen tests as the recipe's Level-3 row.
@@ -150,7 +150,7 @@ class Training:
     )
     min_seeds: int = 0  # at least this many seeds (the full run only)
     reward: str = REWARD
-    # the learner kind (actors/learning/kinds.py): the paper's, or a control on the same settings that takes one of
+    # the learner kind (actors/policies/registry.py): the paper's, or a control on the same settings that takes one of
     # its two design choices away; a control is tested on both test sets, as the sweep's rows
     kind: str = DEFAULT_KIND
     # the share of training epochs that start from a random pose within the joint limits (task start_pose), the

@@ -93,7 +93,7 @@ def report(ctx: Context, tested: Tested, levels: tuple[int, ...]) -> dict[str, A
     )
     if any(t.control for t in trainings):
         rep.text(
-            "Controls for the paper's two design choices (`--set learner.kind=...`, actors/learning/kinds.py), each "
+            "Controls for the paper's two design choices (`--set learner.kind=...`, actors/policies/registry.py), each "
             "on the same settings, goals, seeds, training and frozen tests as the recipe's row: `independent` is the "
             "same fuzzy Q-learning with each agent's Q over its own three actions only, no model of its children "
             "(the paper's design without JASM, the joint action model by fictitious play); `tabular` keeps JASM over "

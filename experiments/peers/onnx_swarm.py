@@ -1,7 +1,13 @@
-"""The ONNX-in-the-swarm row: a per-joint policy exported to ONNX, run through `kinswarm run` as a `process`-placement
-swarm (one OS process per actor, over Zenoh) on unseen goals, intact and with `kinswarm fault RUN-DIR lock a2` sent
-live while it runs, beside the same file stepped in parallel_env (intact, and with a2 locked from each episode's
-first step).
+"""The ONNX-in-the-swarm row: a per-joint policy exported to ONNX, run as `kinswarm run` runs it, as a
+`process`-placement swarm (one OS process per actor, over Zenoh) on unseen goals, intact and with a2 locked live while
+it runs (the fault `kinswarm fault RUN-DIR lock a2` sends, through the same client), beside the same file stepped in
+parallel_env (intact, and with a2 locked from each episode's first step).
+
+The lab stands on the product, never on its command line: the command line reaches this module by the experiments'
+table of names (`kinswarm experiment peers`), so running `kinswarm` from here would close a loop (tests/test_cycles.py).
+What `kinswarm run FILE --out OUT` does with a run file is the product's one loader and `run_swarm`
+(actors/files/runfile.py, actors/run/launch.py); the run's own process runs those, as this module's `__main__`, and
+the fault goes through the command's client (actors/control/client.py).
 
 Needs onnxruntime (the `onnx` extra), not torch: any ONNX file meeting the contract of docs/env.md will do.
 
@@ -27,7 +33,7 @@ from kinswarm.actors.learning.settings import OBSERVATION_FIELDS
 from kinswarm.env import parallel_env
 
 if TYPE_CHECKING:
-    from kinswarm.actors.run.config import RunConfig
+    from kinswarm.actors.files.config import RunConfig
     from kinswarm.protocol.messages import Fault, FaultReply
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -98,16 +104,36 @@ def env_finals(run_file: Path, faults: list[dict[str, Any]] | None = None) -> li
         env.close()
 
 
-def _cli(*args: str) -> list[str]:
-    return [sys.executable, "-m", "kinswarm.actors.cli", *args]
+def _run_command(run_file: Path, out: Path) -> list[str]:
+    """The command line of a run's own process: this module run by name (`main`), as `kinswarm run RUN_FILE --out
+    OUT` would run it."""
+    return [sys.executable, "-m", "kinswarm.experiments.peers.onnx_swarm", str(run_file), str(out)]
+
+
+def main(argv: list[str] | None = None) -> int:
+    """`python -m kinswarm.experiments.peers.onnx_swarm RUN_FILE OUT`: the run of RUN_FILE into OUT, as `kinswarm run
+    RUN_FILE --out OUT` makes it (the one loader, then run_swarm; its logging and thread switch interval; no progress
+    bar: its output is a log); exit 1 if it failed or was interrupted."""
+    from kinswarm.actors.files.runfile import load_run
+    from kinswarm.actors.run.launch import run_swarm
+    from kinswarm.actors.runtime import setup_logging
+
+    run_file, out = (sys.argv[1:] if argv is None else argv)[:2]
+    setup_logging("WARNING")
+    sys.setswitchinterval(0.0005)  # as the command line sets it: Zenoh's callbacks get the GIL promptly
+    cfg = load_run(Path(run_file), out=Path(out))
+    summary = run_swarm(cfg, cfg.topo())
+    if summary.get("error") or summary.get("interrupted"):
+        print(f"kinswarm: the run failed: {summary.get('error') or 'interrupted'}", file=sys.stderr)
+        return 1
+    return 0
 
 
 def _fault(run_dir: Path, kind: str, *targets: str) -> dict[str, Any]:
-    """`kinswarm fault RUN-DIR KIND TARGETS...` as the CLI sends it, through its fault client (actors/cli/control.py),
+    """`kinswarm fault RUN-DIR KIND TARGETS...` as the command sends it, through its client (actors/control/client.py),
     in this process: its imports already paid for (a new interpreter would cost seconds of a loaded machine, and a
-    short run may end before the fault is sent). Not through the CLI's `main`: the CLI reaches this module by the
-    experiments' table of names, and a call back into it would close that loop (tests/test_cycles.py)."""
-    from kinswarm.actors.cli.control import Client, ControlError, make_fault, run_config_at, tool_net
+    short run may end before the fault is sent)."""
+    from kinswarm.actors.control.client import Client, ControlError, make_fault, run_config_at, tool_net
     from kinswarm.protocol.faults import describe
 
     async def send(cfg: RunConfig, f: Fault) -> FaultReply:
@@ -135,18 +161,19 @@ def _rows(run_dir: Path) -> list[dict[str, Any]]:
 
 
 def swarm_run(run_file: Path, out: Path, lock_after: int | None = None, timeout: float = 1800) -> dict[str, Any]:
-    """`kinswarm run RUN_FILE --out OUT` (process placement, as the file says). `lock_after`: once that many epochs
-    are in metrics.jsonl, `kinswarm fault OUT lock a2` is sent (the CLI as an operator types it, run here); where the
-    sim applied it is read back from events.jsonl. Returns the epochs' final errors (and the lock's epoch and step)."""
+    """RUN_FILE's run into OUT as `kinswarm run RUN_FILE --out OUT` makes it (`main`, in a process of its own; the
+    process placement, as the file says). `lock_after`: once that many epochs are in metrics.jsonl, the fault of
+    `kinswarm fault OUT lock a2` is sent (`_fault`); where the sim applied it is read back from events.jsonl. Returns
+    the epochs' final errors (and the lock's epoch and step)."""
     if out.exists():
         raise ValueError(f"{out}: exists; a run directory is made by the run")
     if lock_after is not None:
-        import kinswarm.actors.cli.control  # noqa: F401 -- imported now, not while the run goes by
+        import kinswarm.actors.control.client  # noqa: F401 -- imported now, not while the run goes by
 
     log = out.parent / f"{out.name}.log"  # the run's own output (a pipe nobody reads while it runs could fill)
     out.parent.mkdir(parents=True, exist_ok=True)
     with open(log, "w") as sink:
-        proc = subprocess.Popen(_cli("run", str(run_file), "--out", str(out)), stdout=sink, stderr=subprocess.STDOUT)
+        proc = subprocess.Popen(_run_command(run_file, out), stdout=sink, stderr=subprocess.STDOUT)
         sent: dict[str, Any] | None = None
         try:
             t0 = time.monotonic()
@@ -164,7 +191,7 @@ def swarm_run(run_file: Path, out: Path, lock_after: int | None = None, timeout:
                 proc.wait(timeout=60)
     if proc.returncode != 0:
         tail = log.read_text(errors="replace").strip().splitlines()[-1:]
-        raise RuntimeError(f"kinswarm run {run_file}: exit {proc.returncode}: {' '.join(tail)} ({log})")
+        raise RuntimeError(f"the run of {run_file}: exit {proc.returncode}: {' '.join(tail)} ({log})")
     res: dict[str, Any] = {"final_errors": [float(r["final_error"]) for r in _rows(out)]}
     if lock_after is not None:
         events = [json.loads(x) for x in (out / "events.jsonl").read_text().splitlines() if x.strip()]
@@ -216,3 +243,7 @@ def _epoch_index(run_dir: Path, epoch: int) -> int:
 
 def within(errors: Sequence[float], tol: float = 0.5) -> int:
     return int(sum(e <= tol for e in errors))
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,5 +1,5 @@
-"""Actor entry point: `python -m kinswarm.actors.run.main ROLE ID CONFIG --net NETSPEC.json [--restore]`, and the
-zygote the `process` placement forks its actors from: `python -m kinswarm.actors.run.main --zygote CONFIG`.
+"""Actor entry point: `python -m kinswarm.actors.process.main ROLE ID CONFIG --net NETSPEC.json [--restore]`, and the
+zygote the `process` placement forks its actors from: `python -m kinswarm.actors.process.main --zygote CONFIG`.
 
 This is the one spawn path of the `process` placement. The supervisor starts one zygote a run: a fresh interpreter
 that imports what every actor needs (the runtime, the agent, numpy, numba and the run's compiled learner kernels) once,
@@ -41,7 +41,7 @@ import selectors  # noqa: E402
 from pathlib import Path  # noqa: E402
 from typing import Any, Protocol  # noqa: E402
 
-from kinswarm.actors.run.config import RunConfig, load_run_config  # noqa: E402
+from kinswarm.actors.files.config import RunConfig, load_run_config  # noqa: E402
 from kinswarm.actors.runtime import NetSpec, Node, open_session, setup_logging  # noqa: E402
 from kinswarm.actors.runtime.heap import freeze_setup  # noqa: E402
 from kinswarm.protocol.keys import Keys  # noqa: E402
@@ -198,7 +198,7 @@ def preload(cfg: RunConfig) -> None:
     numba loads (or, with a cold cache, compiles) its kernels for the argument types the agents call them with.
     Learners of a kind from outside the learning package (an ONNX policy) are left to their agents."""
     from kinswarm.actors.agent.actor import Agent  # noqa: F401 - loaded to be shared
-    from kinswarm.actors.run.runfile import kind_of, learner_settings, task_of
+    from kinswarm.actors.files.runfile import kind_of, learner_settings, task_of
 
     if cfg.fleet > 1:
         from kinswarm.actors.agent.fleet import FleetAgent  # noqa: F401 - loaded to be shared

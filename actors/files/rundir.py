@@ -18,7 +18,7 @@ from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
-from kinswarm.actors.run.config import ConfigError, load_run_config
+from kinswarm.actors.files.config import ConfigError, load_run_config
 
 #: files that say a directory holds a run
 RUN_FILES = ("config.json", "metrics.jsonl", "summary.json", "run.toml", "events.jsonl", "poses.jsonl", "agents.jsonl")

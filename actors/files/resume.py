@@ -30,9 +30,9 @@ import secrets
 from dataclasses import dataclass
 from pathlib import Path
 
-from kinswarm.actors.run.checkpoint import CheckpointError, load_checkpoint, previous
-from kinswarm.actors.run.config import ConfigError, RunConfig, load_run_config, recorded_version, writer_version
-from kinswarm.actors.run.rundir import failed_start, lock_held, run_state
+from kinswarm.actors.files.checkpoint import CheckpointError, load_checkpoint, previous
+from kinswarm.actors.files.config import ConfigError, RunConfig, load_run_config, recorded_version, writer_version
+from kinswarm.actors.files.rundir import failed_start, lock_held, run_state
 from kinswarm.protocol.keys import check_id
 
 log = logging.getLogger("kinswarm.resume")

@@ -11,7 +11,7 @@ from pathlib import Path
 from typing import Any
 
 import msgspec
-from kinswarm.actors.run.config import ConfigError
+from kinswarm.actors.files.config import ConfigError
 from kinswarm.protocol.spec import SpecError
 
 #: fields that name files, resolved against where they were written (a file's against it, a flag's the working dir)

@@ -2,7 +2,7 @@
 carrying a format version and a SHA-256 over every array, so a torn or foreign file is refused with a
 clear error instead of loading corrupted learned state. The previous checkpoint is kept as
 `<id>.prev.npz`; `load_latest` falls back to it when the newest one is refused. The header names the learner kind
-(actors/learning/kinds.py) whose state the arrays are: a checkpoint of another kind is refused, not loaded into a
+(actors/policies/registry.py) whose state the arrays are: a checkpoint of another kind is refused, not loaded into a
 learner that would read the same arrays otherwise (a tabular learner's phi is shaped as a fuzzy one's)."""
 
 from __future__ import annotations

@@ -3,7 +3,7 @@ plan names a run file), the experiments and the Python API all resolve it here, 
 (in the dataclass that owns it).
 
 ```toml
-[run]                      # RunConfig's fields (actors/run/config.py); all optional
+[run]                      # RunConfig's fields (actors/files/config.py); all optional
 epochs = 60
 seed = 0
 placement = "process"      # or "single"
@@ -20,7 +20,7 @@ kind = "free"
 kind = "reach"
 goal = [4.16, 6.18]
 
-[learner]                  # optional: kind (actors/learning/kinds.py; default "fuzzy") and LearnerSettings
+[learner]                  # optional: kind (actors/policies/registry.py; default "fuzzy") and LearnerSettings
 gamma = 0.9                # overrides (actors/learning/settings.py): the observation's fields, the learner's own
 ```
 
@@ -45,10 +45,7 @@ from pathlib import Path
 from typing import Any
 
 import msgspec
-from kinswarm.actors.learning.kinds import DEFAULT, OWN_FIELDS, LearnerKind, learner_kind
-from kinswarm.actors.learning.settings import SPATIAL_STATES, LearnerSettings
-from kinswarm.actors.learning.state import OWN_EXTRAS
-from kinswarm.actors.run.config import (
+from kinswarm.actors.files.config import (
     AUTO_LISTEN,
     CONTROLLERS,
     RUN_KEYS,
@@ -57,7 +54,10 @@ from kinswarm.actors.run.config import (
     check_endpoint,
     placement_problem,
 )
-from kinswarm.actors.run.tables import PATH_KEYS, absolute, absolute_paths, copied, merged, plain, put, spec_error
+from kinswarm.actors.files.tables import PATH_KEYS, absolute, absolute_paths, copied, merged, plain, put, spec_error
+from kinswarm.actors.learning.settings import SPATIAL_STATES, LearnerSettings
+from kinswarm.actors.learning.state import OWN_EXTRAS
+from kinswarm.actors.policies.registry import DEFAULT, OWN_FIELDS, LearnerKind, learner_kind
 from kinswarm.actors.tasks import kinds, task_class
 from kinswarm.actors.tasks.base import TaskDef
 from kinswarm.protocol.keys import check_id
@@ -274,13 +274,13 @@ def check_inprocess(cfg: RunConfig) -> None:
 def check_checkpoints(run_dir: Path, task: TaskDef, learner: Mapping[str, Any], source: str = "<memory>") -> None:
     """Every DOF agent's checkpoint in `run_dir` loads into the learner this run gives it (the same state variables
     and neighbours), or the one line that says whose does not and why."""
-    from kinswarm.actors.run.checkpoint import CheckpointError, load_checkpoint
+    from kinswarm.actors.files.checkpoint import CheckpointError, load_checkpoint
 
     topo = task.topo
     if not run_dir.is_dir():
         raise CheckpointError(f"run.from {shown(str(run_dir))}: no such run directory")
     try:  # the run's own record says at once what it was a run of
-        from kinswarm.actors.run.config import load_run_config
+        from kinswarm.actors.files.config import load_run_config
 
         theirs = load_run_config(run_dir / "config.json").topo()
     except (ConfigError, SpecError):

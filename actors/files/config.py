@@ -1,4 +1,4 @@
-"""The resolved run: what every actor of a run reads. `actors/run/runfile.py` (the one loader) resolves a run file
+"""The resolved run: what every actor of a run reads. `actors/files/runfile.py` (the one loader) resolves a run file
 into a RunConfig; the supervisor writes it to `<out>/config.json` (owner-only: it holds the run's secret) and every
 actor process reads it back here. Plain data over protocol specs: the simulator's actor imports this, and nothing of
 the agents'.
@@ -21,6 +21,19 @@ from functools import cached_property
 from pathlib import Path
 from typing import Any
 
+from kinswarm.actors.files.bounds import (
+    at_most,
+    below,
+    boolean,
+    checks,
+    first_problem,
+    integer,
+    integer_in,
+    number_in,
+    one_of,
+    positive,
+    seconds,
+)
 from kinswarm.protocol.faults import LINK_FAULTS, PROCESS_FAULTS
 from kinswarm.protocol.keys import check_id
 from kinswarm.protocol.robots import parse_robot
@@ -101,37 +114,74 @@ def check_endpoint(text: str, what: str = "listen") -> str:
     return text
 
 
+def _run_id(name: str, v: Any, _: Any) -> str:
+    check_id("run id", v)  # a ValueError of its own, as every id's (protocol/keys.py)
+    return ""
+
+
+def _agents_drive_a_fleet(name: str, v: Any, cfg: RunConfig) -> str:
+    if v > 1 and cfg.controller != "agents":
+        return f"fleet: only the learning agents drive a fleet; controller {cfg.controller!r} drives one robot"
+    return ""
+
+
+def _secret(name: str, v: Any, _: Any) -> str:
+    return "" if isinstance(v, str) and len(v) >= 16 else "secret: expected a string of at least 16 characters"
+
+
+def _listen(name: str, v: Any, _: Any) -> str:
+    if v != AUTO_LISTEN:
+        check_endpoint(v, "--listen")  # its one line, as the command line's --listen gets it
+    return ""
+
+
+def _hosts(name: str, v: Any, _: Any) -> str:
+    ok = isinstance(v, list) and all(isinstance(h, str) for h in v)
+    return "" if ok else f"hosts: expected a list of host names, got {v!r}"
+
+
+def _task(name: str, v: Any, _: Any) -> str:
+    return "" if isinstance(v, dict) and isinstance(v.get("kind"), str) else "task: expected a table with a kind"
+
+
 @dataclass(frozen=True)
 class RunConfig:
-    run_id: str
+    """Each field's bounds are declared beside it (`checks`, actors/files/bounds.py), and checked in this order."""
+
+    run_id: str = field(metadata=checks(_run_id))
     out: str  # absolute path of the run directory
     robot: dict[str, Any]  # the resolved [robot] table (protocol/topology.py)
-    task: dict[str, Any]  # the resolved [task] table, `kind` first (actors/tasks/)
+    task: dict[str, Any] = field(metadata=checks(_task))  # the resolved [task] table, `kind` first (actors/tasks/)
     scene: dict[str, Any] = field(default_factory=dict)  # the resolved [scene] table (protocol/scene.py)
     learner: dict[str, Any] = field(default_factory=dict)  # LearnerSettings overrides (actors/learning/settings.py)
     source: str = "<memory>"  # the run file it was resolved from (for messages)
-    epochs: int = 60
-    steps: int = 500  # steps per epoch
-    seed: int = 0
-    placement: str = "process"  # one OS process per actor, all in one ("single"), or a plain loop ("inprocess")
-    learn: bool = True  # TD updates and fictitious-play counts; off: the swarm runs as trained
-    explore: bool = True  # off: greedy actions
+    epochs: int = field(default=60, metadata=checks(integer(1)))
+    steps: int = field(default=500, metadata=checks(integer(1)))  # steps per epoch
+    seed: int = field(default=0, metadata=checks(integer(0), below(2**63, "2**63")))
+    # one OS process per actor, all in one ("single"), or a plain loop ("inprocess")
+    placement: str = field(default="process", metadata=checks(one_of(PLACEMENTS)))
+    # TD updates and fictitious-play counts; off: the swarm runs as trained
+    learn: bool = field(default=True, metadata=checks(boolean))
+    explore: bool = field(default=True, metadata=checks(boolean))  # off: greedy actions
     # Every epoch after the first starts where the last one ended, not at the initial angles: the paper's
     # "successive on-line requests" of its test goals (§5.2).
-    successive: bool = False
+    successive: bool = field(default=False, metadata=checks(boolean))
     from_dir: str | None = None  # start from this run's checkpoints (absolute path)
     scenario: str | None = None  # a scenario TOML (timed faults, absolute path), read by the sim
-    controller: str = "agents"
-    action_deg: float = 1.0  # the size of every agent's move
-    deadline_ms: int = 500  # per step: a command missing by then means its joint holds
-    lease_ms: int = 1000  # how long a silent Zenoh peer still counts as present
-    checkpoint_every: int = 1  # every epoch: a restarted agent loses at most one epoch of learning (~3 ms a save)
-    max_restarts: int = 5  # restart policy: at most this many restarts of one agent ...
-    restart_window_s: float = 60.0  # ... within this many seconds, else the run fails
+    controller: str = field(default="agents", metadata=checks(one_of(CONTROLLERS)))
+    action_deg: float = field(default=1.0, metadata=checks(number_in(0, 45)))  # the size of every agent's move
+    # per step: a command missing by then means its joint holds
+    deadline_ms: int = field(default=500, metadata=checks(integer(1)))
+    # how long a silent Zenoh peer still counts as present
+    lease_ms: int = field(default=1000, metadata=checks(integer(LEASE_RANGE_MS[0]), at_most(LEASE_RANGE_MS[1])))
+    # every epoch: a restarted agent loses at most one epoch of learning (~3 ms a save)
+    checkpoint_every: int = field(default=1, metadata=checks(integer(0)))
+    max_restarts: int = field(default=5, metadata=checks(integer(0)))  # restart policy: at most this many restarts
+    restart_window_s: float = field(default=60.0, metadata=checks(positive))  # ... of one agent within this many s
     # a stall: no step of the lockstep for this long, or steps ending at the deadline without an agent's commands
     # (0: 10 s, or 4 deadlines if longer); recorded and shown, and past stall_limit_s the run ends naming the actor
-    stall_s: float = 0.0
-    stall_limit_s: float = 300.0
+    stall_s: float = field(default=0.0, metadata=checks(seconds))
+    stall_limit_s: float = field(default=300.0, metadata=checks(seconds))
     # every agent sends what it saw and chose at each step, once an epoch (AgentTrace -> agents.jsonl, the viewer)
     record_agents: bool = False
     # at the end: motion.gif (kinswarm animate) and, with the extra kinswarm[viewer], recording.rrd (kinswarm view).
@@ -140,61 +190,19 @@ class RunConfig:
     # B robots in lockstep through one swarm, each agent learning from all B (actors/agent/fleet.py and
     # actors/simulator/fleet.py); the run's metrics, recording and motion are robot 0's, EpochDone.fleet every
     # robot's final error
-    fleet: int = 1
+    fleet: int = field(default=1, metadata=checks(integer_in(1, MAX_FLEET), _agents_drive_a_fleet))
     # "same": every robot the epoch's goal; "spread": robot b of epoch e the task's goal (and start) of epoch e*B + b,
     # a goal list walked B goals an epoch (the paper's protocol is one goal an epoch: "same", or no fleet)
-    fleet_goals: str = "same"
-    listen: str = DEFAULT_LISTEN  # the supervisor's endpoint
+    fleet_goals: str = field(default="same", metadata=checks(one_of(FLEET_GOALS)))
+    listen: str = field(default=DEFAULT_LISTEN, metadata=checks(_listen))  # the supervisor's endpoint
     # Several hosts (a deploy plan): the hosts whose heartbeats the sim must hear to step, within lease_ms
-    hosts: list[str] = field(default_factory=list)
+    hosts: list[str] = field(default_factory=list, metadata=checks(_hosts))
     # Key of the messages' MAC (codec.py): only holders of config.json can speak on this run's keys.
-    secret: str = field(default_factory=lambda: secrets.token_hex(16), repr=False)
+    secret: str = field(default_factory=lambda: secrets.token_hex(16), repr=False, metadata=checks(_secret))
 
     def __post_init__(self) -> None:
-        check_id("run id", self.run_id)
-        ints = (("epochs", 1), ("steps", 1), ("seed", 0), ("deadline_ms", 1), ("checkpoint_every", 0))
-        ints += (("max_restarts", 0), ("lease_ms", LEASE_RANGE_MS[0]))
-        for name, lo in ints:
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, int) or v < lo:
-                raise ConfigError(f"{name}: expected an integer >= {lo}, got {v!r}")
-        if isinstance(self.fleet, bool) or not isinstance(self.fleet, int) or not 1 <= self.fleet <= MAX_FLEET:
-            raise ConfigError(f"fleet: expected an integer in [1, {MAX_FLEET}], got {self.fleet!r}")
-        if self.fleet_goals not in FLEET_GOALS:
-            raise ConfigError(f"fleet_goals: {self.fleet_goals!r} is not one of {', '.join(FLEET_GOALS)}")
-        if self.fleet > 1 and self.controller != "agents":
-            raise ConfigError(
-                f"fleet: only the learning agents drive a fleet; controller {self.controller!r} drives one robot"
-            )
-        if self.seed >= 2**63:
-            raise ConfigError(f"seed: expected an integer below 2**63, got {self.seed}")
-        if self.lease_ms > LEASE_RANGE_MS[1]:
-            raise ConfigError(f"lease_ms: expected at most {LEASE_RANGE_MS[1]}, got {self.lease_ms}")
-        for name in ("learn", "explore", "successive"):
-            if not isinstance(getattr(self, name), bool):
-                raise ConfigError(f"{name}: expected true or false, got {getattr(self, name)!r}")
-        if self.placement not in PLACEMENTS:
-            raise ConfigError(f"placement: {self.placement!r} is not one of {', '.join(PLACEMENTS)}")
-        if self.controller not in CONTROLLERS:
-            raise ConfigError(f"controller: {self.controller!r} is not one of {', '.join(CONTROLLERS)}")
-        ok = isinstance(self.action_deg, (int, float)) and not isinstance(self.action_deg, bool)
-        if not (ok and 0 < self.action_deg <= 45):
-            raise ConfigError(f"action_deg: expected a number in (0, 45], got {self.action_deg!r}")
-        w = self.restart_window_s
-        if not (isinstance(w, (int, float)) and not isinstance(w, bool) and math.isfinite(w) and w > 0):
-            raise ConfigError(f"restart_window_s: expected a number > 0, got {self.restart_window_s!r}")
-        for name in ("stall_s", "stall_limit_s"):
-            v = getattr(self, name)
-            if not (isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) and v >= 0):
-                raise ConfigError(f"{name}: expected a number of seconds >= 0, got {v!r}")
-        if not (isinstance(self.secret, str) and len(self.secret) >= 16):
-            raise ConfigError("secret: expected a string of at least 16 characters")
-        if self.listen != AUTO_LISTEN:
-            check_endpoint(self.listen, "--listen")
-        if not (isinstance(self.hosts, list) and all(isinstance(h, str) for h in self.hosts)):
-            raise ConfigError(f"hosts: expected a list of host names, got {self.hosts!r}")
-        if not (isinstance(self.task, dict) and isinstance(self.task.get("kind"), str)):
-            raise ConfigError("task: expected a table with a kind")
+        if problem := first_problem(self):
+            raise ConfigError(problem)
 
     @property
     def stall_bound(self) -> float:

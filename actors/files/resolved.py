@@ -9,10 +9,10 @@ from pathlib import Path
 from typing import Any
 
 import tomli_w
+from kinswarm.actors.files.config import RUN_KEYS, RunConfig
+from kinswarm.actors.files.runfile import learner_settings, task_of
+from kinswarm.actors.files.tables import plain
 from kinswarm.actors.learning.settings import LearnerSettings
-from kinswarm.actors.run.config import RUN_KEYS, RunConfig
-from kinswarm.actors.run.runfile import learner_settings, task_of
-from kinswarm.actors.run.tables import plain
 from kinswarm.actors.tasks.base import TaskDef
 from kinswarm.protocol.spec import SpecError
 
