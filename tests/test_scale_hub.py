@@ -145,3 +145,16 @@ def test_a_100_joint_chain_runs_in_one_process(tmp_path):
     assert not [e for e in events if e["event"] in ("exited", "restart")], events
     rows = [json.loads(line) for line in (out / "metrics.jsonl").read_text().splitlines()]
     assert len(rows) == 1
+
+
+def test_a_robot_past_pybullets_link_limit_is_refused_in_one_line_before_anything_starts(tmp_path, capsys):
+    """PyBullet reads links 0-126 of a body: a chain of 126 joints (and its tip link) loads, one of 127 is refused
+    when the run file is read, in one line, instead of failing in the sim's first getLinkState."""
+    from kinswarm.actors.run.runfile import load_run
+
+    assert load_run(chain_file(126, tmp_path / "chain126.toml")).topo().name == "chain126"
+    out = tmp_path / "run"
+    assert cli_main(["run", str(chain_file(127, tmp_path / "chain127.toml")), "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "128 links" in err and "at most 127" in err, err
+    assert not out.exists()
