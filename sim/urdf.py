@@ -59,10 +59,30 @@ def _capsule(length: float, radius: float) -> str:
     return f"    <visual>{geom}</visual>\n    <collision>{geom}</collision>\n"
 
 
+# PyBullet reads the state of links 0-126 of a body (measured: a chain of 126 joints and its tip link runs, one of 127
+# fails in getLinkState); a planar robot's body is a link a joint and a tip link an end effector
+MAX_LINKS = 127
+
+
+def too_many_links(topo: Topology) -> str | None:
+    """Why PyBullet cannot hold this planar robot as one body, or None."""
+    if topo.spatial:  # its own URDF: PyBullet says so itself when it loads it
+        return None
+    joints, tips = len(topo.order), len(topo.end_effectors)
+    if joints + tips <= MAX_LINKS:
+        return None
+    return (
+        f"{joints} joints and {tips} end effectors make {joints + tips} links in PyBullet (a link a joint, a tip link"
+        f" an end effector); a body holds at most {MAX_LINKS}"
+    )
+
+
 def urdf_text(topo: Topology, *, radius: float = 0.1) -> str:
     """The URDF document for `topo` (one robot, links in the x-y plane)."""
     if radius <= 0:
         raise ValueError(f"capsule radius must be > 0, got {radius}")
+    if problem := too_many_links(topo):
+        raise ValueError(f"robot {topo.name}: {problem}")
     out = [f'<?xml version="1.0"?>\n<robot name={quoteattr(topo.name)}>\n']
     out.append(f'  <link name="base">\n{_TINY_INERTIAL}  </link>\n')
     for aid in topo.order:

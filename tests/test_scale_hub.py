@@ -131,3 +131,30 @@ def test_forged_liveliness_tokens_during_start_up_change_nothing(tmp_path: Path)
     assert not forged["error"] and forged["missed_cmds"] == clean["missed_cmds"] == 0
     assert forged["final_error"] == clean["final_error"]
     assert forged["mean_error"] == clean["mean_error"]
+
+
+def test_a_100_joint_chain_runs_in_one_process(tmp_path):
+    """The single placement runs a step down and back up a chain as nested calls (runtime/node.py's inline
+    handlers): a 100-joint chain nested 200 deep and its root ended in RecursionError six times, then the run gave up.
+    Past INLINE_DEPTH the step goes through the mailbox; the run ends with every agent as it started."""
+    robot = chain_file(100, tmp_path / "chain100.toml")
+    out = tmp_path / "run"
+    args = ["run", str(robot), "--placement", "single", "--epochs", "1", "--steps", "3", "--out", str(out)]
+    assert cli_main([*args, "--run-id", "c100", "--no-progress"]) == 0
+    events = [json.loads(line) for line in (out / "events.jsonl").read_text().splitlines()]
+    assert not [e for e in events if e["event"] in ("exited", "restart")], events
+    rows = [json.loads(line) for line in (out / "metrics.jsonl").read_text().splitlines()]
+    assert len(rows) == 1
+
+
+def test_a_robot_past_pybullets_link_limit_is_refused_in_one_line_before_anything_starts(tmp_path, capsys):
+    """PyBullet reads links 0-126 of a body: a chain of 126 joints (and its tip link) loads, one of 127 is refused
+    when the run file is read, in one line, instead of failing in the sim's first getLinkState."""
+    from kinswarm.actors.run.runfile import load_run
+
+    assert load_run(chain_file(126, tmp_path / "chain126.toml")).topo().name == "chain126"
+    out = tmp_path / "run"
+    assert cli_main(["run", str(chain_file(127, tmp_path / "chain127.toml")), "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "128 links" in err and "at most 127" in err, err
+    assert not out.exists()

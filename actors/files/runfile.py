@@ -66,6 +66,7 @@ from kinswarm.protocol.scene import SceneSpec, agent_readings, parse_scene
 from kinswarm.protocol.spec import SpecError, shown, table
 from kinswarm.protocol.topology import ROBOT_KEYS, Topology
 from kinswarm.protocol.urdf_robot import URDF_KEYS
+from kinswarm.sim.urdf import too_many_links
 
 SECTIONS = ("run", "robot", "scene", "task", "learner")
 MAX_BASES = 8  # how deep `base` files may nest
@@ -383,7 +384,10 @@ def _robot(data: Any, source: str) -> tuple[dict[str, Any], Topology]:
     table(source, "robot", data, URDF_KEYS if isinstance(data, dict) and "urdf" in data else ROBOT_KEYS)
     if "name" not in data and source.endswith(".toml"):
         data = {"name": Path(source).stem, **data}
-    return data, parse_robot(data, source)
+    topo = parse_robot(data, source)
+    if problem := too_many_links(topo):  # refused here, before a process starts, not by the sim's first step
+        raise SpecError(source, "robot", problem)
+    return data, topo
 
 
 def _task(data: Any, topo: Topology, scene: SceneSpec, source: str) -> TaskDef:

@@ -36,6 +36,12 @@ M = TypeVar("M")
 
 _NOBODY: tuple[tuple, tuple] = ((), ())  # no Node and no tap of this session listens
 FAILED = "__failed__"  # the mailbox item that wakes the loop when an inline step handler raised (no Zenoh key)
+# Inline handlers nest: in the single placement a chain's step runs down and back up its joints as calls, each
+# handler's send running the next one's. A 100-joint chain nested 200 deep and ended in RecursionError. Past this
+# depth a step message goes into its mailbox instead (handled on the loop, in the same order): every robot of the
+# examples (at most 2 x 7 levels a step) still runs as calls.
+INLINE_DEPTH = 32
+_inline = threading.local()  # .depth: the inline handlers running on this thread, nested
 
 
 @dataclass(slots=True)
@@ -210,12 +216,14 @@ class Node(LinkFaults, Gathering):
         """Run a step handler here and now, under `lock`, when the actor serves inline, nothing waits in the mailbox
         (order is kept) and no link fault is active; else into the mailbox (`push`) for the loop. Zenoh's thread, or
         the thread of a Node of the same session that sent it (local delivery)."""
-        if self.inline and self.lock.acquire(False):  # busy (the loop, another thread, this very handler): mailbox
-            try:
+        depth = getattr(_inline, "depth", 0)
+        if depth < INLINE_DEPTH and self.inline and self.lock.acquire(False):  # busy (the loop, another thread, this
+            try:  # very handler) or nested too deep: the mailbox
                 if self.mailbox._items or self._link_faults or not self.inline or self._closed:
                     push(key, payload)
                 else:
                     self.inline_handled += 1
+                    _inline.depth = depth + 1
                     if self._tl is None:
                         handler(key, payload)
                     else:
@@ -223,6 +231,7 @@ class Node(LinkFaults, Gathering):
             except BaseException as e:  # next() raises it on the loop
                 self._fail(e)
             finally:
+                _inline.depth = depth
                 self.lock.release()
         else:
             push(key, payload)
