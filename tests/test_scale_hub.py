@@ -150,7 +150,7 @@ def test_a_100_joint_chain_runs_in_one_process(tmp_path):
 def test_a_robot_past_pybullets_link_limit_is_refused_in_one_line_before_anything_starts(tmp_path, capsys):
     """PyBullet reads links 0-126 of a body: a chain of 126 joints (and its tip link) loads, one of 127 is refused
     when the run file is read, in one line, instead of failing in the sim's first getLinkState."""
-    from kinswarm.actors.run.runfile import load_run
+    from kinswarm.actors.files.runfile import load_run
 
     assert load_run(chain_file(126, tmp_path / "chain126.toml")).topo().name == "chain126"
     out = tmp_path / "run"
