@@ -117,6 +117,11 @@ class Agent:
             subs.append(k.up(self.id))
         return subs
 
+    def stand_in_readings(self, lost: str) -> None:
+        """Hear and keep the encoder readings of `lost`, a descendant this agent stands in for (standin.py)."""
+        self.q_in.setdefault(lost, {})
+        self.node.listen(self.keys.obs(lost))
+
     def outputs(self) -> list[str]:
         """Every key this agent publishes on during a step; all must be matched before it is alive."""
         k = self.keys

@@ -65,8 +65,7 @@ class StandIn:
             self.listening.add(lost)
             spec = a.topo.agents[lost]
             if spec.has_dof:
-                a.q_in.setdefault(lost, {})
-                a.node.listen(a.keys.obs(lost))
+                a.stand_in_readings(lost)
             if spec.children:
                 a.node.listen(a.keys.up(lost))
 
