@@ -504,7 +504,10 @@ def test_sim_in_a_zenoh_session(tmp_path, chain4, endpoint):
             assert done.final_angles["a2"] == pytest.approx(q0["a2"] + ev.step * DEG, abs=1.5 * DEG)
             st = await ctl.wait_for(JointStatus, lambda s: s.step == 40)
             assert st.faults == {"a2": "locked"}
-            assert len(ctl.got[EpochDone]) == 1, "the replayed EpochStart was ignored"
+            # the replay never restarts the epoch: it lands while the epoch runs (ignored), or, on a loaded machine
+            # whose loop reaches its mailbox only after the inline steps ran to the end, after it (the supervisor
+            # asking again: the same EpochDone goes out again)
+            assert all(d == done for d in ctl.got[EpochDone]), "the replayed EpochStart restarted the epoch"
             ctl.node.send(k.ctl("stop"), Stop(reason="test"))
             bye = await ctl.wait_for(Bye)
             assert bye.steps == 40 and bye.rejected == 0
