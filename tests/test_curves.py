@@ -9,7 +9,9 @@ import importlib.util
 import json
 from pathlib import Path
 
+import numpy as np
 import pytest
+from kinswarm.actors.run.checkpoint import load_checkpoint
 from kinswarm.actors.step.learned import restore_learner
 from kinswarm.experiments.goals import halton
 from kinswarm.experiments.research import curves
@@ -37,11 +39,19 @@ def test_quick_curves_cover_every_point_and_resume_from_the_cache(tmp_path: Path
     for kind in ("fuzzy", "tabular"):
         (c,) = res["per_seed"][kind]
         assert c["runs"][0] is None and c["cpu_seconds"][0] == 0.0  # the untrained point
-        for n, run, cpu in zip(c["env_steps"][1:], c["runs"][1:], c["cpu_seconds"][1:], strict=True):
-            spec = json.loads((tmp_path / "runs" / run / "spec.json").read_text())
-            assert spec["epochs"] * spec["steps"] == n and spec["seed"] == 0  # a training of exactly n env steps
-            assert spec["learner"] == ([] if kind == "fuzzy" else [["kind", kind]])
-            assert cpu is not None and cpu > 0  # measured here, when it ran
+        cpus = c["cpu_seconds"][1:]
+        assert all(x > 0 for x in cpus) and cpus == sorted(cpus)  # one training's CPU time, up to each point
+        for n, run in zip(c["env_steps"][1:], c["runs"][1:], strict=True):
+            _, meta = load_checkpoint(tmp_path / "runs" / run / "agents" / "a1.npz", agent="a1", learner=kind)
+            assert meta["epochs_trained"] * z["train_steps"] == n  # the learners after exactly n env steps
+    # ... and they are what a training of that many epochs ends with, to the bit
+    half = curves.train_spec("fuzzy", 0, z, z["every"] // z["train_steps"])
+    prefix = run_spec(half, tmp_path / "prefix")
+    kept = tmp_path / "runs" / res["per_seed"]["fuzzy"][0]["runs"][1] / "agents"
+    for a in ("a1", "a2", "a3", "a4"):
+        mine, _ = load_checkpoint(prefix.out / "agents" / f"{a}.npz", agent=a, learner="fuzzy")
+        theirs, _ = load_checkpoint(kept / f"{a}.npz", agent=a, learner="fuzzy")
+        assert mine.keys() == theirs.keys() and all(np.array_equal(mine[k], theirs[k]) for k in mine), a
     if HAS_SB3:
         assert len(res["sweep"]) == 4
     report = (out / "report.md").read_text()

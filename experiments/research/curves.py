@@ -7,10 +7,11 @@ quad-tree goals twice each in the seed's order, 500-step episodes, a budget of 6
 move of the whole robot, every joint acting once), and every EVERY env steps from 0 to the budget the frozen,
 deterministic policy on the first 100 goals of Halton test set 0, 200 steps each from the start pose.
 
-  swarm      the fuzzy, independent and tabular learner kinds. The test point at N env steps is the frozen test
-             (`--from` its checkpoint, learn and explore off) of a training of N/500 epochs; a training of fewer
-             epochs is the first epochs of a longer one to the bit (lockstep, seeded), so the points are one training
-             read at 8 budgets. Each prefix is its own cached run, and its CPU-seconds are measured when it runs.
+  swarm      the fuzzy, independent and tabular learner kinds. One training to the budget per seed, its learners
+             kept every EVERY env steps (train_with_snapshots); the test point at N env steps is the frozen test
+             (`--from` the learners after N/500 epochs, learn and explore off). Those learners are what a training
+             of N/500 epochs ends with, to the bit (lockstep, seeded: tests/test_curves.py). Its CPU-seconds up to
+             each point are measured as it runs.
              The frozen run steps the robot as parallel_env does (tests/test_env.py: the paper's learners on the env
              give the inprocess run's final errors to the bit), so it is the peers' test, not a lookalike.
   ppo-shared PPO (SB3, library defaults) with one policy shared by the joints, on parallel_env (JointsVecEnv)
@@ -25,23 +26,30 @@ so a second call redoes nothing and an interrupted one resumes.
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import json
 import os
 import platform
 import resource
+import shutil
 import tempfile
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 from kinswarm.actors.learning.kinds import DEFAULT as DEFAULT_KIND
+from kinswarm.actors.report import write_summary
+from kinswarm.actors.run.config import RunConfig
+from kinswarm.actors.run.resolved import write_resolved
+from kinswarm.actors.supervisor.inprocess import InProcessRun
+from kinswarm.actors.supervisor.recorder import Recorder
 
 from ..common import Context, Report, frac_within, plt_module
 from ..goals import halton, quadtree, training_order
-from ..swarm import ROOT, RunOutcome, Spec, find_cached, learner_overrides, run_spec
+from ..swarm import ROOT, RunOutcome, Spec, json_default, learner_overrides, needs_no_messages, run_spec
 
 SEEDS = 3
 RUN_FILE = str(ROOT / "examples" / "reach-generalise.toml")  # the peers' (learners.RUN_FILE)
@@ -100,53 +108,97 @@ def _warm_up(kind: str) -> None:
         run_spec(spec, Path(tmp))
 
 
-def _timed(spec: Spec, runs: Path, cpu_file: Path) -> tuple[RunOutcome, float | None]:
-    """The run of `spec` (cached or fresh) and its training CPU-seconds: measured here when it runs, else as
-    recorded when it ran (None: it ran elsewhere, its CPU time unknown)."""
-    known: dict[str, float] = json.loads(cpu_file.read_text()) if cpu_file.is_file() else {}
-    cached = find_cached(spec, runs)
-    if cached is not None:
-        return run_spec(spec, runs), known.get(cached.name)
+class _SnapshotRun(InProcessRun):
+    """The inprocess run, its checkpoints (every `every` epochs) also copied, with its config.json, into a run
+    directory of their own (`at(epochs)`): what `--from` needs. The learners' state after N epochs, which a run of N
+    epochs would end with."""
+
+    def __init__(self, cfg: RunConfig, every: int, at: Callable[[int], Path]) -> None:
+        super().__init__(cfg, cfg.topo())
+        self.every, self.at = every, at
+
+    def checkpoint(self, epoch: int) -> None:
+        super().checkpoint(epoch)
+        if (epoch + 1) % self.every == 0:
+            dest = self.at(epoch + 1)
+            shutil.copytree(Path(self.cfg.out) / "agents", dest / "agents", dirs_exist_ok=True)
+            shutil.copy2(Path(self.cfg.out) / "config.json", dest / "config.json")
+
+
+def _snapshot_dir(out: Path, epochs: int) -> Path:
+    # a sibling of the run, named for it: a frozen test's identity names its `--from` directory by its name alone
+    return out.parent / f"{out.name}-at-e{epochs}"
+
+
+def train_with_snapshots(spec: Spec, runs: Path, every: int) -> tuple[Path, dict[int, float]]:
+    """`spec` trained once in the inprocess placement (as run_spec runs it), its learners kept every `every` epochs
+    (_snapshot_dir) and the training CPU-seconds up to each (this process's, checkpoints excluded), or all of it from
+    an earlier call. run_spec's records (config.json, run.toml, metrics.jsonl, summary.json, spec.json last: done)."""
+    out = (runs / f"{spec.name}-{spec.identity()[:8]}").resolve()
+    points = range(every, spec.epochs + 1, every)
+    record = out / "curve-cpu.json"  # epochs -> CPU-seconds, written before spec.json
+    if (out / "spec.json").is_file() and record.is_file() and all(_snapshot_dir(out, n).is_dir() for n in points):
+        return out, {int(k): v for k, v in json.loads(record.read_text()).items()}
+    for d in (out, *(_snapshot_dir(out, n) for n in points)):  # an unfinished earlier attempt
+        shutil.rmtree(d, ignore_errors=True)
+    out.mkdir(parents=True)
+    cfg = spec.config(out, run_id=f"x{spec.identity()}")
+    if not needs_no_messages(spec, cfg):
+        raise ValueError(f"{spec.name}: a curve's training runs in the inprocess placement")
+    cfg = dataclasses.replace(cfg, placement="inprocess", checkpoint_every=every)
+    cfg.write(out / "config.json")
+    write_resolved(cfg, out / "run.toml")
+    (out / "metrics.jsonl").write_text("")
+    cpu: dict[int, float] = {}
     c0 = _cpu()
-    out = run_spec(spec, runs)
-    cpu = _cpu() - c0
-    known[out.out.name] = cpu
-    cpu_file.write_text(json.dumps(known, indent=1, sort_keys=True) + "\n")
+
+    def on_epoch(done: Any) -> None:  # before the epoch's checkpoint: the training's CPU time alone
+        if (done.epoch + 1) % every == 0:
+            cpu[done.epoch + 1] = round(_cpu() - c0, 2)
+
+    result = _SnapshotRun(cfg, every, lambda n: _snapshot_dir(out, n)).run(Recorder(out), on_epoch)
+    write_summary(out, {"wall_seconds": result.wall_seconds, "interrupted": result.interrupted, "error": result.error})
+    if result.error or result.interrupted:
+        raise RuntimeError(f"run {spec.name} (seed {spec.seed}) failed: {result.error or 'interrupted'}")
+    record.write_text(json.dumps(cpu, indent=1) + "\n")
+    done = {**dataclasses.asdict(spec), "identity_wo_epochs": spec.identity(with_epochs=False)}
+    (out / "spec.json").write_text(json.dumps(done, indent=1, default=json_default) + "\n")  # last: marks it done
     return out, cpu
 
 
+def train_spec(kind: str, seed: int, z: dict[str, int], epochs: int) -> Spec:
+    """A swarm's training on the peers' goals: Level-3's, twice each in the seed's order (a goal per epoch)."""
+    return Spec(
+        f"curve-train-{kind}",
+        seed=seed,
+        epochs=epochs,
+        steps=z["train_steps"],
+        goals=training_order(quadtree(LEVEL), REPS, seed),
+        learner=_overrides(kind),
+        file=RUN_FILE,
+        checkpoint=True,
+    )
+
+
 def swarm_curve(ctx: Context, kind: str, seed: int, z: dict[str, int], used: list[RunOutcome]) -> dict[str, Any]:
-    """One kind, one seed: the frozen test at every point, from the checkpoint of a training of that many env
-    steps (0: the untrained learners, greedy on a zero Q). Every run it used is appended to `used`."""
-    goals = training_order(quadtree(LEVEL), REPS, seed)
+    """One kind, one seed: one training to the budget, and the frozen test at every point from its learners after
+    that many env steps (0: the untrained learners, greedy on a zero Q). The frozen tests are appended to `used`."""
     tests = tuple(halton(0)[: z["tests"]])
-    cpu_file = ctx.out / "swarm-cpu.json"  # run directory -> training CPU-seconds, measured on this machine
+    every = z["every"] // z["train_steps"]
+    out, cpu = train_with_snapshots(train_spec(kind, seed, z, z["budget"] // z["train_steps"]), ctx.runs, every)
     curve: dict[str, Any] = {"env_steps": [], "cpu_seconds": [], "within": [], "mean": [], "runs": []}
     for n in range(0, z["budget"] + 1, z["every"]):
         epochs = n // z["train_steps"]
-        trained, cpu = None, 0.0
-        if epochs:
-            train = Spec(
-                f"curve-train-{kind}-e{epochs}",
-                seed=seed,
-                epochs=epochs,
-                steps=z["train_steps"],
-                goals=goals,
-                learner=_overrides(kind),
-                file=RUN_FILE,
-                checkpoint=True,
-            )
-            trained, cpu = _timed(train, ctx.runs, cpu_file)
-            used.append(trained)
+        start = _snapshot_dir(out, epochs) if epochs else None
         test = Spec(
-            f"curve-test0-{kind}{'' if trained else '-untrained'}",
+            f"curve-test0-{kind}{'' if start else '-untrained'}",
             seed=seed,
             epochs=len(tests),
             steps=z["eval_steps"],
             goals=tests,
             learner=_overrides(kind),
             file=RUN_FILE,
-            from_dir=str(trained.out) if trained else None,
+            from_dir=str(start) if start else None,
             learn=False,
             explore=False,
         )
@@ -154,10 +206,10 @@ def swarm_curve(ctx: Context, kind: str, seed: int, z: dict[str, int], used: lis
         used.append(tested)
         errors = tested.final_errors
         curve["env_steps"].append(n)
-        curve["cpu_seconds"].append(None if cpu is None else round(cpu, 2))
+        curve["cpu_seconds"].append(cpu[epochs] if epochs else 0.0)
         curve["within"].append(frac_within(errors))
         curve["mean"].append(float(np.mean(errors)))
-        curve["runs"].append(trained.out.name if trained else None)
+        curve["runs"].append(start.name if start else None)
         print(
             f"  {kind} seed {seed}: {n:>6,} env steps, {curve['cpu_seconds'][-1]} CPU-s, "
             f"{100 * curve['within'][-1]:.0f} % within 0.5",
