@@ -33,7 +33,7 @@ def _first(a: dict[str, Any], bar: float) -> str:
 
 
 def _figure(rep: Any, plt: Any, agg: dict[str, dict[str, Any]], z: dict[str, int]) -> None:
-    from matplotlib.ticker import NullFormatter
+    from matplotlib.ticker import FixedLocator, FuncFormatter, NullFormatter
 
     fig, (ax_s, ax_c) = plt.subplots(1, 2, figsize=(11, 4.2), sharey=True)
     for m, a in agg.items():
@@ -56,7 +56,10 @@ def _figure(rep: Any, plt: Any, agg: dict[str, dict[str, Any]], z: dict[str, int
     ax_s.set_xlabel("env steps of training (a step: every joint moves once)")
     ax_s.set_ylabel(f"test set 0: share of {z['tests']} goals within 0.5 (%)")
     ax_c.set_xscale("log")
-    ax_c.xaxis.set_minor_formatter(NullFormatter())  # the decades only: the minor labels overlap
+    # plain numbers at 1-2-5 steps (a log axis labels decades only, and the methods may span less than one)
+    ax_c.xaxis.set_major_locator(FixedLocator([m * 10**e for e in range(-1, 5) for m in (1, 2, 5)]))
+    ax_c.xaxis.set_major_formatter(FuncFormatter(lambda x, _: f"{x:g}"))
+    ax_c.xaxis.set_minor_formatter(NullFormatter())
     ax_c.set_xlabel("training CPU-seconds (mean over seeds; tests excluded; log)")
     ax_s.legend(fontsize=7, loc="lower right")
     rep.save_figure(
@@ -94,6 +97,9 @@ def write(
         f"machine ({os.cpu_count()} cores shared with other work, at a load average of {os.getloadavg()[0]:.1f} when "
         "the report was written): CPU-seconds grow with the load."
     )
+    chosen = os.environ.get("KINSWARM_CURVES_METHODS")
+    if chosen:  # not in the command line above: the methods and their seeds
+        rep.text(f"Methods and seeds as chosen for this call: `KINSWARM_CURVES_METHODS={chosen}`.")
     methods = list(agg)
     missing = [m for m in ("fuzzy", "independent", "tabular", "ppo-shared", "sac") if m not in agg]
     if missing:
