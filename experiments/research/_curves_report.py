@@ -149,11 +149,11 @@ def write(
             "and tests; beside it the defaults' seed 0 (lr 3e-4, n_steps 2048).",
         )
         rows = []
-        runs = dict(sweep)
+        tried = dict(sweep)
         if "ppo-shared" in curves:
             n_steps = z["sweep_default_n_steps"]
-            runs = {f"defaults: lr 0.0003, n_steps {n_steps}": curves["ppo-shared"][0], **runs}
-        for name, r in runs.items():
+            tried = {f"defaults: lr 0.0003, n_steps {n_steps}": curves["ppo-shared"][0], **tried}
+        for name, r in tried.items():
             best = max(range(len(r["within"])), key=lambda i: r["within"][i])
             rows.append(
                 [
