@@ -104,7 +104,9 @@ def write(
         "generalisation runs record no curve: its point is its budget, and its CPU-seconds are one Level-3 "
         f"training (seed 0, {swarm_steps:,} env steps, inprocess placement) measured here: {swarm_cpu:.0f} CPU-s"
         + (f" (at a load average of {swarm['load']:.1f}). " if "load" in swarm else ". ")
-        + "PPO collects 2,048 steps per update: its last point can pass the budget.",
+        + "PPO collects 2,048 steps per update: its last point can pass the budget. Curves over seeds at the "
+        "same 64,000-step budget, a point every 8,000 env steps from 0, the swarm's learner kinds "
+        "included: docs/results/research/curves/report.md (`python -m kinswarm.experiments.research curves`).",
     )
     rows = []
     for r in peers.values():

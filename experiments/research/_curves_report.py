@@ -1,0 +1,169 @@
+"""The curves' report: the figure (over env steps, over CPU-seconds), the table of every point, time to skill and
+PPO's sweep. (A leading underscore: the research runner lists modules without one as studies.)"""
+
+from __future__ import annotations
+
+import os
+from typing import Any
+
+from ..common import Context
+
+BARS = (0.90, 0.95)
+COLORS = {"fuzzy": "C0", "independent": "C1", "tabular": "C2", "ppo-shared": "C3", "sac": "C4"}
+
+
+def _pct(x: float) -> str:
+    return f"{100 * x:.0f}"
+
+
+def _cell(a: dict[str, Any], i: int) -> str:
+    m, lo, hi = a["within_mean"][i], a["within_min"][i], a["within_max"][i]
+    return _pct(m) if a["seeds"] == 1 or lo == hi else f"{_pct(m)} ({_pct(lo)}–{_pct(hi)})"
+
+
+def _first(a: dict[str, Any], bar: float) -> str:
+    """The first point where the seeds' mean share reaches `bar`; how many seeds had reached it there."""
+    for i, (s, w) in enumerate(zip(a["env_steps"], a["within_mean"], strict=True)):
+        if w >= bar - 1e-9:
+            cpu = a["cpu_mean"][i]
+            seeds = sum(p[i] >= bar - 1e-9 for p in a["per_seed"])
+            at = f"{s:,} steps" + ("" if cpu is None else f" / {cpu:.0f} CPU-s")
+            return f"{at} ({seeds} of {a['seeds']} seeds there)"
+    return f"not by {a['env_steps'][-1]:,} steps"
+
+
+def _figure(rep: Any, plt: Any, agg: dict[str, dict[str, Any]], z: dict[str, int]) -> None:
+    from matplotlib.ticker import FixedLocator, FuncFormatter, NullFormatter
+
+    fig, (ax_s, ax_c) = plt.subplots(1, 2, figsize=(11, 4.2), sharey=True)
+    for m, a in agg.items():
+        color = COLORS.get(m)
+        y = [100 * w for w in a["within_mean"]]
+        lo, hi = [100 * w for w in a["within_min"]], [100 * w for w in a["within_max"]]
+        label = f"{a['label']} ({a['seeds']} seeds)"
+        ax_s.plot(a["env_steps"], y, marker=".", color=color, label=label)
+        ax_s.fill_between(a["env_steps"], lo, hi, color=color, alpha=0.18, lw=0)
+        keep = [i for i, c in enumerate(a["cpu_mean"]) if c is not None and c > 0]  # log axis: the trained points
+        if keep:
+            xs = [a["cpu_mean"][i] for i in keep]
+            ax_c.plot(xs, [y[i] for i in keep], marker=".", color=color, label=label)
+            ax_c.fill_between(xs, [lo[i] for i in keep], [hi[i] for i in keep], color=color, alpha=0.18, lw=0)
+    for ax in (ax_s, ax_c):
+        ax.axhline(90, color="grey", lw=0.6, ls=":")
+        ax.axhline(95, color="grey", lw=0.6, ls="--")
+        ax.set_ylim(0, 102)
+        ax.grid(alpha=0.3)
+    ax_s.set_xlabel("env steps of training (a step: every joint moves once)")
+    ax_s.set_ylabel(f"test set 0: share of {z['tests']} goals within 0.5 (%)")
+    ax_c.set_xscale("log")
+    # plain numbers at 1-2-5 steps (a log axis labels decades only, and the methods may span less than one)
+    ax_c.xaxis.set_major_locator(FixedLocator([m * 10**e for e in range(-1, 5) for m in (1, 2, 5)]))
+    ax_c.xaxis.set_major_formatter(FuncFormatter(lambda x, _: f"{x:g}"))
+    ax_c.xaxis.set_minor_formatter(NullFormatter())
+    ax_c.set_xlabel("training CPU-seconds (mean over seeds; tests excluded; log)")
+    ax_s.legend(fontsize=7, loc="lower right")
+    rep.save_figure(
+        fig,
+        "curves.png",
+        f"Share of test set 0 within 0.5 ({z['tests']} goals, frozen, {z['eval_steps']} steps from the start pose) "
+        "over training: mean over seeds (line) and min–max over seeds (band); left over env steps, right over "
+        "training CPU-seconds",
+    )
+
+
+def write(
+    ctx: Context,
+    z: dict[str, int],
+    agg: dict[str, dict[str, Any]],
+    curves: dict[str, list[dict[str, Any]]],
+    sweep: dict[str, dict[str, Any]],
+    report_cls: Any,
+    plt_module: Any,
+    runs: list[Any] | None = None,
+) -> dict[str, Any]:
+    rep = report_cls(ctx, "Learning curves: the swarm and its peers over env steps, seeds and budgets equal", "§5.2")
+    rep.text(
+        "Every method trained on examples/reach-generalise.toml (chain4, 1° moves, reward `graded`, the start pose "
+        f"each episode) on Level-3's 64 quad-tree goals twice each in the seed's order, {z['train_steps']}-step "
+        f"episodes, for {z['budget']:,} env steps (one env step: every joint moves once). Every {z['every']:,} env "
+        f"steps from 0, the frozen, deterministic policy is tested on the first {z['tests']} goals of Halton test "
+        f"set 0, {z['eval_steps']} steps each from the start pose: the share whose final error is within 0.5. "
+        "Swarm: the frozen run (`--from` the checkpoint of a training of that many env steps, learn and explore "
+        "off), which steps the robot as parallel_env does (tests/test_env.py); peers: learners.evaluate in "
+        "parallel_env / gym_env, as `kinswarm experiment peers` tests them. Library defaults for the peers "
+        "(SB3's PPO: lr 3e-4, n_steps 2048 per joint row, batch 64, 10 epochs; torch at one thread). CPU-seconds: "
+        "training alone, tests excluded (swarm: each training's own process CPU time, measured when it ran, "
+        "numba compiled beforehand; peers: learners.CurveCallback's). All of it ran fresh by this command on this "
+        f"machine ({os.cpu_count()} cores shared with other work, at a load average of {os.getloadavg()[0]:.1f} when "
+        "the report was written): CPU-seconds grow with the load."
+    )
+    chosen = os.environ.get("KINSWARM_CURVES_METHODS")
+    if chosen:  # not in the command line above: the methods and their seeds
+        rep.text(f"Methods and seeds as chosen for this call: `KINSWARM_CURVES_METHODS={chosen}`.")
+    methods = list(agg)
+    missing = [m for m in ("fuzzy", "independent", "tabular", "ppo-shared", "sac") if m not in agg]
+    if missing:
+        rep.text(f"Not run by this command: {', '.join(missing)}.")
+    rep.text("## The curves")
+    _figure(rep, plt_module(), agg, z)
+    steps = agg[methods[0]]["env_steps"] if methods else []
+    rep.text(
+        "Share of test set 0 within 0.5 (%), mean over seeds (min–max over seeds where they differ), at every "
+        "point (env steps):"
+    )
+    rows = []
+    for a in agg.values():
+        rows.append([a["label"], str(a["seeds"]), *(_cell(a, i) for i in range(len(a["env_steps"])))])
+    rep.table(["method", "seeds", *(f"{s:,}" for s in steps)], rows)
+    rep.text("## Time to skill and cost")
+    rows = []
+    for a in agg.values():
+        cpu = a["cpu_mean"][-1]
+        rate = f"{a['env_steps'][-1] / cpu:,.0f}" if cpu else "—"
+        rows.append(
+            [
+                a["label"],
+                *(_first(a, b) for b in BARS),
+                f"{100 * a['within_mean'][-1]:.0f} %",
+                f"{a['mean_error'][-1]:.3f}",
+                "—" if cpu is None else f"{cpu:.1f}" if cpu < 10 else f"{cpu:.0f}",
+                rate,
+            ]
+        )
+    rep.table(
+        [
+            "method",
+            "first point the mean reaches ≥ 90 %",
+            "≥ 95 %",
+            "at the budget",
+            "mean final error at the budget",
+            "training CPU-s for the budget (mean)",
+            "env steps per CPU-s",
+        ],
+        rows,
+    )
+    if sweep:
+        rep.text(
+            "## PPO's sweep (the shared policy, seed 0)",
+            "Learning rate x n_steps (per joint row of the vector env), the rest SB3's defaults, the same budget "
+            "and tests; beside it the defaults' seed 0 (lr 3e-4, n_steps 2048).",
+        )
+        rows = []
+        tried = dict(sweep)
+        if "ppo-shared" in curves:
+            n_steps = z["sweep_default_n_steps"]
+            tried = {f"defaults: lr 0.0003, n_steps {n_steps}": curves["ppo-shared"][0], **tried}
+        for name, r in tried.items():
+            best = max(range(len(r["within"])), key=lambda i: r["within"][i])
+            rows.append(
+                [
+                    name,
+                    *(f"{100 * r['within'][i]:.0f}" for i in range(len(steps))),
+                    f"{100 * r['within'][best]:.0f} % at {r['env_steps'][best]:,}",
+                    f"{r['cpu_seconds'][-1]:.0f}",
+                ]
+            )
+        rep.table(["PPO, seed 0", *(f"{s:,}" for s in steps), "best point", "training CPU-s"], rows)
+    rep.results = {"size": z, "curves": agg, "per_seed": curves, "sweep": sweep}
+    rep.write({"run_file": "examples/reach-generalise.toml", "size": z}, runs or [])
+    return rep.results
