@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from kinswarm.actors.run.checkpoint import load_checkpoint
+from kinswarm.actors.files.checkpoint import load_checkpoint
 from kinswarm.actors.step.learned import restore_learner
 from kinswarm.experiments.goals import halton
 from kinswarm.experiments.research import curves

@@ -40,11 +40,11 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from kinswarm.actors.learning.kinds import DEFAULT as DEFAULT_KIND
+from kinswarm.actors.files.config import RunConfig
+from kinswarm.actors.files.resolved import write_resolved
+from kinswarm.actors.policies.registry import DEFAULT as DEFAULT_KIND
 from kinswarm.actors.report import write_summary
-from kinswarm.actors.run.config import RunConfig
-from kinswarm.actors.run.resolved import write_resolved
-from kinswarm.actors.supervisor.inprocess import InProcessRun
+from kinswarm.actors.run.inprocess import InProcessRun
 from kinswarm.actors.supervisor.recorder import Recorder
 
 from ..common import Context, Report, frac_within, plt_module
