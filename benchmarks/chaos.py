@@ -559,6 +559,15 @@ def stop_everything(base: Path, procs: list[subprocess.Popen | None], pids: dict
         if p is not None:
             with contextlib.suppress(subprocess.TimeoutExpired):
                 p.wait(timeout=10.0)
+    # until each is gone: a killed process lives on while the kernel frees it (seconds for PyBullet's on a loaded
+    # machine), and a zygote can fork one more actor between the scan above and its own kill
+    deadline = time.monotonic() + 10.0
+    while (left := {pid for pid in doomed if _alive(pid)} | set(naming(base))) and time.monotonic() < deadline:
+        for pid in left - doomed:
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(pid, signal.SIGKILL)
+        doomed |= left
+        time.sleep(0.05)
     return len(doomed)
 
 
