@@ -21,14 +21,13 @@ cannot freeze), a fault on agents a baseline run does not have.
 from __future__ import annotations
 
 import math
-import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from kinswarm.protocol.faults import ALL, JOINT_FAULTS, check_fault
 from kinswarm.protocol.messages import Fault
-from kinswarm.protocol.spec import one_line, shown
+from kinswarm.protocol.spec import one_line, read_toml, shown
 from kinswarm.protocol.topology import Topology
 
 
@@ -132,13 +131,5 @@ def parse_scenario(data: dict[str, Any], topo: Topology, source: str = "<memory>
 
 
 def load_scenario(path: str | Path, topo: Topology) -> Scenario:
-    path = Path(path)
-    try:
-        text = path.read_text()
-    except (OSError, ValueError) as e:  # ValueError: a NUL in the name
-        raise ScenarioError(str(path), "file", f"cannot read: {getattr(e, 'strerror', None) or e}") from None
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as e:
-        raise ScenarioError(str(path), "toml", str(e)) from None
+    data = read_toml(path, ScenarioError)
     return parse_scenario(data, topo, source=str(path))

@@ -4,6 +4,9 @@ the checks of numbers and vectors."""
 from __future__ import annotations
 
 import math
+import tomllib
+from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
 
@@ -51,3 +54,16 @@ def table(src: str, where: str, v: Any, known: set[str] | frozenset[str]) -> dic
         name = bad[0] if str(bad[0]).isprintable() else repr(bad[0])  # a key like "\n" is named on the one line
         raise SpecError(src, f"{where}.{name}", f"unknown field (expected {', '.join(sorted(known))})")
     return v
+
+
+def read_toml(path: str | Path, error: Callable[[str, str, str], Exception] = SpecError) -> dict[str, Any]:
+    """A TOML file's document; a file that cannot be read, or is no TOML, is `error(file, where, what)`: one line."""
+    p = Path(path)
+    try:
+        text = p.read_text()
+    except (OSError, ValueError) as e:  # ValueError: a NUL in the name
+        raise error(str(p), "file", f"cannot read: {getattr(e, 'strerror', None) or e}") from None
+    try:
+        return tomllib.loads(text)
+    except tomllib.TOMLDecodeError as e:
+        raise error(str(p), "toml", str(e)) from None

@@ -63,7 +63,7 @@ from kinswarm.actors.tasks.base import TaskDef
 from kinswarm.protocol.keys import check_id
 from kinswarm.protocol.robots import parse_robot
 from kinswarm.protocol.scene import SceneSpec, agent_readings, parse_scene
-from kinswarm.protocol.spec import SpecError, shown, table
+from kinswarm.protocol.spec import SpecError, read_toml, shown, table
 from kinswarm.protocol.topology import ROBOT_KEYS, Topology
 from kinswarm.protocol.urdf_robot import URDF_KEYS
 from kinswarm.sim.urdf import too_many_links
@@ -82,18 +82,6 @@ _MISSING = {
     "robot": 'missing: give a [robot] table or robot = "a robot file"',
     "task": f"missing: give a [task] table with kind = one of {', '.join(kinds())}",
 }
-
-
-def read_toml(path: str | Path) -> dict[str, Any]:
-    p = Path(path)
-    try:
-        text = p.read_text()
-    except (OSError, ValueError) as e:  # ValueError: a NUL in the name
-        raise SpecError(str(p), "file", f"cannot read: {getattr(e, 'strerror', None) or e}") from None
-    try:
-        return tomllib.loads(text)
-    except tomllib.TOMLDecodeError as e:
-        raise SpecError(str(p), "toml", str(e)) from None
 
 
 def parse_set(text: str) -> tuple[tuple[str, ...], Any]:
