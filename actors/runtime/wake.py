@@ -4,8 +4,9 @@ towards it meanwhile is lost. That is not its peers leaving. `WakeGuard` tells t
 own, `watch`, or the owner's periodic timer, `expect`/`ticked`) late by half a lease means this process did not run;
 a token loss heard within a lease of such a wake is held, and counts only if the token is still gone a lease later.
 
-Used by the agents (a descendant's loss: stand in or not), the simulator (an agent's loss: wait for its command or
-not) and the supervisor (a loss recorded, a stall judged, a reply asked for again)."""
+Used by the agents (a descendant's loss: stand in or not) and the supervisor (a loss recorded, a stall judged, a reply
+asked for again). The simulator needs none: an agent's token lost while it stalled costs only that agent's joint
+holding for the steps until it is back (it is waited for again from the next step)."""
 
 from __future__ import annotations
 

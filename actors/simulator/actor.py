@@ -43,6 +43,8 @@ from kinswarm.protocol.topology import Topology
 from kinswarm.sim.robot import Robot
 from kinswarm.sim.world import World
 
+from .hosts import HostSilence
+
 # Timers and liveliness changes go through the mailbox under keys no Zenoh key can equal (those start
 # with "ks/"), so every handler but the commands' runs on the loop, in arrival order. The commands are handled on
 # Zenoh's thread as they arrive (Node.listen's `inline`; under the node's lock, so never beside the loop's handlers):
@@ -83,14 +85,14 @@ class SimActor:
         # (a step published on Zenoh's thread needs no timer of its own; see _on_watchdog)
         self._deadline: asyncio.TimerHandle | None = None
         self._loop: asyncio.AbstractEventLoop | None = None
-        # Several hosts (a deploy plan): the sim hears every host's heartbeat. While one is silent for a lease
-        # the next step is held back, not run on stale or missing data, and published once all are heard again.
-        # The silence itself is the signal: during a cut even local messages stalled for ~9 s (measured).
-        self.hosts = frozenset(cfg.hosts) if len(cfg.hosts) > 1 else frozenset()
-        self.lease = cfg.lease_ms / 1000
-        self.heard: dict[str, float] = {}
+        # Several hosts (a deploy plan): steps are held while one is silent for a lease (hosts.py)
+        self.silence = HostSilence(
+            cfg.hosts,
+            cfg.lease_ms / 1000,
+            self._event,
+            lambda delay: self._later(delay, self.node.mailbox.push, PAUSE_CHECK, b""),
+        )
         self.held = False
-        self._paused = False
         self._host_prefix = self.keys.prefix("host")
         self._status: asyncio.TimerHandle | None = None
         self._cmd_prefix = self.keys.prefix("cmd")
@@ -115,7 +117,7 @@ class SimActor:
     async def run(self) -> None:
         node, k = self.node, self.keys
         node.listen(k.ctl_all, inline=self._on_ctl_sample)
-        if self.hosts:
+        if self.silence.hosts:
             node.listen(k.host("*"))
         node.listen(k.cmd_all, inline=self._on_cmd_sample)
         push = node.mailbox.push
@@ -171,8 +173,8 @@ class SimActor:
             if (e := node.decode(key, payload, EpochStart)) is not None:
                 self._on_epoch(e)
         elif key.startswith(self._host_prefix):
-            if (hb := node.decode(key, payload, Heartbeat)) is not None and hb.host in self.hosts:
-                self.heard[hb.host] = time.monotonic()
+            if (hb := node.decode(key, payload, Heartbeat)) is not None:
+                self.silence.heard_from(hb.host)
         elif key == PAUSE_CHECK:
             self._check_pause()
         elif key == k.ctl("stop"):
@@ -183,27 +185,11 @@ class SimActor:
 
     @property
     def paused(self) -> bool:
-        """A host is silent (checked when a step is due, and every tenth of a second while held)."""
-        if not self.hosts:
-            return False
-        silent = self._silent()
-        if silent and not self._paused:
-            self._paused = True
-            self._event("pause", "sim", f"no heartbeat from {', '.join(silent)} for a lease; steps held")
-            self._later(0.1, self.node.mailbox.push, PAUSE_CHECK, b"")
-        return self._paused
-
-    def _silent(self) -> list[str]:
-        now = time.monotonic()
-        return sorted(h for h in self.hosts if now - self.heard.get(h, now) > self.lease)
+        """A host is silent: the next step is held (hosts.py)."""
+        return self.silence.holding()
 
     def _check_pause(self) -> None:
-        if self._silent():
-            asyncio.get_running_loop().call_later(0.1, self.node.mailbox.push, PAUSE_CHECK, b"")
-            return
-        self._paused = False
-        self._event("resume", "sim", "every host heard again")
-        if self.held and self.epoch is not None:
+        if self.silence.recheck() and self.held and self.epoch is not None:
             self.held = False
             self._publish_step()
 

@@ -99,7 +99,7 @@ class FleetSim(SimActor):
 
     def _check_pause(self) -> None:
         super()._check_pause()
-        if not self._paused:  # every host heard again: the robots held go on
+        if not self.silence.paused:  # every host heard again: the robots held go on
             for lane in self.lanes[1:]:
                 if lane.held and lane.epoch is not None:
                     lane.held = False
@@ -153,7 +153,7 @@ class _SimLane(SimActor):
 
     @property
     def paused(self) -> bool:
-        return self.fleet._paused
+        return self.fleet.silence.paused
 
     def _arm(self, delay: float) -> None:
         pass  # lane 0's watchdog checks this robot's step (FleetSim._on_watchdog)
