@@ -183,3 +183,23 @@ def test_dense_grid_never_allocated():
     assert ln.rules_used <= 64 * 1000
     assert ln.memory_bytes < dense / 20
     assert ln.q.phi.shape[0] < 1_783_600
+
+
+def test_taking_turns_is_per_user_and_gives_way_where_no_lock_file_can_be_had(tmp_path, monkeypatch) -> None:
+    """The compile's turn-taking lock: one file per user in the temporary directory, and a directory it cannot
+    write (another user's file of the same name, a read-only /tmp) costs the turns, not the learner."""
+    import os
+    import tempfile
+
+    from kinswarm.actors.learning.learner import _taking_turns
+
+    monkeypatch.setattr(tempfile, "gettempdir", lambda: str(tmp_path))
+    ran = []
+    with _taking_turns("x"):
+        ran.append(1)
+    (lock,) = tmp_path.iterdir()
+    assert lock.name.startswith(f"kinswarm-{os.getuid()}-"), lock.name
+    monkeypatch.setattr(tempfile, "gettempdir", lambda: str(tmp_path / "missing"))
+    with _taking_turns("x"):
+        ran.append(2)
+    assert ran == [1, 2]
