@@ -376,3 +376,34 @@ def test_view_saved_into_a_directory_is_one_line(tmp_path, capsys):
         assert err.startswith("kinswarm: error: --save ") and says in err and "\n" not in err, err
         assert "Traceback" not in err
     assert not (tmp_path / "nowhere").exists()
+
+
+@pytest.mark.timeout(120)
+def test_status_waits_for_a_run_that_is_there_but_silent_and_gives_up_once_it_is_gone(tmp_path, capsys):
+    """A run whose process holds its directory but sends no status yet (a 100-agent start forks for seconds first)
+    is waited for, said once; once nothing holds the directory, status gives up in one line."""
+    import threading
+
+    from kinswarm.actors.runtime.net import open_session
+
+    out = epochs_dir(tmp_path / "starting", 0)
+    port = free_port()
+    endpoint = f"tcp/127.0.0.1:{port}"
+    session = open_session(listen=[endpoint])  # where the run's hub would be: reachable, but nothing speaks
+    lock = open(out / ".lock")  # noqa: SIM115 (closed by the thread below)
+    fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    release = threading.Timer(8.0, lock.close)  # the run's process goes away while status waits
+    release.start()
+    try:
+        t0 = time.monotonic()
+        assert cli(["status", "r", "--run-dir", str(out), "--connect", endpoint]) == 2
+        waited = time.monotonic() - t0
+    finally:
+        release.cancel()
+        lock.close()
+        session.close()
+    err = capsys.readouterr().err
+    assert "run r is running but has sent no status for 5 s" in err and "still waiting" in err, err
+    assert err.count("still waiting") == 1, err
+    assert "kinswarm: error: no status from run r" in err, err
+    assert waited >= 8.0, waited  # it did not give up while the run's process was there

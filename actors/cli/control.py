@@ -21,7 +21,7 @@ from pathlib import Path
 from kinswarm.actors.cli.output import Output, OutputGone
 from kinswarm.actors.control.client import Client, ControlError, make_fault, run_config, run_config_at, tool_net
 from kinswarm.actors.files.config import ConfigError, RunConfig
-from kinswarm.actors.files.rundir import failed_start, run_state
+from kinswarm.actors.files.rundir import failed_start, lock_held, run_state
 from kinswarm.actors.runtime import NetSpec, setup_logging
 from kinswarm.protocol.faults import FAULTS, describe
 from kinswarm.protocol.messages import JointStatus, SwarmStatus
@@ -76,10 +76,27 @@ async def show_status(cfg: RunConfig, connect: str | NetSpec, watch: bool, run_d
     if (run_dir / "summary.json").exists():
         print(ended(run_dir, cfg.run_id))
         return
+    said = False
+
+    def keep_waiting(waited: float) -> bool:
+        """A run here whose process still holds its directory is there, only slow to speak (a 100-agent start forks
+        for seconds before its first status): waited for, said once. Another host's run, or one gone, is not."""
+        nonlocal said
+        if not lock_held(run_dir) or (run_dir / "summary.json").exists():
+            return False
+        if not said:
+            print(
+                f"kinswarm: run {cfg.run_id} is running but has sent no status for {waited:g} s (starting, or its "
+                "machine is loaded); still waiting (Ctrl-C to stop)",
+                file=sys.stderr,
+            )
+            said = True
+        return True
+
     async with Client(cfg, connect) as c:
         first = time.monotonic()
         try:
-            async for status, joints in c.statuses():
+            async for status, joints in c.statuses(keep_waiting=keep_waiting):
                 table = render(status, joints, cfg.run_id)
                 if not watch:
                     if joints is None and time.monotonic() - first < 2.0:

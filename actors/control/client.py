@@ -14,6 +14,7 @@ from __future__ import annotations
 import os
 import secrets
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 from kinswarm.actors.files.config import ConfigError, RunConfig, load_run_config
@@ -90,16 +91,23 @@ class Client:
                 return reply
         raise ControlError(f"the supervisor of run {k.run} did not answer within {timeout:g} s")
 
-    async def statuses(self, timeout: float = 5.0):  # noqa: ANN201 -- an async iterator of (status, joints)
+    async def statuses(self, timeout: float = 5.0, keep_waiting: Callable[[float], bool] | None = None):  # noqa: ANN201 -- an async iterator of (status, joints)
+        """The run's statuses as they come. `timeout` seconds without one end the wait, unless `keep_waiting(waited)`
+        says to go on (a run that is there but busy: starting, or on a loaded machine)."""
         k = self.node.keys
         self.node.listen(k.metrics("status"))
         self.node.listen(k.metrics("joints"))
         joints: JointStatus | None = None
+        waited = 0.0
         while True:
             try:
                 key, payload = await self.node.recv(timeout=timeout)
             except TimeoutError:
-                raise ControlError(f"no status from run {k.run} at {self.connect} within {timeout:g} s") from None
+                waited += timeout
+                if keep_waiting is not None and keep_waiting(waited):
+                    continue
+                raise ControlError(f"no status from run {k.run} at {self.connect} within {waited:g} s") from None
+            waited = 0.0
             if key == k.metrics("joints"):
                 joints = self.node.decode(key, payload, JointStatus) or joints
             elif (status := self.node.decode(key, payload, SwarmStatus)) is not None:
