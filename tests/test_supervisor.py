@@ -52,3 +52,28 @@ def test_a_run_leaves_no_task_timer_or_actor_behind(tmp_path):
     left, sup = asyncio.run(main())
     assert left == set() and sup._timers == set()
     assert (out / "metrics.jsonl").read_text().count("\n") == 2 and (out / "events.jsonl").exists()
+
+
+def test_a_stop_while_the_swarm_starts_stops_the_start() -> None:
+    """`kinswarm down` before the first epoch: the readiness wait handles the mailbox through `_handle`, which once
+    let a Stop go by (only the epochs' waits acted on it), so the run went on to train."""
+    from kinswarm.actors.supervisor.core import Supervisor, _Down
+    from kinswarm.protocol.keys import Keys
+    from kinswarm.protocol.messages import Stop
+
+    class Decoded:  # the mailbox's item, already decoded (the codec is tested on its own)
+        def decode(self, key: str, payload: object, expect: type) -> object:
+            return payload if isinstance(payload, expect) else None
+
+    sup = Supervisor.__new__(Supervisor)
+    sup.keys, sup.node = Keys("r"), Decoded()
+
+    async def recv(timeout: float | None) -> tuple[str, object]:
+        return sup.keys.ctl("stop"), Stop(reason="kinswarm down from h1")
+
+    sup._recv = recv  # type: ignore[method-assign]
+    sup.lead = True
+    with pytest.raises(_Down, match="stop requested"):
+        asyncio.run(sup._handle(1.0))
+    sup.lead = False  # a follower's supervisor stops when its leader tells the actors, not on the request itself
+    asyncio.run(sup._handle(1.0))

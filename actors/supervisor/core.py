@@ -139,8 +139,10 @@ class Supervisor:
         return await self.node.recv(timeout=timeout)
 
     async def _handle(self, timeout: float | None) -> None:
-        """Handle the next mailbox item (TimeoutError after `timeout` s)."""
-        self._route(*await self._recv(timeout))
+        """Handle the next mailbox item while the swarm starts (TimeoutError after `timeout` s): a Stop then is
+        `kinswarm down` before the first epoch, and stops the start."""
+        if isinstance(item := self._route(*await self._recv(timeout)), Stop):
+            self._stop_requested(item)
 
     def _stop_requested(self, stop: Stop) -> None:
         """A Stop on ctl/stop while the leader waits: someone ran `kinswarm down`."""
