@@ -39,7 +39,6 @@ from kinswarm.protocol.messages import (
     JointStatus,
     Saved,
     Stop,
-    SwarmStatus,
 )
 from kinswarm.protocol.topology import Topology
 
@@ -53,6 +52,7 @@ from .replies import Replies
 from .restarts import RestartBudgetSpent, RestartPolicy
 from .result import NoMessage, RunResult, SwarmError
 from .stalls import SIM_SILENT, StallError, StallWatch
+from .status import swarm_status
 
 log = logging.getLogger("kinswarm.supervisor")
 ALIVE, RESPAWN, STATUS = "__alive__", "__respawn__", "__status__"  # the supervisor's own mailbox items
@@ -431,28 +431,18 @@ class Supervisor:
 
     def _publish_status(self, now: float) -> None:
         assert self.node is not None
-        ids = [ident for _, ident in self.expected]
-        roles = dict((ident, role) for role, ident in self.expected)
-        pids = self.placement.pids
-        faults: dict[str, list[str]] = {i: [] for i in ids}
-        for agent, what in self.faults.status(now).items():
-            faults.setdefault(agent, []).extend(what)
-        for ident, (since, why) in self.why_down.items():
-            if ident in faults and (roles[ident], ident) not in self.alive:
-                faults[ident].append(f"down {now - since:.1f} s: {why}")
-        if self.joints is not None:
-            for joint, what in self.joints.faults.items():
-                faults.setdefault(joint, []).append(what)
-        if stalled := self.stalls.status(now):
-            faults.setdefault("sim", []).append(stalled)
-        status = SwarmStatus(
+        status = swarm_status(
             epoch=self.epochs.epoch,
             epochs=self.cfg.epochs,
-            role=roles,
-            alive={i: int((roles[i], i) in self.alive) for i in ids},
-            pid={i: pids.get(i, 0) for i in ids},
-            host={i: self.hostname.get(self.host_of((roles[i], i)), self.host_of((roles[i], i))) for i in ids},
-            restarts={i: self.restarts.total(i) for i in ids},
-            faults=faults,
+            expected=self.expected,
+            alive=self.alive,
+            pids=self.placement.pids,
+            host=lambda actor: self.hostname.get(self.host_of(actor), self.host_of(actor)),
+            restarts=self.restarts.total,
+            faults_now=self.faults.status(now),
+            why_down=self.why_down,
+            joints=self.joints,
+            stalled=self.stalls.status(now),
+            now=now,
         )
         self.node.send(self.keys.metrics("status"), status)
