@@ -13,8 +13,9 @@ from . import RESULTS
 BARS = (0.90, 0.95)
 METHOD_NAMES = {"sac": "SAC", "ppo": "PPO, central", "ppo-shared": "PPO, shared by the joints"}
 SWARM_KINDS = ("fuzzy", "independent", "tabular")
-PLASTIC = "trained + direction + sensed tip, learning"
-ANY_POSE = "free joints: trained from any pose + direction + sensed tip, learning"
+PLASTIC_ADAPT = "trained + direction + sensed tip, learning"  # adapt's row: today's recipe, learning on
+LIVE_RECIPE = "swarm, today's recipe, learning"
+LIVE_ANY_POSE = "swarm, the any-pose recipe (+ direction + sensed tip), learning"
 
 
 def _pct(x: float | None) -> str:
@@ -79,16 +80,18 @@ def write(
     n_seeds = {r["label"]: len(r["seeds"]) for r in peers.values()}
     versions = next((s.get("versions") for r in peers.values() for s in r["seeds"] if s.get("versions")), {})
     rep.text(
-        "SAC and PPO from Stable-Baselines3 (SAC: its JAX port sbx when installed) with library defaults (no "
-        "tuning for any method), on `kinswarm.env` built from examples/reach-generalise.toml (the generalisation "
-        "recipe's chain4, 1° moves, reward `graded`, the start pose each episode), each seed trained on Level-3's 64 "
+        "SAC and PPO from Stable-Baselines3 ("
+        + ("SAC: its JAX port sbx" if "sbx-rl" in versions else "SAC: SB3's own on torch, sbx not being installed")
+        + ") with library defaults (no tuning for any method), on `kinswarm.env` built from "
+        "examples/reach-generalise.toml (the generalisation recipe's chain4, 1° moves, reward `graded`, the start "
+        "pose each episode), each seed trained on Level-3's 64 "
         f"quad-tree goals twice each in that seed's order, {z['train_steps']}-step episodes, for "
         f"{z['budget']:,} env steps (the swarm's budget; one env step: every joint moves once): "
         + "; ".join(f"{label} on {n} seed(s)" for label, n in n_seeds.items())
         + f", all trained here. Tests frozen and deterministic, {z['eval_steps']} steps from the start pose, on the "
         f"first {z['tests']} goals of Halton test sets 0 and 1. The swarm's rows, the rule's and the pseudo-inverse's "
-        "are the committed reports' (docs/results/generalisation: 6 seeds, its successive rows 20; "
-        "docs/results/research/curves: 3 seeds; docs/results/adapt: 3 seeds), not rerun. 'central' policies see "
+        "are the committed reports' (docs/results/generalisation, docs/results/research/curves, "
+        "docs/results/adapt; their seeds in each table), not rerun. 'central' policies see "
         "the whole robot (every reading, the tip, the goal); the shared PPO sees what one agent of the swarm sees "
         "(its S_i and a one-hot of its index) and moves one joint."
         + (" Versions: " + ", ".join(f"{k} {v}" for k, v in versions.items()) + "." if versions else ""),
@@ -102,6 +105,17 @@ def write(
             f"{'; '.join(reused)}. This call's wall time is the rest."
         )
 
+    study = _curves_study()
+    per_seed: dict[str, list[dict[str, list]]] = {}
+    labels: dict[str, str] = {}
+    if study:
+        for k in SWARM_KINDS:
+            if k in study["per_seed"]:
+                per_seed[k], labels[k] = study["per_seed"][k], study["curves"][k]["label"]
+    for m, r in peers.items():
+        per_seed[m], labels[m] = [s["curve"] for s in r["seeds"]], r["label"]
+    agg = {m: over_seeds(labels[m], cs) for m, cs in per_seed.items()}
+    rep.text("## In short", *in_short(peers, per_seed, ref, z))
     rep.text("## Generalisation: unseen goals, frozen, from the start pose")
     rows = []
     for r in peers.values():
@@ -151,16 +165,6 @@ def write(
     rep.text("Peers: mean ± std over seeds (sample std); the swarm's rows: the mean over its seeds.")
 
     # -- learning curves: every method, its seeds, the same budget and test points ---------------------------------
-    study = _curves_study()
-    per_seed: dict[str, list[dict[str, list]]] = {}
-    labels: dict[str, str] = {}
-    if study:
-        for k in SWARM_KINDS:
-            if k in study["per_seed"]:
-                per_seed[k], labels[k] = study["per_seed"][k], study["curves"][k]["label"]
-    for m, r in peers.items():
-        per_seed[m], labels[m] = [s["curve"] for s in r["seeds"]], r["label"]
-    agg = {m: over_seeds(labels[m], cs) for m, cs in per_seed.items()}
     rep.text(
         "## Learning curves and time to skill: seeds, budget and test equal for every method",
         f"Every method on the same run file, goals (each seed's order) and {z['budget']:,}-env-step budget; the frozen "
@@ -231,9 +235,16 @@ def write(
     if onnx_row is not None and first0 is not None:
         _swarm_row(rep, onnx_row, first0, z["eval_steps"])
     missing = [METHOD_NAMES[m] for m in METHOD_NAMES if m not in peers]
+    fewer = [f"{r['label']} ({len(r['seeds'])})" for r in peers.values() if len(r["seeds"]) < ctx.seeds]
     rep.text(
         "## Not done here",
         (f"Not run for this report: {', '.join(missing)} (the machine's CPU budget). " if missing else "")
+        + (
+            f"On fewer than {ctx.seeds} seeds (the machine's CPU budget; KINSWARM_PEERS_METHODS=NAME:N): "
+            f"{', '.join(fewer)}. "
+            if fewer
+            else ""
+        )
         + "The iiwa's points (reach3d within 5 cm) for the peers and a tuning sweep of the shared PPO: not run "
         "within this report's CPU budget (the curves study has the sweep's code: KINSWARM_CURVES_METHODS=sweep).",
     )
@@ -251,6 +262,102 @@ def write(
         rep.results["onnx_swarm"] = onnx_row
     rep.write({"run_file": "examples/reach-generalise.toml", "size": z, "seeds": ctx.seed_list})
     return rep.results
+
+
+def _best(peers: dict[str, Any], value: Any) -> tuple[str, list[float]]:
+    """The peer with the highest mean of `value(seed result)` over its seeds: its label and its per-seed values."""
+    per = {r["label"]: [value(s) for s in r["seeds"]] for r in peers.values()}
+    label = max(per, key=lambda k: float(np.mean(per[k])))
+    return label, per[label]
+
+
+def _mean_first(curves: list[dict[str, list]], bar: float) -> tuple[float, float, int] | None:
+    hits = [h for h in (_first_per_seed(c, bar) for c in curves) if h is not None]
+    if not hits:
+        return None
+    return float(np.mean([h[0] for h in hits])), float(np.mean([h[1] for h in hits])), len(hits)
+
+
+def in_short(peers: dict[str, Any], per_seed: dict[str, list], ref: dict[str, Any], z: dict[str, int]) -> list[str]:
+    """Where the swarm wins and where it loses, by how much, on how many seeds: each line from the tables below."""
+    if not peers:
+        return ["No peer ran."]
+    lines = []
+    fz = ref.get("swarm, fuzzy (the paper's)", {}).get("test_set_0")
+    label, vals = _best(peers, lambda s: s["test_set_0"]["within"])
+    if fz:
+        lines.append(
+            f"- Unseen goals, frozen, from the start pose (test set 0 within 0.5): the swarm {_pct(fz['within'])} "
+            f"({fz.get('seeds', '?')} seeds); the best peer, {label}, {_ms(vals)} ({len(vals)} seeds); the rule "
+            f"{_pct(ref.get('rule on g_perp', {}).get('test_set_0', {}).get('within'))}."
+        )
+    if "fuzzy" in per_seed:
+        best = max(
+            (m for m in peers if m in per_seed),
+            key=lambda m: float(np.mean([c["within"][-1] for c in per_seed[m]])),
+        )
+        sw, pe = per_seed["fuzzy"], per_seed[best]
+        parts = []
+        for bar in BARS:
+            a, b = _mean_first(sw, bar), _mean_first(pe, bar)
+            say = lambda x, n: (  # noqa: E731
+                "no seed" if x is None else f"{x[0]:,.0f} env steps / {x[1]:.0f} CPU-s ({x[2]} of {n} seeds)"
+            )
+            parts.append(f"≥ {100 * bar:.0f} %: the swarm {say(a, len(sw))}, {peers[best]['label']} {say(b, len(pe))}")
+        cpu_s = float(np.mean([c["cpu_seconds"][-1] for c in sw]))
+        cpu_p = float(np.mean([c["cpu_seconds"][-1] for c in pe]))
+        lines.append(
+            "- Time to skill (the first test point, mean over the seeds that get there): "
+            + "; ".join(parts)
+            + f". Training CPU-seconds for {z['budget']:,} env steps (the swarm's: the curves study's): "
+            f"the swarm {cpu_s:.0f}, "
+            f"{peers[best]['label']} {cpu_p:.0f} ({cpu_p / max(cpu_s, 1e-9):.1f}x the swarm's)."
+        )
+    succ = ref.get("successive", {})
+    label_c, vals_c = _best(peers, lambda s: s["successive"]["chain4"]["within"])
+    label_f, vals_f = _best(peers, lambda s: s["successive"]["joints free"]["within"])
+    if succ:
+        lines.append(
+            "- Successive goals (each from where the last ended, test set 0): on chain4 (±180°) the swarm "
+            f"{_pct(succ.get('succ', {}).get('within'))}, the best peer ({label_c}) {_ms(vals_c)}; on the free chain "
+            f"the any-pose recipe's swarm {_pct(succ.get('any pose', {}).get('within'))}, the swarm trained from the "
+            f"start pose {_pct(succ.get('succ free', {}).get('within'))}, the best peer ({label_f}) {_ms(vals_f)}."
+        )
+    wrong = ref.get("wrong", {})
+    if wrong:
+        parts = []
+        for cond in wrong:
+            rec = wrong[cond].get(PLASTIC_ADAPT)
+            label, vals = _best(
+                peers, lambda s, c=cond: max(s["wrong"][c]["frozen"]["within"], s["wrong"][c]["learning"]["within"])
+            )
+            if rec:
+                parts.append(
+                    f"{cond}: the swarm {rec['within']}, the best peer ({label}, frozen or learning) {_ms(vals)}"
+                )
+        lines.append(
+            f"- A wrong model (adapt's goals; the swarm today's recipe learning on, over the first {z['online']} "
+            "goals, 3 seeds): " + "; ".join(parts) + "."
+        )
+    live = ref.get("live", {})
+    if live:
+        parts = []
+        for cond in [c for c in live if c != "intact"]:
+            rows = {(r["robot"], r["label"]): r["within"] for r in live[cond]}
+            label, vals = _best(
+                peers, lambda s, c=cond: max(s["live"][c]["frozen"]["within"], s["live"][c]["learning"]["within"])
+            )
+            parts.append(
+                f"{cond}: the swarm {rows.get(('chain4, ±180°', LIVE_RECIPE), '—')} on chain4, the any-pose recipe "
+                f"{rows.get(('joints free', LIVE_ANY_POSE), '—')} on the free chain, the best peer ({label}) "
+                f"{_ms(vals)} on chain4"
+            )
+        lines.append(
+            f"- Live (at a goal intact, then the fault and {z['live_next']} next goals from where it stands): "
+            + "; ".join(parts)
+            + "."
+        )
+    return lines
 
 
 def _successive(rep: Any, z: dict[str, int], peers: dict[str, Any], ref: dict[str, Any]) -> None:
