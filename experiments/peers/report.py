@@ -13,6 +13,7 @@ from . import RESULTS
 BARS = (0.90, 0.95)
 METHOD_NAMES = {"sac": "SAC", "ppo": "PPO, central", "ppo-shared": "PPO, shared by the joints"}
 SWARM_KINDS = ("fuzzy", "independent", "tabular")
+PEER_STUDY = ("ppo-shared", "sac")  # peers the curves study ran too (its seeds shown beside this command's)
 PLASTIC_ADAPT = "trained + direction + sensed tip, learning"  # adapt's row: today's recipe, learning on
 LIVE_RECIPE = "swarm, today's recipe, learning"
 LIVE_ANY_POSE = "swarm, the any-pose recipe (+ direction + sensed tip), learning"
@@ -114,6 +115,10 @@ def write(
                 per_seed[k], labels[k] = study["per_seed"][k], study["curves"][k]["label"]
     for m, r in peers.items():
         per_seed[m], labels[m] = [s["curve"] for s in r["seeds"]], r["label"]
+    for m in PEER_STUDY:  # the curves study's seeds of a peer, the same protocol: beside this command's
+        if study and m in study["per_seed"] and not ctx.quick:
+            key = f"{m} (curves study)"
+            per_seed[key], labels[key] = study["per_seed"][m], f"{study['curves'][m]['label']} (curves study)"
     agg = {m: over_seeds(labels[m], cs) for m, cs in per_seed.items()}
     rep.text("## In short", *in_short(peers, per_seed, ref, z))
     rep.text("## Generalisation: unseen goals, frozen, from the start pose")
@@ -169,8 +174,9 @@ def write(
         "## Learning curves and time to skill: seeds, budget and test equal for every method",
         f"Every method on the same run file, goals (each seed's order) and {z['budget']:,}-env-step budget; the frozen "
         f"test of test set 0 every {z['every']:,} env steps from 0; mean and min–max over seeds. CPU-seconds are the "
-        "training's alone (tests excluded; torch at one thread). The peers are trained by this command; the swarm's "
-        "kinds are the curves study's (docs/results/research/curves, "
+        "training's alone (tests excluded; torch at one thread). The peers are trained by this command (rows marked "
+        "'curves study': that study's seeds of the same peer, the same protocol); the swarm's kinds are the curves "
+        "study's (docs/results/research/curves, "
         + (f"`{study['command']}`" if study else "not present")
         + ": its test point at N env steps is the frozen test `--from` its learners after N env steps, the same "
         "test as the peers'). Both ran on this machine; CPU-seconds grow with the machine's load (the peers' "

@@ -9,7 +9,16 @@ from typing import Any
 from ..common import Context
 
 BARS = (0.90, 0.95)
-COLORS = {"fuzzy": "C0", "independent": "C1", "tabular": "C2", "ppo-shared": "C3", "sac": "C4"}
+COLORS = {
+    "fuzzy": "C0",
+    "independent": "C1",
+    "tabular": "C2",
+    "ppo-shared": "C3",
+    "sac": "C4",
+    "ppo": "C5",  # the peers report draws these too
+    "ppo-shared (curves study)": "C6",
+    "sac (curves study)": "C7",
+}
 
 
 def _pct(x: float) -> str:
