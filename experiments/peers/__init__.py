@@ -2,21 +2,26 @@
 
 SAC (sbx, SB3's JAX port, when installed; else SB3's) on gym_env's continuous Box, PPO on gym_env's MultiDiscrete (a
 central policy seeing the whole robot), and PPO with one policy shared by every joint on parallel_env (independent
-learners with parameter sharing), each trained on the generalisation protocol's Level-3 goals (64 quad-tree centres,
-twice each in a seeded order, 500-step episodes: PPO for the swarm's 64k env steps, SAC for 16k) with library
-defaults and the task's own reward (`graded`), then:
+learners with parameter sharing), each seed trained on the generalisation protocol's Level-3 goals (64 quad-tree
+centres, twice each in the seed's order, 500-step episodes) for the swarm's 64k env steps with library defaults and
+the task's own reward (`graded`), then:
 
+  curve            the test set 0 share within 0.5, frozen, every EVERY env steps from 0 (the curves study's points):
+                   env steps and training CPU-seconds until >= 90 % and >= 95 %, per seed
   generalisation   frozen, deterministic, from the start pose: test sets 0 and 1 (100 Halton goals, 200 steps each)
-  time to skill    the test set 0 share within 0.5 every EVERY env steps: env steps and training CPU-seconds until
-                   >= 90 % and >= 95 %
+  successive       test set 0, each goal from where the last ended, on chain4 and on the chain whose joints turn
+                   freely (the any-pose recipe's robot)
   wrong model      a1 reversed, a2 and a3 reversed (unknown), adapt's 30 goals of test set 0, one 500-step episode
-                   each: frozen, and SAC learning on (its learning carried from goal to goal)
+                   each: frozen; and learning on (SB3's learn, carried from goal to goal) on the first 10
+  live             adapt's live sequence: at a goal intact, the fault from the next episode on, then 10 next goals
+                   from where it stands; frozen and learning on
 
-against the swarm's three kinds, the rule and the pseudo-inverse as their committed reports give them
-(docs/results/generalisation, docs/results/adapt: not rerun), and the swarm's training CPU-seconds measured here.
-The shared policy is exported to ONNX (learners.export_onnx), checked against torch with onnxruntime, and run through
-`kinswarm run` as `[learner] kind = "onnx"` in a process swarm on test goals, intact and with `kinswarm fault ... lock
-a2` sent live, beside the same file stepped in parallel_env (onnx_swarm.py: onnxruntime, no torch).
+against the swarm's kinds, the rule and the pseudo-inverse as their committed reports give them
+(docs/results/generalisation, docs/results/research/curves, docs/results/adapt with today's recipe: not rerun), and
+the swarm's training CPU-seconds measured here. Seed 0's shared policy is exported to ONNX (learners.export_onnx),
+checked against torch with onnxruntime, and run through `kinswarm run` as `[learner] kind = "onnx"` in a process
+swarm on test goals, intact and with `kinswarm fault ... lock a2` sent live, beside the same file stepped in
+parallel_env (onnx_swarm.py: onnxruntime, no torch). Every method's seeds are cached in OUT as they end.
 Needs the `peers` extra: pip install -e '.[peers]'.
 """
 
