@@ -32,6 +32,10 @@ def _ms(xs: list[float], pct: bool = True, digits: int = 3) -> str:
     return s + (" %" if pct else "")
 
 
+def _n(seeds: int) -> str:
+    return f"{seeds} seed" + ("s" if seeds != 1 else "")
+
+
 def _first_per_seed(curve: dict[str, list], bar: float) -> tuple[int, float] | None:
     for s, c, w in zip(curve["env_steps"], curve["cpu_seconds"], curve["within"], strict=True):
         if w >= bar - 1e-9:
@@ -247,7 +251,7 @@ def write(
         (f"Not run for this report: {', '.join(missing)} (the machine's CPU budget). " if missing else "")
         + (
             f"On fewer than {ctx.seeds} seeds (the machine's CPU budget; KINSWARM_PEERS_METHODS=NAME:N): "
-            f"{', '.join(fewer)}. "
+            f"{', '.join(fewer)}; the rows marked 'curves study' are a peer's seeds at the same budget and test. "
             if fewer
             else ""
         )
@@ -294,7 +298,7 @@ def in_short(peers: dict[str, Any], per_seed: dict[str, list], ref: dict[str, An
     if fz:
         lines.append(
             f"- Unseen goals, frozen, from the start pose (test set 0 within 0.5): the swarm {_pct(fz['within'])} "
-            f"({fz.get('seeds', '?')} seeds); the best peer, {label}, {_ms(vals)} ({len(vals)} seeds); the rule "
+            f"({fz.get('seeds', '?')} seeds); the best peer, {label}, {_ms(vals)} ({_n(len(vals))}); the rule "
             f"{_pct(ref.get('rule on g_perp', {}).get('test_set_0', {}).get('within'))}."
         )
     if "fuzzy" in per_seed:
