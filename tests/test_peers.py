@@ -19,24 +19,44 @@ pytestmark = [pytest.mark.slow, pytest.mark.timeout(900)]
 def test_quick_peers_report(tmp_path: Path) -> None:
     from kinswarm.actors.cli.commands import main as kinswarm
 
-    assert kinswarm(["experiment", "peers", "--quick", "--out", str(tmp_path)]) == 0
+    assert kinswarm(["experiment", "peers", "--quick", "--seeds", "2", "--out", str(tmp_path)]) == 0
     out = tmp_path / "peers"
     report = (out / "report.md").read_text()
-    for heading in ("## Generalisation", "## Time to skill", "## A wrong model", "## The shared policy in ONNX"):
+    for heading in (
+        "## Generalisation",
+        "## Learning curves and time to skill",
+        "## Successive goals",
+        "## A wrong model",
+        "### Live",
+        "## The shared policy in ONNX",
+    ):
         assert heading in report
     assert "](curves.png)" in report and (out / "curves.png").stat().st_size > 1000
     res = json.loads((out / "results.json").read_text())
     assert res["experiment"] == "peers" and res["quick"] is True
     assert set(res["peers"]) == {"sac", "ppo", "ppo-shared"}
     for method, r in res["peers"].items():
-        for k in (0, 1):
-            assert len(r[f"test_set_{k}"]["errors"]) == res["size"]["tests"], method
-            assert all(np.isfinite(r[f"test_set_{k}"]["errors"]))
-        assert r["curve"]["env_steps"] and all(0.0 <= w <= 1.0 for w in r["curve"]["within"])
-        assert set(r["wrong"]) == {"a1 reversed", "a2, a3 reversed"}
-    assert "learning" in res["peers"]["sac"]["wrong"]["a1 reversed"]  # SAC kept learning under the fault
+        assert [s["seed"] for s in r["seeds"]] == [0, 1], method  # every peer on every seed, the same budget
+        for s in r["seeds"]:
+            assert s["budget"] == res["size"]["budget"]
+            for k in (0, 1):
+                assert len(s[f"test_set_{k}"]["errors"]) == res["size"]["tests"], method
+                assert all(np.isfinite(s[f"test_set_{k}"]["errors"]))
+            c = s["curve"]
+            assert c["env_steps"][0] == 0 and c["env_steps"][-1] == res["size"]["budget"]
+            assert all(0.0 <= w <= 1.0 for w in c["within"])
+            assert set(s["successive"]) == {"chain4", "joints free"}
+            assert len(s["successive"]["chain4"]["errors"]) == res["size"]["tests"]
+            assert set(s["wrong"]) == {"a1 reversed", "a2, a3 reversed"}
+            for row in s["wrong"].values():  # frozen on every goal, learning on the first `online`
+                assert len(row["frozen"]["errors"]) == res["size"]["wrong"]
+                assert len(row["learning"]["errors"]) == res["size"]["online"]
+            assert set(s["live"]) == {"intact", "a1 reversed", "a2, a3 reversed"}
+            for row in s["live"].values():  # the next goals after the one reached intact
+                assert len(row["frozen"]["errors"]) == len(row["learning"]["errors"]) == res["size"]["live_next"]
+        assert res["curves"][method]["seeds"] == 2
     assert res["swarm_training_cpu_seconds"] > 0
-    onnx = res["peers"]["ppo-shared"]["onnx"]
+    onnx = res["peers"]["ppo-shared"]["seeds"][0]["onnx"]
     assert (out / onnx["file"]).stat().st_size > 0
     if onnx["checked"]:  # onnxruntime installed: the exported file chooses as the torch policy does
         assert onnx["decisions"] > 0 and onnx["same"] == onnx["decisions"]
@@ -45,6 +65,10 @@ def test_quick_peers_report(tmp_path: Path) -> None:
     row = res["onnx_swarm"]
     assert len(row["swarm_intact"]) == res["size"]["onnx_goals"] and row["intact_identical"]
     assert row["lock"] is not None and row["after"] and row["after_identical"] and row["before_identical"], row
+    # a second call retrains and retests nothing: every seed's training is read back
+    assert kinswarm(["experiment", "peers", "--quick", "--seeds", "2", "--out", str(tmp_path)]) == 0
+    again = (out / "report.md").read_text()
+    assert "Trained by an earlier call with this --out" in again
 
 
 def test_exported_scores_take_the_agent_index(tmp_path: Path) -> None:

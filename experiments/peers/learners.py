@@ -38,18 +38,17 @@ def central_env(goals: Sequence[Goal], steps: int, continuous: bool, seed: int) 
 
 
 class GoalsEnv(gymnasium.Wrapper):
-    """Each reset the next goal of a list, with the given faults from the first step (the joints freed first);
-    records each episode's final error. What a policy learning online meets: one episode per goal."""
+    """Each reset the next goal of a list, with the given faults from the first step (the joints freed first) of
+    episode `faults_from` on (the live sequence: at a goal intact, then the fault); records each episode's final
+    error. What a policy learning online meets: one episode per goal."""
 
-    def __init__(self, env: gymnasium.Env, goals: Sequence[Goal], faults: Faults) -> None:
+    def __init__(self, env: gymnasium.Env, goals: Sequence[Goal], faults: Faults, faults_from: int = 0) -> None:
         super().__init__(env)
-        self.goals, self.faults, self.i = list(goals), faults, 0
+        self.options = GoalsOptions(goals, faults, faults_from)
         self.final_errors: list[float] = []
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> Any:
-        goal = self.goals[self.i % len(self.goals)]
-        self.i += 1
-        return self.env.reset(seed=seed, options={"goal": list(goal), "faults": self.faults})
+        return self.env.reset(seed=seed, options=self.options(0))
 
     def step(self, action: Any) -> Any:
         obs, r, term, trunc, info = self.env.step(action)
@@ -61,16 +60,17 @@ class GoalsEnv(gymnasium.Wrapper):
 # -- every joint, one shared policy ------------------------------------------------------------------------------
 # parallel_env's joints as the rows of an SB3 vector env (kinswarm.env.sb3: S_i, then a one-hot of the agent's index)
 class GoalsOptions:
-    """JointsVecEnv's reset options: each episode the next goal of a list, with the given faults from its first
-    step (the joints freed first)."""
+    """The reset options of each episode: the next goal of a list (cycling), with the given faults from its first
+    step (the joints freed first) from episode `faults_from` on, none before."""
 
-    def __init__(self, goals: Sequence[Goal], faults: Faults) -> None:
-        self.goals, self.faults, self.i = list(goals), faults, 0
+    def __init__(self, goals: Sequence[Goal], faults: Faults, faults_from: int = 0) -> None:
+        self.goals, self.faults, self.faults_from, self.i = list(goals), faults, faults_from, 0
 
     def __call__(self, copy: int) -> dict[str, Any]:
         goal = self.goals[self.i % len(self.goals)]
+        faults = self.faults if self.i >= self.faults_from else []
         self.i += 1
-        return {"goal": list(goal), "faults": self.faults}
+        return {"goal": list(goal), "faults": faults}
 
 
 def joints_env(goals: Sequence[Goal], steps: int, seed: int) -> JointsVecEnv:
@@ -81,16 +81,41 @@ def joints_env(goals: Sequence[Goal], steps: int, seed: int) -> JointsVecEnv:
     return venv
 
 
-def goals_env(goals: Sequence[Goal], steps: int, faults: Faults) -> JointsVecEnv:
-    return JointsVecEnv(parallel_env(RUN_FILE, steps=steps, render_mode=None), options=GoalsOptions(goals, faults))
+def goals_env(
+    goals: Sequence[Goal], steps: int, faults: Faults, sets: Sequence[str] = (), faults_from: int = 0
+) -> JointsVecEnv:
+    par = parallel_env(RUN_FILE, steps=steps, sets=list(sets), render_mode=None)
+    return JointsVecEnv(par, options=GoalsOptions(goals, faults, faults_from))
+
+
+def central_goals_env(
+    method: str, goals: Sequence[Goal], steps: int, faults: Faults, sets: Sequence[str] = (), faults_from: int = 0
+) -> GoalsEnv:
+    env = gym_env(RUN_FILE, continuous=method == "sac", steps=steps, sets=list(sets), render_mode=None)
+    return GoalsEnv(env, goals, faults, faults_from)
+
+
+# the successive protocol: each episode from where the last ended; on the chain whose joints turn freely
+# (examples/chain4-free.toml's limits, as the any-pose recipe's robot)
+SUCCESSIVE = ("run.successive=true",)
+FREE_JOINTS = ("robot.defaults.limits_deg=[-36000.0, 36000.0]",)
 
 
 # -- evaluation -----------------------------------------------------------------------------------------------------
-def evaluate(model: Any, method: str, goals: Sequence[Goal], steps: int, faults: Faults | None = None) -> list[float]:
-    """Final errors of the frozen, deterministic policy, one `steps`-step episode per goal from the start pose."""
+def evaluate(
+    model: Any,
+    method: str,
+    goals: Sequence[Goal],
+    steps: int,
+    faults: Faults | None = None,
+    sets: Sequence[str] = (),
+    faults_from: int = 0,
+) -> list[float]:
+    """Final errors of the frozen, deterministic policy, one `steps`-step episode per goal from the start pose (with
+    SUCCESSIVE in `sets`: from where the last ended); the faults from episode `faults_from` on."""
     faults = faults or []
     if method == "ppo-shared":
-        venv = goals_env(goals, steps, faults)
+        venv = goals_env(goals, steps, faults, sets, faults_from)
         obs = venv.reset()
         while len(venv.final_errors) < len(goals):
             actions, _ = model.predict(obs, deterministic=True)
@@ -98,7 +123,7 @@ def evaluate(model: Any, method: str, goals: Sequence[Goal], steps: int, faults:
             obs, *_ = venv.step_wait()
         venv.close()
         return venv.final_errors
-    env = GoalsEnv(gym_env(RUN_FILE, continuous=method == "sac", steps=steps, render_mode=None), goals, faults)
+    env = central_goals_env(method, goals, steps, faults, sets, faults_from)
     for _ in goals:
         obs, _ = env.reset()
         over = False
@@ -178,11 +203,21 @@ def train(
             model = sac_class()("MlpPolicy", env, seed=seed, verbose=0, **({"learning_starts": 64} if quick else {}))
         else:
             model = PPO("MlpPolicy", env, seed=seed, verbose=0, device="cpu", **small)
-    cb = CurveCallback(method, per_step, every, lambda m: evaluate(m, method, check_goals, 20 if quick else 200))
+
+    def check(m: Any) -> list[float]:
+        return evaluate(m, method, check_goals, 20 if quick else 200)
+
+    errors = check(model)  # the untrained policy: the curve's point at 0 (as the curves study's)
+    cb = CurveCallback(method, per_step, every, check)
     c0 = time.process_time()
     model.learn(total_timesteps=budget * per_step, callback=cb)
     cpu = time.process_time() - c0 - cb.eval_cpu
-    return model, cb.curve, cpu
+    env.close()
+    c = cb.curve
+    curve = Curve(
+        [0, *c.env_steps], [0.0, *c.cpu_seconds], [within(errors), *c.within], [float(np.mean(errors)), *c.mean]
+    )
+    return model, curve, cpu
 
 
 def sac_class() -> Any:
@@ -194,14 +229,36 @@ def sac_class() -> Any:
         return SAC
 
 
-def online(model: Any, goals: Sequence[Goal], steps: int, faults: Faults) -> list[float]:
-    """The trained central SAC policy learning on: one `steps`-step episode per goal, the faults unknown to it, its
-    learning carried from goal to goal (as adapt's 'trained, learning'). Final errors per goal."""
-    env = GoalsEnv(gym_env(RUN_FILE, continuous=True, steps=steps, render_mode=None), goals, faults)
-    model.set_env(env)
-    model.learn(total_timesteps=len(goals) * steps, reset_num_timesteps=False)
-    env.close()
-    return env.final_errors[: len(goals)]
+def load(method: str, path: Path) -> Any:
+    """A trained peer as saved (SB3's zip): a fresh copy for each condition that learns on."""
+    torch.set_num_threads(1)
+    cls = sac_class() if method == "sac" else PPO
+    return cls.load(str(path), device="cpu") if cls is PPO else cls.load(str(path))
+
+
+def online(
+    model: Any,
+    method: str,
+    goals: Sequence[Goal],
+    steps: int,
+    faults: Faults,
+    sets: Sequence[str] = (),
+    faults_from: int = 0,
+) -> list[float]:
+    """The trained policy learning on (SB3's `learn`, its stochastic policy acting): one `steps`-step episode per
+    goal, the faults unknown to it, its learning carried from goal to goal (as adapt's 'trained, learning'). Final
+    errors per goal. PPO learns once a rollout is full (2,048 steps per row): it runs on past the last goal to its
+    rollout's end, the goals cycling; the errors are the goals' first pass."""
+    if method == "ppo-shared":
+        venv: Any = goals_env(goals, steps, faults, sets, faults_from)
+        per_step = venv.n
+    else:
+        venv = central_goals_env(method, goals, steps, faults, sets, faults_from)
+        per_step = 1
+    model.set_env(venv)
+    model.learn(total_timesteps=len(goals) * steps * per_step, reset_num_timesteps=False)
+    venv.close()
+    return venv.final_errors[: len(goals)]
 
 
 # -- export ---------------------------------------------------------------------------------------------------------

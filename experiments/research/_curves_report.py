@@ -4,12 +4,45 @@ PPO's sweep. (A leading underscore: the research runner lists modules without on
 from __future__ import annotations
 
 import os
+from collections.abc import Sequence
 from typing import Any
+
+import numpy as np
 
 from ..common import Context
 
 BARS = (0.90, 0.95)
-COLORS = {"fuzzy": "C0", "independent": "C1", "tabular": "C2", "ppo-shared": "C3", "sac": "C4"}
+COLORS = {
+    "fuzzy": "C0",
+    "independent": "C1",
+    "tabular": "C2",
+    "ppo-shared": "C3",
+    "sac": "C4",
+    "ppo": "C5",  # the peers report draws these too
+    "ppo-shared (curves study)": "C6",
+    "sac (curves study)": "C7",
+}
+
+
+# -- over seeds (the peers report reads it too) ---------------------------------------------------------------------
+def over_seeds(label: str, curves: Sequence[dict[str, Any]]) -> dict[str, Any]:
+    """Mean, min and max over seeds at every point (the points every seed has; a PPO rollout may pass the budget)."""
+    n = min(len(c["env_steps"]) for c in curves)
+    steps = curves[0]["env_steps"][:n]
+    assert all(c["env_steps"][:n] == steps for c in curves), "seeds tested at other env steps"
+    w = np.array([c["within"][:n] for c in curves], dtype=float)
+    cpu = [[x for x in col if x is not None] for col in zip(*(c["cpu_seconds"][:n] for c in curves), strict=True)]
+    return {
+        "label": label,
+        "seeds": len(curves),
+        "env_steps": steps,
+        "within_mean": w.mean(axis=0).tolist(),
+        "within_min": w.min(axis=0).tolist(),
+        "within_max": w.max(axis=0).tolist(),
+        "cpu_mean": [float(np.mean(x)) if x else None for x in cpu],
+        "mean_error": np.array([c["mean"][:n] for c in curves]).mean(axis=0).tolist(),
+        "per_seed": [c["within"][:n] for c in curves],
+    }
 
 
 def _pct(x: float) -> str:

@@ -35,7 +35,7 @@ import resource
 import shutil
 import tempfile
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -50,6 +50,7 @@ from kinswarm.actors.supervisor.recorder import Recorder
 from ..common import Context, Report, frac_within, plt_module
 from ..goals import halton, quadtree, training_order
 from ..swarm import ROOT, RunOutcome, Spec, json_default, learner_overrides, needs_no_messages, run_spec
+from ._curves_report import over_seeds
 
 SEEDS = 3
 RUN_FILE = str(ROOT / "examples" / "reach-generalise.toml")  # the peers' (learners.RUN_FILE)
@@ -291,27 +292,6 @@ def peer_curve(ctx: Context, method: str, seed: int, z: dict[str, int], hp: dict
     cached.parent.mkdir(parents=True, exist_ok=True)
     cached.write_text(json.dumps(res, indent=1) + "\n")
     return res
-
-
-# -- over seeds ------------------------------------------------------------------------------------------------------
-def over_seeds(label: str, curves: Sequence[dict[str, Any]]) -> dict[str, Any]:
-    """Mean, min and max over seeds at every point (the points every seed has; a PPO rollout may pass the budget)."""
-    n = min(len(c["env_steps"]) for c in curves)
-    steps = curves[0]["env_steps"][:n]
-    assert all(c["env_steps"][:n] == steps for c in curves), "seeds tested at other env steps"
-    w = np.array([c["within"][:n] for c in curves], dtype=float)
-    cpu = [[x for x in col if x is not None] for col in zip(*(c["cpu_seconds"][:n] for c in curves), strict=True)]
-    return {
-        "label": label,
-        "seeds": len(curves),
-        "env_steps": steps,
-        "within_mean": w.mean(axis=0).tolist(),
-        "within_min": w.min(axis=0).tolist(),
-        "within_max": w.max(axis=0).tolist(),
-        "cpu_mean": [float(np.mean(x)) if x else None for x in cpu],
-        "mean_error": np.array([c["mean"][:n] for c in curves]).mean(axis=0).tolist(),
-        "per_seed": [c["within"][:n] for c in curves],
-    }
 
 
 # -- the run ---------------------------------------------------------------------------------------------------------
