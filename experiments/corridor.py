@@ -19,6 +19,7 @@ which runs the same machinery (`run_configs`) on every configuration tried, and 
 from __future__ import annotations
 
 import dataclasses
+import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -32,6 +33,7 @@ from .swarm import ROOT, RunOutcome, Spec, resolved
 TOPOLOGY = ROOT / "examples" / "corridor7.toml"
 STAGE1 = ROOT / "examples" / "corridor7-inner200.toml"
 STAGE2 = ROOT / "examples" / "corridor7-freeze260.toml"
+RECIPE = ROOT / "examples" / "corridor7-blame260.toml"  # the second stage as recommended: STAGE2 with the blame
 TOL = 0.3  # "within 0.3 of the target"
 TAIL = 50  # the last 50 training epochs
 LAST_STEPS = 100  # no collision in the epoch's last 100 steps
@@ -41,6 +43,9 @@ QUICK_EPOCHS, QUICK_STEPS = 3, 100
 #: refusal; 0.05 kept them further from the target, 0.01 let two jam, docs/notebook/corridor.md)
 EVAL_SHIELD = 0.02
 SEEDS = 5  # the bars' seeds
+#: the learner kinds beside the paper's (fuzzy Q over joint actions, JASM) on the same recipe: without the model of
+#: the children (independent) and without the fuzzy interpolation (tabular)
+KINDS = ("independent", "tabular")
 REFERENCE_SEEDS = 2  # references run on fewer seeds in the full version
 
 
@@ -57,9 +62,33 @@ class Config:
     continues: str | None = None
     seeds: int = SEEDS
     text: str = ""
+    untrained: bool = False  # a control: the swarm as it starts (one epoch, learning and exploration off)
+
+
+def _recipe_stage2(kind: str) -> Config:
+    """The recipe's second stage for another learner kind, on that kind's first stage. The independent learner has
+    no counts to freeze (it refuses `count_freeze`), so it runs the first stage's file with the second stage's other
+    settings (the anneal, the blame) set over it; the tabular one takes the stage file as it is."""
+    if kind != "independent":
+        return Config(RECIPE, 60, learner={"kind": kind}, continues=f"inner-200-{kind}", text=f"blame-260, {kind}")
+    learner = {k: v for k, v in _own(STAGE2, "learner").items() if k != "count_freeze"}
+    return Config(
+        STAGE1,
+        60,
+        task=_own(RECIPE, "task"),
+        learner={"kind": kind, **learner},
+        continues=f"inner-200-{kind}",
+        text=f"blame-260, {kind} (no counts to freeze)",
+    )
+
+
+def _own(file: Path, table: str) -> dict[str, Any]:
+    """A run file's own [table], without its base's."""
+    return dict(tomllib.loads(file.read_text()).get(table, {}))
 
 
 CONFIGS: dict[str, Config] = {
+    "untrained": Config(STAGE1, 0, untrained=True, text="the swarm as it starts (a control)"),
     "paper": Config(
         TOPOLOGY, 100, reward="paper", seeds=REFERENCE_SEEDS, text="Eq. 11 as printed, the paper's state, 100 epochs"
     ),
@@ -67,7 +96,26 @@ CONFIGS: dict[str, Config] = {
     "freeze-260": Config(
         STAGE2, 60, continues="inner-200", text="its second stage: examples/corridor7-freeze260.toml, 60 epochs more"
     ),
+    "blame-260": Config(
+        RECIPE,
+        60,
+        continues="inner-200",
+        text="the recipe's second stage: examples/corridor7-blame260.toml (freeze-260 with the blame), 60 epochs more",
+    ),
+    **{
+        label: config
+        for kind in KINDS
+        for label, config in (
+            (
+                f"inner-200-{kind}",
+                Config(STAGE1, 200, learner={"kind": kind}, text=f"inner-200, `--set learner.kind={kind}`"),
+            ),
+            (f"blame-260-{kind}", _recipe_stage2(kind)),
+        )
+    },
 }
+#: the configurations drawn in the report's figures (each figure has a panel per configuration)
+FIGURES = ("paper", "freeze-260", "blame-260", "blame-260-independent", "blame-260-tabular")
 
 
 def run(ctx: Context) -> dict[str, Any]:
@@ -102,8 +150,14 @@ def run_configs(ctx: Context, rep: Report, configs: dict[str, Config], intro: tu
         base |= dict(task=tuple(sorted(c.task.items())), learner=tuple(sorted(c.learner.items())))
         return Spec(**{**base, **kw})
 
+    def first(label: str, seed: int) -> Spec:
+        c = configs[label]
+        if c.untrained:
+            return spec(label, seed, name=f"corr-{label}", epochs=1, learn=False, explore=False)
+        return spec(label, seed, name=f"corr-{label}", epochs=_epochs(ctx, c), checkpoint=True)
+
     train = {
-        (label, seed): spec(label, seed, name=f"corr-{label}", epochs=_epochs(ctx, c), checkpoint=True)
+        (label, seed): first(label, seed)
         for label, c in configs.items()
         if c.continues is None
         for seed in seeds_of[label]
@@ -126,14 +180,22 @@ def run_configs(ctx: Context, rep: Report, configs: dict[str, Config], intro: tu
         prior = trained[(configs[key[0]].continues, key[1])]  # type: ignore[index]
         trained[key] = dataclasses.replace(out, rows=prior.rows + out.rows)  # the whole history, base's and its own
     train |= more
-    frozen_specs = {
+    frozen_specs = {  # an untrained swarm (no checkpoint: it learned nothing) starts as a fresh one
         key: dataclasses.replace(
-            s, name=f"{s.name}-frozen", epochs=1, from_dir=str(trained[key].out), learn=False, explore=False
+            s,
+            name=f"{s.name}-frozen",
+            epochs=1,
+            from_dir=None if configs[key[0]].untrained else str(trained[key].out),
+            learn=False,
+            explore=False,
         )
         for key, s in train.items()
     }
-    evals = {
-        "frozen": {k: dataclasses.replace(s, observe=True) for k, s in frozen_specs.items()},
+    evals = {  # the frozen epoch with nothing added: no tabu even where training had it, no shield
+        "frozen": {
+            k: dataclasses.replace(_with(s, "plain", task={"collision_tabu": False}), name=s.name, observe=True)
+            for k, s in frozen_specs.items()
+        },
         "tabu": {k: _with(s, "tabu", task={"collision_tabu": True}) for k, s in frozen_specs.items()},
         "shield": {
             k: _with(s, "shield", task={"collision_tabu": True}, scene={"shield": EVAL_SHIELD})
@@ -320,8 +382,8 @@ def _figures(
     seeds_of: dict[str, list[int]],
 ) -> None:
     plt = plt_module()
-    scenes = {label: resolved(c.file) for label, c in configs.items()}
-    labels = list(configs)
+    labels = [label for label in configs if label in FIGURES] or list(configs)
+    scenes = {label: resolved(configs[label].file) for label in labels}
 
     def scene_of(label: str) -> tuple[Any, Any, tuple[float, float]]:
         cfg = scenes[label]
@@ -338,7 +400,7 @@ def _figures(
     rep.save_figure(fig, "corridor.png", "Fig. 23 analogue: the chain's final configuration across training epochs")
 
     # the frozen swarm's path: the chain every 50 steps and the tip's path, per seed
-    seeds = max(len(s) for s in seeds_of.values())
+    seeds = max(len(seeds_of[label]) for label in labels)
     fig, axes = plt.subplots(len(labels), seeds, figsize=(4.2 * seeds, 4.2 * len(labels)), squeeze=False)
     for row, label in enumerate(labels):
         topo, walls, goal = scene_of(label)

@@ -284,7 +284,8 @@ def test_quick_corridor_experiment(tmp_path):
         assert f"]({fig})" in report
     res = json.loads((d / "results.json").read_text())
     assert res["experiment"] == "corridor" and res["quick"] is True and res["steps"] == 100
-    assert set(res["configs"]) == {"paper", "inner-200", "freeze-260"}
+    kinds = {f"{stage}-{kind}" for stage in ("inner-200", "blame-260") for kind in ("independent", "tabular")}
+    assert set(res["configs"]) == {"untrained", "paper", "inner-200", "freeze-260", "blame-260", *kinds}
     for per in res["configs"].values():
         seed = per["seeds"]["0"]
         assert 0.0 <= seed["success_last"] <= 1.0 and seed["frozen_collisions"] >= 0
@@ -299,6 +300,22 @@ def test_quick_corridor_experiment(tmp_path):
     cfg = json.loads((out / "runs" / cont["seeds"]["0"]["train_run"] / "config.json").read_text())
     assert Path(cfg["from_dir"]).name == res["configs"]["inner-200"]["seeds"]["0"]["train_run"]
     assert cfg["learner"]["lr_anneal"] == [200, 240] and cfg["learner"]["count_freeze"] == 200
+
+    # the recipe's stage (the blame over freeze-260) and the other learner kinds on it, each on its own first stage
+    def config_of(label: str) -> dict:
+        return json.loads((out / "runs" / res["configs"][label]["seeds"]["0"]["train_run"] / "config.json").read_text())
+
+    recipe = config_of("blame-260")
+    assert res["configs"]["blame-260"]["file"] == "examples/corridor7-blame260.toml"
+    assert recipe["task"]["blame_penalty"] < 0.0 and recipe["learner"]["count_freeze"] == 200
+    for kind in ("independent", "tabular"):
+        cfg = config_of(f"blame-260-{kind}")
+        assert cfg["learner"]["kind"] == kind and cfg["learner"]["lr_anneal"] == [200, 240]
+        assert cfg["task"]["blame_penalty"] == recipe["task"]["blame_penalty"]
+        assert Path(cfg["from_dir"]).name == res["configs"][f"inner-200-{kind}"]["seeds"]["0"]["train_run"]
+    # the untrained control learned nothing and started from nothing
+    untrained = config_of("untrained")
+    assert untrained["learn"] is False and untrained["from_dir"] is None
 
 
 @pytest.mark.timeout(240)
