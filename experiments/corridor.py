@@ -3,17 +3,21 @@ links of length 1 and radius 0.1, walls 0.8 apart spanning x in [3, 6] around y 
 
 The product's corridor: Eq. 11 as printed (the paper's claim: its six state variables and the default learner) and
 the recommended recipe, run from its two files: examples/corridor7-inner200.toml (200 epochs) and
-examples/corridor7-freeze260.toml (60 more from that swarm, the learning rate annealed to 0 and the fictitious-play
-counts frozen, so the last epochs run what a frozen swarm runs). Each trained swarm then runs one frozen epoch
-(`--learn off --explore off`); two more frozen epochs add decision rules that change nothing learned: the tabu, and
-the tabu and the shield (EVAL_SHIELD). The bars, per seed:
+examples/corridor7-blame260.toml (60 more from that swarm, the learning rate annealed to 0 and the fictitious-play
+counts frozen, so the last epochs run what a frozen swarm runs, and the blame: an agent whose move was applied while
+a move below it was refused pays too). The controls: the untrained swarm, and the second stage without the blame
+(examples/corridor7-freeze260.toml); the recipe's rows for the independent and tabular learner kinds (KINDS), each
+on its own first stage. Each trained swarm then runs one frozen epoch with nothing added (`--learn off --explore off
+--set task.collision_tabu=false`); two more frozen epochs add decision rules that change nothing learned: the tabu,
+and the tabu and the shield (EVAL_SHIELD). The bars, per seed:
 
   training  the share of the last TAIL training epochs that end within TOL of the target with no collision (refused
             penetrating increment) in the epoch's last LAST_STEPS steps; bar: >= 80 % over 5 seeds
   frozen    the frozen epoch ends within TOL of the target with zero collisions in the whole epoch; bar: >= 4 of 5
 
 How the recipe was found, configuration by configuration (studies 1-11): experiments/research/corridor_studies.py,
-which runs the same machinery (`run_configs`) on every configuration tried, and docs/notebook/corridor.md.
+which runs the same machinery (`run_configs`) on every configuration tried, study 12's probes
+experiments/research/corridor_compound.py, and docs/notebook/corridor.md.
 """
 
 from __future__ import annotations
@@ -128,12 +132,13 @@ def run(ctx: Context) -> dict[str, Any]:
         "solid: an increment that would make a link penetrate a wall is refused (the joint holds) and counted as a "
         "collision. Configurations: "
         + "; ".join(f"`{label}`: {c.text}" for label, c in CONFIGS.items())
-        + ". Each trained swarm then runs one frozen epoch (`--learn off --explore off`); a second adds the tabu "
+        + ". Each trained swarm then runs one frozen epoch with nothing added (`--learn off --explore off --set "
+        "task.collision_tabu=false`: no tabu even where training had it); a second adds the tabu "
         "(`--set task.collision_tabu=true`: a refused move is not chosen at the next step), a third the tabu and "
         f"the shield (`--set scene.shield={EVAL_SHIELD}`: the walls veto a move that alone would bring the links "
         "it moves nearer a wall than that) — decision rules at evaluation only; nothing learned changes. The "
         "recipe: `kinswarm run examples/corridor7-inner200.toml --out runs/corridor7-inner200`, then `kinswarm "
-        "run examples/corridor7-freeze260.toml`. A bar counts as met only with >= 5 seeds.",
+        "run examples/corridor7-blame260.toml`. A bar counts as met only with >= 5 seeds.",
     )
     return run_configs(ctx, rep, CONFIGS, intro)
 

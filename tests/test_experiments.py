@@ -390,7 +390,15 @@ def test_quick_adapt_experiment(tmp_path):
 @pytest.mark.research
 @pytest.mark.timeout(600)
 @pytest.mark.parametrize(
-    "name", ["corridor_studies", "successive_training", "grasp_epsilon_decay", "fleet_reach3d", "sensed_tip3d"]
+    "name",
+    [
+        "corridor_studies",
+        "corridor_compound",
+        "successive_training",
+        "grasp_epsilon_decay",
+        "fleet_reach3d",
+        "sensed_tip3d",
+    ],
 )
 def test_research_runs(tmp_path, name):
     """Research is not product, but it stays runnable: each study's smoke version."""

@@ -1,8 +1,10 @@
 """Corridor (paper §5.4): reach a goal among solid walls (a `walls` scene). The root's reward is Eq. 11 (or a
 variant): the reach reward with a collision term from the scene's task readings ("clearance": the smallest link
 clearance, "collisions": how many moves the walls refused). Each agent may add what it senses locally to its
-state (its clearance, whether its own move was refused), pay a local collision penalty, follow the leader along the
-corridor's axis, and leave out moves it knows are futile (the tabu) or that the scene's shield vetoes.
+state (its clearance, whether its own move was refused), pay a local collision penalty (and, with the blame, one for
+its applied move when a move below it was refused: the walls refuse a compound move's increments root first, so the
+one refused is not always the one that carried the links there), follow the leader along the corridor's axis, and
+leave out moves it knows are futile (the tabu) or that the scene's shield vetoes.
 
 ```toml
 [task]

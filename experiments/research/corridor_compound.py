@@ -5,7 +5,6 @@ setting of the corridor task added:
 
   freeze-260   the product's second stage as it is (the control)
   blame        + blame_penalty: an agent that moved while a move below it was refused pays it too
-  blame-20     blame, with both penalties -20 (blame-10: -10)
 
   CORRIDOR_PROBES=blame python -m kinswarm.experiments.research corridor_compound --seeds 3 --jobs 1 --out runs/full
 (CORRIDOR_PROBES: a comma-separated subset; unset, all of them.) Study 12 also measured a graded near-wall penalty
@@ -31,12 +30,6 @@ PROBES: dict[str, Config] = {
     "inner-200": CONFIGS["inner-200"],
     "freeze-260": CONFIGS["freeze-260"],
     "blame": _stage2("freeze-260 + blame_penalty -5", blame_penalty=-5.0),
-    "blame-20": _stage2(
-        "freeze-260 + blame_penalty -20, collision_penalty -20", blame_penalty=-20.0, collision_penalty=-20.0
-    ),
-    "blame-10": _stage2(
-        "freeze-260 + blame_penalty -10, collision_penalty -10", blame_penalty=-10.0, collision_penalty=-10.0
-    ),
 }
 
 
