@@ -271,7 +271,8 @@ def test_run_cache_serves_another_checkout(tmp_path):
     assert find_cached(specs(file_b, None)[0], two) is None
 
 
-@pytest.mark.timeout(180)
+@pytest.mark.slow  # nine configurations (the kinds' rows, the controls): 20-80 s, 3x the three it had
+@pytest.mark.timeout(300)
 def test_quick_corridor_experiment(tmp_path):
     out = tmp_path / "x"
     assert kinswarm(["experiment", "corridor", "--quick", "--seeds", "1", "--out", str(out)]) == 0
