@@ -3,22 +3,27 @@ links of length 1 and radius 0.1, walls 0.8 apart spanning x in [3, 6] around y 
 
 The product's corridor: Eq. 11 as printed (the paper's claim: its six state variables and the default learner) and
 the recommended recipe, run from its two files: examples/corridor7-inner200.toml (200 epochs) and
-examples/corridor7-freeze260.toml (60 more from that swarm, the learning rate annealed to 0 and the fictitious-play
-counts frozen, so the last epochs run what a frozen swarm runs). Each trained swarm then runs one frozen epoch
-(`--learn off --explore off`); two more frozen epochs add decision rules that change nothing learned: the tabu, and
-the tabu and the shield (EVAL_SHIELD). The bars, per seed:
+examples/corridor7-blame260.toml (60 more from that swarm, the learning rate annealed to 0 and the fictitious-play
+counts frozen, so the last epochs run what a frozen swarm runs, and the blame: an agent whose move was applied while
+a move below it was refused pays too). The controls: the untrained swarm, and the second stage without the blame
+(examples/corridor7-freeze260.toml); the recipe's rows for the independent and tabular learner kinds (KINDS), each
+on its own first stage. Each trained swarm then runs one frozen epoch with nothing added (`--learn off --explore off
+--set task.collision_tabu=false`); two more frozen epochs add decision rules that change nothing learned: the tabu,
+and the tabu and the shield (EVAL_SHIELD). The bars, per seed:
 
   training  the share of the last TAIL training epochs that end within TOL of the target with no collision (refused
             penetrating increment) in the epoch's last LAST_STEPS steps; bar: >= 80 % over 5 seeds
   frozen    the frozen epoch ends within TOL of the target with zero collisions in the whole epoch; bar: >= 4 of 5
 
 How the recipe was found, configuration by configuration (studies 1-11): experiments/research/corridor_studies.py,
-which runs the same machinery (`run_configs`) on every configuration tried, and docs/notebook/corridor.md.
+which runs the same machinery (`run_configs`) on every configuration tried, study 12's probes
+experiments/research/corridor_compound.py, and docs/notebook/corridor.md.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -32,6 +37,7 @@ from .swarm import ROOT, RunOutcome, Spec, resolved
 TOPOLOGY = ROOT / "examples" / "corridor7.toml"
 STAGE1 = ROOT / "examples" / "corridor7-inner200.toml"
 STAGE2 = ROOT / "examples" / "corridor7-freeze260.toml"
+RECIPE = ROOT / "examples" / "corridor7-blame260.toml"  # the second stage as recommended: STAGE2 with the blame
 TOL = 0.3  # "within 0.3 of the target"
 TAIL = 50  # the last 50 training epochs
 LAST_STEPS = 100  # no collision in the epoch's last 100 steps
@@ -41,6 +47,9 @@ QUICK_EPOCHS, QUICK_STEPS = 3, 100
 #: refusal; 0.05 kept them further from the target, 0.01 let two jam, docs/notebook/corridor.md)
 EVAL_SHIELD = 0.02
 SEEDS = 5  # the bars' seeds
+#: the learner kinds beside the paper's (fuzzy Q over joint actions, JASM) on the same recipe: without the model of
+#: the children (independent) and without the fuzzy interpolation (tabular)
+KINDS = ("independent", "tabular")
 REFERENCE_SEEDS = 2  # references run on fewer seeds in the full version
 
 
@@ -57,9 +66,33 @@ class Config:
     continues: str | None = None
     seeds: int = SEEDS
     text: str = ""
+    untrained: bool = False  # a control: the swarm as it starts (one epoch, learning and exploration off)
+
+
+def _recipe_stage2(kind: str) -> Config:
+    """The recipe's second stage for another learner kind, on that kind's first stage. The independent learner has
+    no counts to freeze (it refuses `count_freeze`), so it runs the first stage's file with the second stage's other
+    settings (the anneal, the blame) set over it; the tabular one takes the stage file as it is."""
+    if kind != "independent":
+        return Config(RECIPE, 60, learner={"kind": kind}, continues=f"inner-200-{kind}", text=f"blame-260, {kind}")
+    learner = {k: v for k, v in _own(STAGE2, "learner").items() if k != "count_freeze"}
+    return Config(
+        STAGE1,
+        60,
+        task=_own(RECIPE, "task"),
+        learner={"kind": kind, **learner},
+        continues=f"inner-200-{kind}",
+        text=f"blame-260, {kind} (no counts to freeze)",
+    )
+
+
+def _own(file: Path, table: str) -> dict[str, Any]:
+    """A run file's own [table], without its base's."""
+    return dict(tomllib.loads(file.read_text()).get(table, {}))
 
 
 CONFIGS: dict[str, Config] = {
+    "untrained": Config(STAGE1, 0, untrained=True, text="the swarm as it starts (a control)"),
     "paper": Config(
         TOPOLOGY, 100, reward="paper", seeds=REFERENCE_SEEDS, text="Eq. 11 as printed, the paper's state, 100 epochs"
     ),
@@ -67,7 +100,26 @@ CONFIGS: dict[str, Config] = {
     "freeze-260": Config(
         STAGE2, 60, continues="inner-200", text="its second stage: examples/corridor7-freeze260.toml, 60 epochs more"
     ),
+    "blame-260": Config(
+        RECIPE,
+        60,
+        continues="inner-200",
+        text="the recipe's second stage: examples/corridor7-blame260.toml (freeze-260 with the blame), 60 epochs more",
+    ),
+    **{
+        label: config
+        for kind in KINDS
+        for label, config in (
+            (
+                f"inner-200-{kind}",
+                Config(STAGE1, 200, learner={"kind": kind}, text=f"inner-200, `--set learner.kind={kind}`"),
+            ),
+            (f"blame-260-{kind}", _recipe_stage2(kind)),
+        )
+    },
 }
+#: the configurations drawn in the report's figures (each figure has a panel per configuration)
+FIGURES = ("paper", "freeze-260", "blame-260", "blame-260-independent", "blame-260-tabular")
 
 
 def run(ctx: Context) -> dict[str, Any]:
@@ -80,12 +132,13 @@ def run(ctx: Context) -> dict[str, Any]:
         "solid: an increment that would make a link penetrate a wall is refused (the joint holds) and counted as a "
         "collision. Configurations: "
         + "; ".join(f"`{label}`: {c.text}" for label, c in CONFIGS.items())
-        + ". Each trained swarm then runs one frozen epoch (`--learn off --explore off`); a second adds the tabu "
+        + ". Each trained swarm then runs one frozen epoch with nothing added (`--learn off --explore off --set "
+        "task.collision_tabu=false`: no tabu even where training had it); a second adds the tabu "
         "(`--set task.collision_tabu=true`: a refused move is not chosen at the next step), a third the tabu and "
         f"the shield (`--set scene.shield={EVAL_SHIELD}`: the walls veto a move that alone would bring the links "
         "it moves nearer a wall than that) — decision rules at evaluation only; nothing learned changes. The "
         "recipe: `kinswarm run examples/corridor7-inner200.toml --out runs/corridor7-inner200`, then `kinswarm "
-        "run examples/corridor7-freeze260.toml`. A bar counts as met only with >= 5 seeds.",
+        "run examples/corridor7-blame260.toml`. A bar counts as met only with >= 5 seeds.",
     )
     return run_configs(ctx, rep, CONFIGS, intro)
 
@@ -102,8 +155,14 @@ def run_configs(ctx: Context, rep: Report, configs: dict[str, Config], intro: tu
         base |= dict(task=tuple(sorted(c.task.items())), learner=tuple(sorted(c.learner.items())))
         return Spec(**{**base, **kw})
 
+    def first(label: str, seed: int) -> Spec:
+        c = configs[label]
+        if c.untrained:
+            return spec(label, seed, name=f"corr-{label}", epochs=1, learn=False, explore=False)
+        return spec(label, seed, name=f"corr-{label}", epochs=_epochs(ctx, c), checkpoint=True)
+
     train = {
-        (label, seed): spec(label, seed, name=f"corr-{label}", epochs=_epochs(ctx, c), checkpoint=True)
+        (label, seed): first(label, seed)
         for label, c in configs.items()
         if c.continues is None
         for seed in seeds_of[label]
@@ -126,14 +185,22 @@ def run_configs(ctx: Context, rep: Report, configs: dict[str, Config], intro: tu
         prior = trained[(configs[key[0]].continues, key[1])]  # type: ignore[index]
         trained[key] = dataclasses.replace(out, rows=prior.rows + out.rows)  # the whole history, base's and its own
     train |= more
-    frozen_specs = {
+    frozen_specs = {  # an untrained swarm (no checkpoint: it learned nothing) starts as a fresh one
         key: dataclasses.replace(
-            s, name=f"{s.name}-frozen", epochs=1, from_dir=str(trained[key].out), learn=False, explore=False
+            s,
+            name=f"{s.name}-frozen",
+            epochs=1,
+            from_dir=None if configs[key[0]].untrained else str(trained[key].out),
+            learn=False,
+            explore=False,
         )
         for key, s in train.items()
     }
-    evals = {
-        "frozen": {k: dataclasses.replace(s, observe=True) for k, s in frozen_specs.items()},
+    evals = {  # the frozen epoch with nothing added: no tabu even where training had it, no shield
+        "frozen": {
+            k: dataclasses.replace(_with(s, "plain", task={"collision_tabu": False}), name=s.name, observe=True)
+            for k, s in frozen_specs.items()
+        },
         "tabu": {k: _with(s, "tabu", task={"collision_tabu": True}) for k, s in frozen_specs.items()},
         "shield": {
             k: _with(s, "shield", task={"collision_tabu": True}, scene={"shield": EVAL_SHIELD})
@@ -320,8 +387,8 @@ def _figures(
     seeds_of: dict[str, list[int]],
 ) -> None:
     plt = plt_module()
-    scenes = {label: resolved(c.file) for label, c in configs.items()}
-    labels = list(configs)
+    labels = [label for label in configs if label in FIGURES] or list(configs)
+    scenes = {label: resolved(configs[label].file) for label in labels}
 
     def scene_of(label: str) -> tuple[Any, Any, tuple[float, float]]:
         cfg = scenes[label]
@@ -338,7 +405,7 @@ def _figures(
     rep.save_figure(fig, "corridor.png", "Fig. 23 analogue: the chain's final configuration across training epochs")
 
     # the frozen swarm's path: the chain every 50 steps and the tip's path, per seed
-    seeds = max(len(s) for s in seeds_of.values())
+    seeds = max(len(seeds_of[label]) for label in labels)
     fig, axes = plt.subplots(len(labels), seeds, figsize=(4.2 * seeds, 4.2 * len(labels)), squeeze=False)
     for row, label in enumerate(labels):
         topo, walls, goal = scene_of(label)

@@ -564,3 +564,24 @@ def test_corridor_run_walls_are_solid(tmp_path, endpoint):
     assert sum(sum(r["traces"]["collisions"]) for r in rows) > 0  # exploring from scratch, it bumps into the walls
     for f in ("scene.png", "learning_curve.png", "arm.png", "summary.json", "run.toml"):
         assert (out / f).is_file(), f
+
+
+def test_blame_falls_on_an_agent_that_moved_when_a_move_below_was_refused():
+    """A compound refusal: my move was applied, a move below me was refused (the walls take back increments root
+    first, so the one below is the one refused). The blame reaches every agent above that moved, through `Up`."""
+    a = _agent("a5", ["task.collision_penalty=-5", "task.blame_penalty=-3"])
+
+    def view(collided: float, below: float, last: int | None) -> StepView:
+        ups = {"a6": Up(epoch=0, step=3, tips={"a7": (5.0, 2.0, 0.0)}, action=1, sense={"refused": below})}
+        return _view(3, {"clearance": 0.3, "collided": collided}, last=last, ups=ups)
+
+    assert a.reward(view(0.0, 1.0, last=2), 1.0) == pytest.approx(1.0 - 3.0)  # I moved: blamed
+    assert a.reward(view(0.0, 1.0, last=1), 1.0) == pytest.approx(1.0)  # I held: not
+    assert a.reward(view(0.0, 0.0, last=0), 1.0) == pytest.approx(1.0)  # nothing refused below
+    assert a.reward(view(1.0, 1.0, last=0), 1.0) == pytest.approx(1.0 - 5.0)  # refused myself: that penalty only
+    # up: whether a move in my subtree (mine or below) was refused, for my parent
+    assert a.up(view(0.0, 1.0, last=2))["refused"] == 1.0 and a.up(view(1.0, 0.0, last=2))["refused"] == 1.0
+    assert a.up(view(0.0, 0.0, last=2))["refused"] == 0.0
+    assert "refused" not in _agent("a5", []).up(view(1.0, 1.0, last=2))  # off: nothing more on the wire
+    with pytest.raises(SpecError, match="task.blame_penalty: must be <= 0"):
+        run_config(GUIDED, ["task.blame_penalty=2.0"])

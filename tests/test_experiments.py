@@ -271,7 +271,8 @@ def test_run_cache_serves_another_checkout(tmp_path):
     assert find_cached(specs(file_b, None)[0], two) is None
 
 
-@pytest.mark.timeout(180)
+@pytest.mark.slow  # nine configurations (the kinds' rows, the controls): 20-80 s, 3x the three it had
+@pytest.mark.timeout(300)
 def test_quick_corridor_experiment(tmp_path):
     out = tmp_path / "x"
     assert kinswarm(["experiment", "corridor", "--quick", "--seeds", "1", "--out", str(out)]) == 0
@@ -284,7 +285,8 @@ def test_quick_corridor_experiment(tmp_path):
         assert f"]({fig})" in report
     res = json.loads((d / "results.json").read_text())
     assert res["experiment"] == "corridor" and res["quick"] is True and res["steps"] == 100
-    assert set(res["configs"]) == {"paper", "inner-200", "freeze-260"}
+    kinds = {f"{stage}-{kind}" for stage in ("inner-200", "blame-260") for kind in ("independent", "tabular")}
+    assert set(res["configs"]) == {"untrained", "paper", "inner-200", "freeze-260", "blame-260", *kinds}
     for per in res["configs"].values():
         seed = per["seeds"]["0"]
         assert 0.0 <= seed["success_last"] <= 1.0 and seed["frozen_collisions"] >= 0
@@ -299,6 +301,22 @@ def test_quick_corridor_experiment(tmp_path):
     cfg = json.loads((out / "runs" / cont["seeds"]["0"]["train_run"] / "config.json").read_text())
     assert Path(cfg["from_dir"]).name == res["configs"]["inner-200"]["seeds"]["0"]["train_run"]
     assert cfg["learner"]["lr_anneal"] == [200, 240] and cfg["learner"]["count_freeze"] == 200
+
+    # the recipe's stage (the blame over freeze-260) and the other learner kinds on it, each on its own first stage
+    def config_of(label: str) -> dict:
+        return json.loads((out / "runs" / res["configs"][label]["seeds"]["0"]["train_run"] / "config.json").read_text())
+
+    recipe = config_of("blame-260")
+    assert res["configs"]["blame-260"]["file"] == "examples/corridor7-blame260.toml"
+    assert recipe["task"]["blame_penalty"] < 0.0 and recipe["learner"]["count_freeze"] == 200
+    for kind in ("independent", "tabular"):
+        cfg = config_of(f"blame-260-{kind}")
+        assert cfg["learner"]["kind"] == kind and cfg["learner"]["lr_anneal"] == [200, 240]
+        assert cfg["task"]["blame_penalty"] == recipe["task"]["blame_penalty"]
+        assert Path(cfg["from_dir"]).name == res["configs"][f"inner-200-{kind}"]["seeds"]["0"]["train_run"]
+    # the untrained control learned nothing and started from nothing
+    untrained = config_of("untrained")
+    assert untrained["learn"] is False and untrained["from_dir"] is None
 
 
 @pytest.mark.timeout(240)
@@ -374,7 +392,15 @@ def test_quick_adapt_experiment(tmp_path):
 @pytest.mark.timeout(600)
 @pytest.mark.parametrize(
     "name",
-    ["corridor_studies", "successive_training", "grasp_epsilon_decay", "fleet_reach3d", "sensed_tip3d", "coordination"],
+    [
+        "corridor_studies",
+        "corridor_compound",
+        "successive_training",
+        "grasp_epsilon_decay",
+        "fleet_reach3d",
+        "sensed_tip3d",
+        "coordination",
+    ],
 )
 def test_research_runs(tmp_path, name):
     """Research is not product, but it stays runnable: each study's smoke version."""

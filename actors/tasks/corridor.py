@@ -1,8 +1,10 @@
 """Corridor (paper §5.4): reach a goal among solid walls (a `walls` scene). The root's reward is Eq. 11 (or a
 variant): the reach reward with a collision term from the scene's task readings ("clearance": the smallest link
 clearance, "collisions": how many moves the walls refused). Each agent may add what it senses locally to its
-state (its clearance, whether its own move was refused), pay a local collision penalty, follow the leader along the
-corridor's axis, and leave out moves it knows are futile (the tabu) or that the scene's shield vetoes.
+state (its clearance, whether its own move was refused), pay a local collision penalty (and, with the blame, one for
+its applied move when a move below it was refused: the walls refuse a compound move's increments root first, so the
+one refused is not always the one that carried the links there), follow the leader along the corridor's axis, and
+leave out moves it knows are futile (the tabu) or that the scene's shield vetoes.
 
 ```toml
 [task]
@@ -19,6 +21,7 @@ collision_penalty = -5.0     # added to its reward when its own move was refused
 collision_tabu = true        # the move the wall just refused is left out of the next choice
 follow_leader = 40.0         # weight of each of the last follow_leader_links agents' own progress along the axis
 follow_leader_links = 4
+blame_penalty = -5.0         # added when I moved and a move of an agent below me was refused (a compound refusal)
 ```
 Measured and reasoned: docs/notebook/corridor.md.
 """
@@ -45,6 +48,8 @@ CORRIDOR_C2 = 0.5
 CORRIDOR_D_SAFE = 0.1
 #: strict and shaped on a corridor: a collision costs -CORRIDOR_WEIGHT e^(-c2 D_corridor), below any other case
 CORRIDOR_WEIGHT = 5.0
+#: the action index that holds the joint (0: -, 1: hold, 2: +)
+HOLD = 1
 
 
 @dataclass(frozen=True)
@@ -56,6 +61,7 @@ class CorridorSettings(ReachSettings):
     collision_tabu: bool = False  # leave the move the wall just refused out of the next choice
     follow_leader: float = 0.0  # weight w of each of the last agents' own progress towards its place on the axis
     follow_leader_links: int = 4  # ... how many agents, counted from the end effector
+    blame_penalty: float = 0.0  # (<= 0) when I moved and a move below me was refused (its `Up` says so)
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -69,6 +75,8 @@ class CorridorSettings(ReachSettings):
             raise ValueError(f"follow_leader: must be >= 0, got {self.follow_leader}")
         if self.follow_leader > 0.0 and self.via is None:
             raise ValueError("follow_leader: needs via (the corridor's axis)")
+        if not (math.isfinite(self.blame_penalty) and self.blame_penalty <= 0.0):
+            raise ValueError(f"blame_penalty: must be <= 0, got {self.blame_penalty}")
         if self.follow_leader_links < 1:
             raise ValueError(f"follow_leader_links: must be >= 1, got {self.follow_leader_links}")
 
@@ -103,20 +111,33 @@ class CorridorAgent(ReachAgent):
         return corridor_reward(D, D_prev, clearance, collisions, self.c.reward, settle_radius=self.c.settle_radius)
 
     def up(self, view: StepView) -> Readings:
-        """My subtree's smallest clearance (my link's and my live children's subtrees'), for my parent's state."""
+        """My subtree's smallest clearance (my link's and my live children's subtrees'), for my parent's state;
+        with the blame, whether a move in my subtree (mine or below) was refused, for my parent's reward."""
         clearance = _subtree_clearance(view)
-        return {} if clearance is None else {"clearance": clearance}
+        out: Readings = {} if clearance is None else {"clearance": clearance}
+        if self.c.blame_penalty < 0.0:
+            out["refused"] = max(view.sense.get("collided", 0.0), _refused_below(view))
+        return out
+
+    def _clearance(self, view: StepView) -> float:
+        clearance = view.sense.get("clearance", 0.0)
+        if self.c.clearance_of == "subtree" and (subtree := _subtree_clearance(view)) is not None:
+            clearance = subtree
+        return clearance
 
     def state(self, view: StepView) -> list[float]:
         c = self.c
-        clearance = view.sense.get("clearance", 0.0)
-        if c.clearance_of == "subtree" and (subtree := _subtree_clearance(view)) is not None:
-            clearance = subtree
-        return [clearance] * c.clearance_state + [view.sense.get("collided", 0.0)] * c.collision_state
+        return [self._clearance(view)] * c.clearance_state + [view.sense.get("collided", 0.0)] * c.collision_state
 
     def reward(self, view: StepView, reward: float | None) -> float | None:
+        c = self.c
         if reward is not None and view.sense.get("collided", 0.0) > 0.5:
-            reward += self.c.collision_penalty
+            reward += c.collision_penalty
+        # a compound refusal: my move was applied, one below me (which mine carried towards the wall) was refused
+        moved = view.last_action is not None and view.last_action != HOLD
+        if reward is not None and c.blame_penalty < 0.0 and moved and view.sense.get("collided", 0.0) < 0.5:
+            if _refused_below(view) > 0.5:
+                reward += c.blame_penalty
         if self.behind is not None:  # + w (D_i(t-1) - D_i(t)) for my link end's distance to its place on the axis
             assert self.c.via is not None
             end = (view.end[0], view.end[1])
@@ -145,6 +166,11 @@ def _subtree_clearance(view: StepView) -> float | None:
     own = view.sense.get("clearance")
     known = [c for c in (own, *(up.sense.get("clearance") for up in view.ups.values())) if c is not None]
     return min(known) if known else None
+
+
+def _refused_below(view: StepView) -> float:
+    """1 when a move of an agent below me was refused at the step before (my live children's `Up`), else 0."""
+    return max((up.sense.get("refused", 0.0) for up in view.ups.values()), default=0.0)
 
 
 def _follow_leader_behind(topo: Topology, agent: str, s: CorridorSettings) -> float | None:
