@@ -45,6 +45,8 @@ class ObjectScene(Scene):
                     applied[a] = 0.0
             world.reset(q)
             g.blocked += len(deep)
+            if g.spec.solid == "pad":  # the joints whose own move keeps the finger out still move
+                self._one_by_one(deep, deltas, applied)
         g.sense_contacts()
         fx, fy, tau = g.wrench
         row = {"net_fx": fx, "net_fy": fy, "net_torque": tau}
@@ -56,6 +58,20 @@ class ObjectScene(Scene):
         for name, v in row.items():
             self.rows.setdefault(name, []).append(round(v, 5))
         return applied
+
+    def _one_by_one(self, deep: list[str], deltas: Mapping[str, float], applied: dict[str, float]) -> None:
+        """Each refused finger's joints, root first: a joint's move is kept if the finger then stays out."""
+        g, world = self.contacts, self.world
+        for leaf in deep:
+            for a in g.fingers[leaf]:
+                if not deltas.get(a):
+                    continue
+                q = world.joint_positions()
+                step = world.apply_increments({a: deltas[a]})
+                if leaf in g.too_deep():
+                    world.reset(q)
+                else:
+                    applied[a] = step.get(a, 0.0)
 
     def agent_sense(self, agent: str) -> Readings:
         return self.contacts.tip_sense(agent) if agent in self.contacts.readings else {}
