@@ -6,7 +6,7 @@ state and, within D_fine of it, fine steps.
 ```toml
 [task]
 kind = "grasp"
-reward = "shaped"     # shaped | paper | contact | global | force (grasp_reward.py)
+reward = "shaped"     # shaped | sensed | paper | contact | global | force (grasp_reward.py)
 fine_action = 0.1     # a finger near its contact goal moves fine_action x the action size
 ```
 The object and each fingertip's grasp point are the scene's (`[scene.object]`). Measured: docs/notebook/grasp.md.
