@@ -309,6 +309,17 @@ def test_state_of_the_finger_agents():
         run_config(GRASP3, ["task.fine_action=0.0"])
     with pytest.raises(SpecError, match="task.grasp_state: unknown field"):
         run_config(GRASP3, ['task.grasp_state="force"'])
+    # collision_state: + "collided" (its own move refused by the object), with the penalty and the tabu
+    on = ["task.collision_state=true", "task.collision_penalty=-1.0", "task.collision_tabu=true"]
+    task = task_of(run_config(GRASP3, on))
+    st = task.learner("f2_3", {})
+    assert tuple(st.state_names[-2:]) == ("g_perp", "collided") and st.state_sets[-1] == 2
+    finger = task.agent("f2_3", st)
+    hit = StepView(**{**view.__dict__, "sense": {"collided": 1.0}, "last_action": 2})
+    assert finger.state(hit)[-1] == 1.0 and finger.reward(hit, 0.5) == -0.5 and finger.avoid(hit) == [2]
+    assert finger.reward(view, 0.5) == 0.5 and finger.avoid(view) == []
+    with pytest.raises(SpecError, match="task.collision_penalty: must be <= 0"):
+        run_config(GRASP3, ["task.collision_penalty=1.0"])
 
 
 def _wrench_of(fn: dict, ft: dict, points: dict, normals: dict) -> tuple[float, float, float]:
@@ -584,6 +595,9 @@ def test_pad_tries_a_refused_fingers_joints_one_by_one():
         assert applied["f1_3"] == 0.0 and applied["f1_4"] == pytest.approx(math.radians(-1.0))
         assert scene.contacts.blocked == 1 and scene.contacts.too_deep() == []
         assert world.joint_positions()["f1_3"] == pytest.approx(q["f1_3"])
+        # each joint senses whether the object refused its own move (a refused joint, a kept one, one not asked)
+        assert [scene.agent_sense(a)["collided"] for a in ("f1_3", "f1_4", "f2_3")] == [1.0, 0.0, 0.0]
+        assert scene.agent_sense("f1_4")["fn"] >= 0.0  # the fingertip still senses its contact
         links = ObjectScene(world, SceneSpec(kind="object", object=dataclasses.replace(pad, solid="links")), 0.01)
         world.reset(q)
         links.reset()
@@ -668,3 +682,23 @@ def test_sensed_goals_plan_nothing():
     sense["net_fx"] = -100.0  # a large error: the step is clipped to step_max
     g.step(tips, sense)
     assert g.goals["b"] == pytest.approx((1.05 + p.step_max, 0.35))
+
+
+def test_sensed_detour_goes_round_the_corner():
+    """`sensed`, detour: a finger touching another face than its own is sent to the point `approach` out along both
+    normals from the corner between the two faces, then on to its pre-grasp point; without detour straight on."""
+    below = _contact_sense({"a": (-0.5, -0.5)}, {"a": (-0.5, -0.5)}, {"a": 0.05}, {"a": (0.0, -1.0)})
+    tips = {"a": (-0.5, -0.55), "b": (1.8, 0.35), "c": (1.8, -0.35)}
+    straight = GraspReward("sensed", GRASP, (0.0, 0.0), (1.0, 0.5))
+    straight.step(tips, below)
+    out = straight.p.approach
+    assert straight.goals["a"] == pytest.approx((-1.0 - out, 0.0))  # through the object's corner
+    g = GraspReward("sensed", GRASP, (0.0, 0.0), (1.0, 0.5), detour=True)
+    g.step(tips, below)
+    assert g.goals["a"] == pytest.approx((-1.0 - out, -0.5 - out))
+    g.step({**tips, "a": (-0.9, -0.9)}, _sense({}))  # off the face, not yet round: still the corner
+    assert g.goals["a"] == pytest.approx((-1.0 - out, -0.5 - out))
+    g.step({**tips, "a": (-1.0 - out + 0.05, -0.5 - out)}, _sense({}))  # round the corner: to the pre-grasp point
+    assert g.goals["a"] == pytest.approx((-1.0 - out, 0.0))
+    g.reset()
+    assert g._via == dict.fromkeys(TIPS, None)

@@ -336,13 +336,15 @@ class GraspReward:
         kn: float = 20.0,
         kt: float = 20.0,
         fine_action: float = 1.0,
+        detour: bool = False,
     ) -> None:
         """kn, kt: the contact stiffnesses (the scene's), to turn forces into displacements; fine_action: the
-        fingers' action scale within D_fine of their goal (the grasp task's fine_action), for the k term."""
+        fingers' action scale within D_fine of their goal (the grasp task's fine_action), for the k term;
+        detour (sensed): a finger touching another face than its own goes round the corner between the two."""
         if mode not in GRASP_REWARDS:
             raise ValueError(f"unknown grasp reward {mode!r}; allowed: {', '.join(GRASP_REWARDS)}")
         self.mode, self.grasp, self.center, self.fine_action = mode, dict(grasp), center, fine_action
-        self.kn, self.kt = kn, kt
+        self.kn, self.kt, self.detour = kn, kt, detour
         self.tips, self.half_extents = tuple(grasp), half_extents
         self.normals = {t: face_normal(g, center, half_extents) for t, g in grasp.items()}
         self.p = params or GraspParams()
@@ -355,6 +357,7 @@ class GraspReward:
         self._tips: dict[str, Vec] | None = None
         self._fine: dict[str, bool] = dict.fromkeys(self.tips, False)
         self._pressing: dict[str, bool] = dict.fromkeys(self.tips, False)  # sensed: past the pre-grasp point
+        self._via: dict[str, Vec | None] = dict.fromkeys(self.tips, None)  # sensed, detour: the corner to go round
         self.goals: dict[str, Vec] = {t: (float(g[0]), float(g[1])) for t, g in self.grasp.items()}
 
     def step(
@@ -440,6 +443,15 @@ class GraspReward:
         for t, g in self.grasp.items():
             n = self.normals[t]
             pre = (g[0] + p.approach * n[0], g[1] + p.approach * n[1])
+            if self.detour and obs.contact[t] and not on_face[t]:
+                # on another face: the straight way to the pre-grasp point cuts through the object
+                self._via[t], self._pressing[t] = self._corner(t, obs.normal[t], now[t]), False
+            via = self._via[t]
+            if via is not None:
+                if math.hypot(now[t][0] - via[0], now[t][1] - via[1]) >= p.pre_reached:
+                    goals[t] = via
+                    continue
+                self._via[t] = None  # round the corner: on to the pre-grasp point
             if not self._pressing[t] and math.hypot(now[t][0] - pre[0], now[t][1] - pre[1]) < p.pre_reached:
                 self._pressing[t] = True  # at the pre-grasp point: from now on towards the face
             if not on_face[t]:
@@ -450,6 +462,14 @@ class GraspReward:
             dx, dy = p.compliance * (-dfn * nx + dft * tx), p.compliance * (-dfn * ny + dft * ty)
             goals[t] = _towards(now[t], (now[t][0] + dx, now[t][1] + dy), p.step_max)
         return goals
+
+    def _corner(self, t: str, touched: Vec, tip: Vec) -> Vec:
+        """The point `approach` out along both faces' normals from the object's corner between the face the
+        finger touches (its sensed normal) and its own face (opposite faces: the corner on the tip's side)."""
+        n, c, h, a = self.normals[t], self.center, self.half_extents, self.p.approach
+        s = [n[i] + touched[i] for i in (0, 1)]
+        side = [math.copysign(1.0, s[i]) if abs(s[i]) > 0.5 else math.copysign(1.0, tip[i] - c[i]) for i in (0, 1)]
+        return (c[0] + side[0] * (h[0] + a), c[1] + side[1] * (h[1] + a))
 
     def _finger(self, t: str, obs: Contacts, D: float, D_prev: float, err: float, err_prev: float) -> float:
         p = self.p
