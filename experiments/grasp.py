@@ -146,7 +146,10 @@ def _sensed_section(rep: Report, sensed: dict[str, Any], shaped_frozen: dict[int
         "*sensed* balance error E = (|F|^2 + (tau/L)^2)/2 from where its tip is (the net force and torque on the "
         "object, the finger's own contact point, normal, fn, ft and cone margin: its own normal force kept in [2, 5], "
         "its tangential force inside the cone), through a fixed gain (0.02 length per force unit, not the contact's "
-        "1/kn), at most 0.04 away; a finger pressing another face is sent 0.04 out along that face's sensed normal. "
+        "1/kn), at most 0.05 away. A finger that touches another face than its own (`detour = true`) is sent first "
+        "to the point 0.3 out along both faces' normals from the corner between the two, then on to its pre-grasp "
+        "point: the straight way there cut through the object, where a frozen finger pressed until its moves were "
+        "refused and then repeated them (docs/notebook/grasp.md). "
         "The fingers are paid, as with `shaped`, for closing on the goal of the step before. The object is solid but "
         'for the fingertip pads (`solid = "pad"`: no link deeper than its fingertip sphere, so no finger cuts a '
         "corner; a refused finger's joints are tried one by one). Each swarm is trained, then replayed for one "
