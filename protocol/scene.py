@@ -41,8 +41,9 @@ from .topology import Topology
 
 SCENE_KINDS = ("free", "walls", "object")
 OBJECT_CONTACTS = ("link", "tip")
+OBJECT_SOLIDS = ("links", "pad")
 _OBJECT_KEYS = ("center", "half_extents", "mu", "kn", "kt", "cn", "ct", "max_depth", "grasp")
-_OBJECT_OPTIONAL = ("contact",)
+_OBJECT_OPTIONAL = ("contact", "solid")
 _KEYS = {"free": {"kind"}, "walls": {"kind", "obstacle", "shield"}, "object": {"kind", "object"}}
 
 
@@ -62,6 +63,10 @@ class ObjectSpec:
     # what presses on the object: "link" = the fingertip agent's whole capsule; "tip" = a sphere of the
     # capsule's radius at the fingertip only (a point contact at the fingertip)
     contact: str = "link"
+    # how solid the object is for the fingers: "links" = no link deeper than max_depth (a blocked finger holds all
+    # its joints); "pad" (with contact = "tip") = also no link deeper than its fingertip pad, and a blocked
+    # finger's joints are tried one by one, the ones whose own move keeps it out moving (sim/scenes/contact.py)
+    solid: str = "links"
 
     @property
     def char_length(self) -> float:
@@ -121,6 +126,11 @@ def _parse_object(src: str, where: str, data: Any, leaves: list[str]) -> ObjectS
     contact = data.get("contact", "link")
     if contact not in OBJECT_CONTACTS:
         raise SpecError(src, f"{where}.contact", f"must be one of {', '.join(OBJECT_CONTACTS)}, got {contact!r}")
+    solid = data.get("solid", "links")
+    if solid not in OBJECT_SOLIDS:
+        raise SpecError(src, f"{where}.solid", f"must be one of {', '.join(OBJECT_SOLIDS)}, got {solid!r}")
+    if solid == "pad" and contact != "tip":
+        raise SpecError(src, f"{where}.solid", 'a fingertip pad needs contact = "tip"')
     missing = [k for k in _OBJECT_KEYS if k not in data]
     if missing:
         raise SpecError(src, f"{where}.{missing[0]}", "missing")
@@ -153,4 +163,4 @@ def _parse_object(src: str, where: str, data: Any, leaves: list[str]) -> ObjectS
     lacking = [leaf for leaf in leaves if leaf not in grasp]
     if lacking:
         raise SpecError(src, f"{where}.grasp", f"no grasp point for end effector(s) {', '.join(lacking)}")
-    return ObjectSpec(center=(cx, cy), half_extents=(hx, hy), grasp=grasp, contact=contact, **consts)
+    return ObjectSpec(center=(cx, cy), half_extents=(hx, hy), grasp=grasp, contact=contact, solid=solid, **consts)

@@ -339,6 +339,13 @@ def test_quick_grasp_experiment(tmp_path):
         q = results[replay]["0"]
         assert set(q) >= {"good", "net_force", "net_torque", "mean_fn"} and q["net_force"] >= 0.0
     assert "frozen (`--learn off --explore off`) it ends good in" in (out / "report.md").read_text()
+    # the grasp with no planned contact points (grasp3-sensed.toml): trained and frozen, and the untrained control
+    sensed = results["sensed"]
+    assert set(sensed) == {"fuzzy", "untrained"}  # the smoke version keeps to the paper's learner
+    assert [t["seed"] for t in sensed["fuzzy"]["training"]] == [0] and sensed["untrained"]["training"] == []
+    for kind in ("fuzzy", "untrained"):
+        assert set(sensed[kind]["frozen"]["0"]) >= {"good", "net_force", "net_torque", "mean_fn"}
+    assert "## The grasp with no planned contact points" in (out / "report.md").read_text()
 
 
 @pytest.mark.slow  # ~25 s on top of `all --quick`

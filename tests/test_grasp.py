@@ -14,6 +14,7 @@ from kinswarm.actors.tasks.grasp_reward import (
     Contacts,
     GraspParams,
     GraspReward,
+    balance_step,
     balance_targets,
     contact_goals,
     eq12,
@@ -280,7 +281,9 @@ def test_force_reward_in_contact_credits_a_fingers_own_move():
 
 def test_reward_names_fit_the_task():
     assert run_config(GRASP3, ['task.reward="contact"']).task["reward"] == "contact"
-    with pytest.raises(SpecError, match="task.reward: 'strict' is not one of shaped, paper, contact, global, force"):
+    with pytest.raises(
+        SpecError, match="task.reward: 'strict' is not one of shaped, sensed, paper, contact, global, force"
+    ):
         run_config(GRASP3, ['task.reward="strict"'])
     with pytest.raises(SpecError, match="task.reward: 'contact' is not one of shaped, paper, strict"):
         run_config(ROOT / "examples" / "chain4.toml", ['task.reward="contact"'])
@@ -306,6 +309,17 @@ def test_state_of_the_finger_agents():
         run_config(GRASP3, ["task.fine_action=0.0"])
     with pytest.raises(SpecError, match="task.grasp_state: unknown field"):
         run_config(GRASP3, ['task.grasp_state="force"'])
+    # collision_state: + "collided" (its own move refused by the object), with the penalty and the tabu
+    on = ["task.collision_state=true", "task.collision_penalty=-1.0", "task.collision_tabu=true"]
+    task = task_of(run_config(GRASP3, on))
+    st = task.learner("f2_3", {})
+    assert tuple(st.state_names[-2:]) == ("g_perp", "collided") and st.state_sets[-1] == 2
+    finger = task.agent("f2_3", st)
+    hit = StepView(**{**view.__dict__, "sense": {"collided": 1.0}, "last_action": 2})
+    assert finger.state(hit)[-1] == 1.0 and finger.reward(hit, 0.5) == -0.5 and finger.avoid(hit) == [2]
+    assert finger.reward(view, 0.5) == 0.5 and finger.avoid(view) == []
+    with pytest.raises(SpecError, match="task.collision_penalty: must be <= 0"):
+        run_config(GRASP3, ["task.collision_penalty=1.0"])
 
 
 def _wrench_of(fn: dict, ft: dict, points: dict, normals: dict) -> tuple[float, float, float]:
@@ -519,3 +533,172 @@ def test_tip_contact_is_the_fingertip_sphere_only():
         assert not readings["tip"].contact and readings["tip"].fn == 0.0
     finally:
         world.close()
+
+
+def test_pad_keeps_links_out_and_below_the_radius_the_fingertip_centre():
+    """solid = "pad" (examples/grasp3-sensed.toml): a fingertip pressing its face is allowed; a distal link sunk
+    into the object with its fingertip out of it (the link's side or base pressing) is refused, where the "links"
+    rule of grasp3.toml lets it through. A fingertip that entered through the face next to the one it presses, its
+    link coming up through the bottom face at the corner, is refused only with max_depth below the links' radius
+    (no fingertip centre inside the object): at grasp3's 0.3 the pad rule alone lets it through."""
+    import dataclasses
+
+    from kinswarm.sim.scenes.contact import GraspScene
+    from kinswarm.sim.world import World
+
+    cfg = run_config(ROOT / "examples" / "grasp3-sensed.toml")
+    topo, pad = cfg.topo(), cfg.scene_spec.object
+    links = run_config(GRASP3).scene_spec.object
+    assert pad.solid == "pad" and links.solid == "links"
+    strict = dataclasses.replace(pad, max_depth=0.095)  # below the capsules' radius 0.1
+    world = World(topo)
+    try:
+        fingers = GraspScene(world, pad).fingers
+        q = _ik(world, fingers, world.joint_positions(), "f1_4", (-1.54, 0.0))
+        q = _ik(world, fingers, q, "f1_4", (-1.04, 0.0))  # the tip 0.06 deep
+        for obj in (pad, links, strict):
+            assert GraspScene(world, obj).too_deep() == []
+        # the distal link's base 0.05 inside the left face, pointing away up-left: its fingertip is out
+        h = math.radians(135.0)
+        q = _ik(world, fingers, q, "f1_4", (-0.95 + 0.8 * math.cos(h), 0.8 * math.sin(h)), heading=h)
+        assert GraspScene(world, pad).too_deep() == ["f1_4"] and GraspScene(world, links).too_deep() == []
+        # at the corner: the fingertip centre 0.05 inside the left face and 0.1 above the bottom one, its link
+        # coming up through the bottom face (docs/notebook/grasp.md, Corners)
+        q = _ik(world, fingers, q, "f1_4", (-0.95, -1.0))
+        q = _ik(world, fingers, q, "f1_4", (-0.95, -0.5), heading=math.radians(90.0))
+        assert GraspScene(world, strict).too_deep() == ["f1_4"]
+        assert GraspScene(world, pad).too_deep() == [] and GraspScene(world, links).too_deep() == []
+    finally:
+        world.close()
+
+
+def test_pad_tries_a_refused_fingers_joints_one_by_one():
+    """A finger whose move is refused keeps the moves of the joints that alone keep it out (solid = "pad"); with
+    "links" the whole finger holds."""
+    import dataclasses
+
+    from kinswarm.protocol.scene import SceneSpec
+    from kinswarm.sim.scenes.object import ObjectScene
+    from kinswarm.sim.world import World
+
+    cfg = run_config(ROOT / "examples" / "grasp3-sensed.toml")
+    topo, pad = cfg.topo(), cfg.scene_spec.object
+    world = World(topo)
+    try:
+        scene = ObjectScene(world, SceneSpec(kind="object", object=pad), math.radians(1.0))
+        q = _ik(world, scene.contacts.fingers, world.joint_positions(), "f1_4", (-1.54, 0.0))
+        q = _ik(world, scene.contacts.fingers, q, "f1_4", (-1.015, 0.0))  # the tip 0.085 deep
+        scene.reset()
+        assert scene.contacts.too_deep() == []
+        # f1_3 turns the tip 0.3 into the face (refused), f1_4 alone turns it a little (kept)
+        applied = scene.move({"f1_3": math.radians(-15.0), "f1_4": math.radians(-1.0)})
+        assert applied["f1_3"] == 0.0 and applied["f1_4"] == pytest.approx(math.radians(-1.0))
+        assert scene.contacts.blocked == 1 and scene.contacts.too_deep() == []
+        assert world.joint_positions()["f1_3"] == pytest.approx(q["f1_3"])
+        # each joint senses whether the object refused its own move (a refused joint, a kept one, one not asked)
+        assert [scene.agent_sense(a)["collided"] for a in ("f1_3", "f1_4", "f2_3")] == [1.0, 0.0, 0.0]
+        assert scene.agent_sense("f1_4")["fn"] >= 0.0  # the fingertip still senses its contact
+        links = ObjectScene(world, SceneSpec(kind="object", object=dataclasses.replace(pad, solid="links")), 0.01)
+        world.reset(q)
+        links.reset()
+        applied = links.move({"f1_3": math.radians(-15.0), "f1_4": math.radians(-1.0)})
+        assert applied["f1_3"] == 0.0 and applied["f1_4"] == 0.0  # "links": the whole finger holds
+    finally:
+        world.close()
+
+
+def test_balance_step_descends_the_sensed_balance_error():
+    """`sensed`: each finger's force change is the descent of E = (|F|^2 + (tau/L)^2)/2 in its own forces, from
+    sensed quantities only, with its own normal force kept in [f_grip, f_hi]. Finger a presses the left face, b
+    and c the right one (GRASP): a pressing harder than b + c pushes the object right, so a eases off and b, c
+    press harder; a torque is taken up by b and c in opposite ways; moved along the steps, E falls."""
+    p = GraspParams()
+    fn = {"a": 5.0, "b": 2.0, "c": 2.0}  # a presses 1 more than b + c: F = (1, 0) on the object
+    obs = Contacts.from_sense(_sense(fn, net=(1.0, 0.0, 0.0), margin=dict.fromkeys(fn, 1.0)), TIPS)
+    d = {t: balance_step(obs, t, (0.0, 0.0), 1.0, p) for t in TIPS}
+    assert d["a"][0] == pytest.approx(-1.0) and d["b"][0] == pytest.approx(1.0) and d["c"][0] == pytest.approx(1.0)
+    assert all(v[1] == pytest.approx(0.0) for v in d.values())
+    # a counter-clockwise torque 0.7: b (above the centre, normal +x) eases off, c (below) presses harder
+    obs = Contacts.from_sense(_sense(fn, net=(0.0, 0.0, 0.7), margin=dict.fromkeys(fn, 1.0)), TIPS)
+    db, dc = balance_step(obs, "b", (0.0, 0.0), 1.0, p)[0], balance_step(obs, "c", (0.0, 0.0), 1.0, p)[0]
+    assert db == pytest.approx(-0.35 * 0.7) and dc == pytest.approx(0.35 * 0.7)
+    # a finger below the grip presses, one above f_hi eases off, one at its cone's edge eases its tangential force
+    low = Contacts.from_sense(_sense({"a": 1.0}, margin={"a": 1.0}), TIPS)
+    assert balance_step(low, "a", (0.0, 0.0), 1.0, p)[0] == pytest.approx(p.f_lo - 1.0)
+    high = Contacts.from_sense(_sense({"a": 6.0}, margin={"a": 1.0}), TIPS)
+    assert balance_step(high, "a", (0.0, 0.0), 1.0, p)[0] == pytest.approx(p.f_hi - 6.0)
+    edge = Contacts.from_sense(_sense({"a": 3.0}, ft={"a": 1.5}, margin={"a": 0.0}), TIPS)
+    assert balance_step(edge, "a", (0.0, 0.0), 1.0, p)[1] == pytest.approx(-p.margin_min)
+    # the wrench after small steps along (dfn, dft) of every finger at once is smaller (a descent direction)
+    fn = {"a": 4.6, "b": 1.7, "c": 2.4}
+    ft = {"a": 0.2, "b": -0.1, "c": 0.0}
+    NORMALS = {"a": (-1.0, 0.0), "b": (1.0, 0.0), "c": (1.0, 0.0)}  # noqa: N806
+
+    def wrench(fn, ft):
+        tips = {
+            t: ContactReading(
+                True,
+                0.1,
+                fn[t],
+                ft[t],
+                ft[t],
+                1.0,
+                GRASP[t],
+                NORMALS[t],
+                (-fn[t] * NORMALS[t][0] - ft[t] * NORMALS[t][1], -fn[t] * NORMALS[t][1] + ft[t] * NORMALS[t][0]),
+            )
+            for t in TIPS
+        }
+        return net_wrench(tips, (0.0, 0.0))
+
+    E = lambda w: 0.5 * (w[0] ** 2 + w[1] ** 2 + w[2] ** 2)  # noqa: E731
+    w = wrench(fn, ft)
+    obs = Contacts.from_sense(_sense(fn, ft, net=w, margin=dict.fromkeys(fn, 1.0)), TIPS)
+    d = {t: balance_step(obs, t, (0.0, 0.0), 1.0, p) for t in TIPS}
+    w2 = wrench({t: fn[t] + 0.05 * d[t][0] for t in TIPS}, {t: ft[t] + 0.05 * d[t][1] for t in TIPS})
+    assert E(w2) < 0.9 * E(w)
+
+
+def test_sensed_goals_plan_nothing():
+    """`sensed`: a finger goes to its pre-grasp point first, then to its grasp point, and touching its face it is
+    sent one descent step from where its tip is (at most step_max away), whatever kn would plan."""
+    g = GraspReward("sensed", GRASP, (0.0, 0.0), (1.0, 0.5), kn=1e6, kt=1e6)  # no contact model is used
+    p, out = g.p, g.p.approach
+    tips = {"a": (-0.5, -1.2), "b": (1.0 + out + 0.15, 0.35), "c": (1.8, -0.35)}
+    g.step(tips, _sense({}))
+    assert g.goals["a"] == pytest.approx((-1.0 - out, 0.0)) and g.goals["c"] == pytest.approx((1.0 + out, -0.35))
+    assert g.goals["b"] == pytest.approx((1.0 + out, 0.35))
+    tips = {**tips, "b": (1.0 + out + 0.05, 0.35)}
+    g.step(tips, _sense({}))  # b is within pre_reached of its pre-grasp point: now to its grasp point
+    assert g.goals["b"] == GRASP["b"] and g.goals["a"] == pytest.approx((-1.0 - out, 0.0))
+    # b touches its face: F = (-1, 0) (b and c press more than a): b eases off, out along +x
+    tips = {**tips, "b": (1.05, 0.35)}
+    sense = _contact_sense({"b": (1.0, 0.35)}, {"b": (1.0, 0.35)}, {"b": 0.05}, {"b": (1.0, 0.0)})
+    sense.update({"fn/b": 3.0, "margin/b": 1.0, "net_fx": -1.0})
+    g.step(tips, sense)
+    assert g.goals["b"] == pytest.approx((1.05 + p.compliance * 1.0, 0.35))
+    _, context = g.step({**tips, "b": (1.05 + p.compliance, 0.35)}, sense)
+    assert context["b"]["fine"] == 1.0 and context["b"]["force_error"] == 0.0  # no force target is planned
+    sense["net_fx"] = -100.0  # a large error: the step is clipped to step_max
+    g.step(tips, sense)
+    assert g.goals["b"] == pytest.approx((1.05 + p.step_max, 0.35))
+
+
+def test_sensed_detour_goes_round_the_corner():
+    """`sensed`, detour: a finger touching another face than its own is sent to the point `approach` out along both
+    normals from the corner between the two faces, then on to its pre-grasp point; without detour straight on."""
+    below = _contact_sense({"a": (-0.5, -0.5)}, {"a": (-0.5, -0.5)}, {"a": 0.05}, {"a": (0.0, -1.0)})
+    tips = {"a": (-0.5, -0.55), "b": (1.8, 0.35), "c": (1.8, -0.35)}
+    straight = GraspReward("sensed", GRASP, (0.0, 0.0), (1.0, 0.5))
+    straight.step(tips, below)
+    out = straight.p.approach
+    assert straight.goals["a"] == pytest.approx((-1.0 - out, 0.0))  # through the object's corner
+    g = GraspReward("sensed", GRASP, (0.0, 0.0), (1.0, 0.5), detour=True)
+    g.step(tips, below)
+    assert g.goals["a"] == pytest.approx((-1.0 - out, -0.5 - out))
+    g.step({**tips, "a": (-0.9, -0.9)}, _sense({}))  # off the face, not yet round: still the corner
+    assert g.goals["a"] == pytest.approx((-1.0 - out, -0.5 - out))
+    g.step({**tips, "a": (-1.0 - out + 0.05, -0.5 - out)}, _sense({}))  # round the corner: to the pre-grasp point
+    assert g.goals["a"] == pytest.approx((-1.0 - out, 0.0))
+    g.reset()
+    assert g._via == dict.fromkeys(TIPS, None)

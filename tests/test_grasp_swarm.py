@@ -41,7 +41,9 @@ def test_grasp_swarm_runs_in_processes(tmp_path):
 def test_grasp_rejects_a_reaching_reward(tmp_path, capsys):
     args = ["run", str(GRASP3), "--reward", "strict", "--out", str(tmp_path / "x"), "--no-progress"]
     assert cli_main(args) == 2
-    assert "task.reward: 'strict' is not one of shaped, paper, contact, global, force" in capsys.readouterr().err
+    assert (
+        "task.reward: 'strict' is not one of shaped, sensed, paper, contact, global, force" in capsys.readouterr().err
+    )
     assert not (tmp_path / "x").exists()
 
 

@@ -6,14 +6,19 @@ state and, within D_fine of it, fine steps.
 ```toml
 [task]
 kind = "grasp"
-reward = "shaped"     # shaped | paper | contact | global | force (grasp_reward.py)
+reward = "shaped"     # shaped | sensed | paper | contact | global | force (grasp_reward.py)
 fine_action = 0.1     # a finger near its contact goal moves fine_action x the action size
+collision_state = false   # + "collided": the joint's own move of the step before was refused by the object
+collision_penalty = 0.0   # (<= 0) added to the reward of a joint whose own move was refused
+collision_tabu = false    # the move the object just refused is left out of the next choice
+detour = false            # sensed: a finger on another face goes round the corner between it and its own face
 ```
 The object and each fingertip's grasp point are the scene's (`[scene.object]`). Measured: docs/notebook/grasp.md.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 from kinswarm.actors.learning.observation import Observation, StateVariable
@@ -21,6 +26,7 @@ from kinswarm.actors.learning.state import goal_along_motion
 from kinswarm.protocol.messages import Task
 
 from .base import AgentTask, Head, StepView, TaskDef, Vec2
+from .corridor import COLLIDED
 from .grasp_reward import GRASP_REWARDS, GraspParams, GraspReward
 
 #: the finger agents' extra state variable: the goal's component along the direction the agent's joint moves the tip
@@ -31,10 +37,20 @@ G_PERP = StateVariable("g_perp", 7, (-GraspParams.g_perp, GraspParams.g_perp))
 class GraspSettings:
     reward: str = "shaped"  # the grasp agent's reward (grasp_reward.py)
     fine_action: float = 0.1  # the fingers' action scale within D_fine of their goal (1 degree moves fn too much)
+    # a move the solid object refuses leaves the state unchanged, so a frozen table would pick it again forever:
+    # with the refusal in the state (as the corridor's collision_state) the table can hold another action for it
+    collision_state: bool = False
+    collision_penalty: float = 0.0
+    collision_tabu: bool = False  # leave the move the object just refused out of the next choice (as the corridor)
+    # sensed: a finger touching another face than its own first goes round the corner between the two (a point
+    # `approach` out along both normals from it), not straight through the object to its pre-grasp point
+    detour: bool = False
 
     def __post_init__(self) -> None:
         if not 0.0 < self.fine_action <= 1.0:
             raise ValueError(f"fine_action: must be in (0, 1], got {self.fine_action}")
+        if not (math.isfinite(self.collision_penalty) and self.collision_penalty <= 0.0):
+            raise ValueError(f"collision_penalty: must be <= 0, got {self.collision_penalty}")
 
 
 class GraspTask(TaskDef):
@@ -70,12 +86,12 @@ class GraspTask(TaskDef):
         return longest
 
     def state_variables(self, agent: str) -> tuple[StateVariable, ...]:
-        return (G_PERP,)
+        return (G_PERP,) + (COLLIDED,) * self.settings.collision_state
 
     def agent(self, agent: str, observation: Observation | None) -> AgentTask:
         if agent == self.topo.root:
             return GraspRoot(self)
-        return GraspFinger(self.settings.fine_action)
+        return GraspFinger(self.settings)
 
 
 class GraspRoot(AgentTask):
@@ -92,6 +108,7 @@ class GraspRoot(AgentTask):
             kn=obj.kn,
             kt=obj.kt,
             fine_action=task.settings.fine_action,
+            detour=task.settings.detour,
         )
         self.finger_of = {c: topo.subtree_leaves(c)[0] for c in topo.agents[topo.root].children}
 
@@ -108,11 +125,24 @@ class GraspRoot(AgentTask):
 
 
 class GraspFinger(AgentTask):
-    def __init__(self, fine_action: float) -> None:
-        self.fine_action = fine_action
+    def __init__(self, settings: GraspSettings) -> None:
+        self.fine_action = settings.fine_action
+        self.c = settings
 
     def state(self, view: StepView) -> list[float]:
-        return [goal_along_motion(view.frame, view.tip, view.goal)]
+        g = goal_along_motion(view.frame, view.tip, view.goal)
+        return [g] + [view.sense.get("collided", 0.0)] * self.c.collision_state
+
+    def reward(self, view: StepView, reward: float | None) -> float | None:
+        if reward is not None and view.sense.get("collided", 0.0) > 0.5:
+            reward += self.c.collision_penalty
+        return reward
+
+    def avoid(self, view: StepView) -> list[int]:
+        """The tabu: a refused move left the state unchanged, so a frozen table would choose it again."""
+        if self.c.collision_tabu and view.sense.get("collided", 0.0) > 0.5 and view.last_action is not None:
+            return [view.last_action]
+        return []
 
     def scale(self, view: StepView) -> float:
         """Fine steps while the grasp agent says "fine" (within D_fine of the contact goal)."""

@@ -33,6 +33,16 @@ shaped   (default) contact goals: the grasp agent turns the balancing forces int
          action scale the finger moved with. The grasp agent sends each finger "fine" = 1 while it
          is within D_fine of its goal; the finger then moves fine_action x the action
          size (a 1 degree step changes fn by more than the balance bound allows).
+sensed   no planned contact points and no contact model (examples/grasp3-sensed.toml). A finger first
+         goes to its pre-grasp point (`approach` out from its grasp point along the face normal; the
+         grasp points are the scene's, Eq. 12's D_goal), then to its grasp point. Touching its grasp
+         point's face, its goal is one descent step of the *sensed* balance error
+         E = (|F|^2 + (tau/L)^2)/2 from where its tip is: goal_i = tip_i + c (dfn_i (-n_i) + dft_i t_i),
+         at most step_max away, (dfn_i, dft_i) = balance_step: -dE/dfn_i and -dE/dft_i with the sensed
+         F, tau and the finger's own contact point and normal, its normal force kept in [f_lo, f_hi] and
+         its tangential force inside the cone (the sensed margin at least margin_min). c is a fixed gain
+         (compliance, length per force unit), not the contact's 1/kn. Reward and "fine" as `shaped`,
+         against the goal of t-1.
 
 Numpy only: pure functions of the task observation, tested on their own (tests/test_grasp.py).
 """
@@ -45,7 +55,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-GRASP_REWARDS: tuple[str, ...] = ("shaped", "paper", "contact", "global", "force")
+GRASP_REWARDS: tuple[str, ...] = ("shaped", "sensed", "paper", "contact", "global", "force")
 
 
 Vec = tuple[float, float]
@@ -67,6 +77,12 @@ class GraspParams:
     g_perp: float = 0.05  # the range of the state variable g_perp: [-g_perp, g_perp] (clipped)
     approach: float = 0.3  # shaped: a finger not in front of its grasp point's face goes first to the point
     # this far out along the face normal (the pre-grasp point), so that it does not press into another face
+    compliance: float = 0.02  # sensed: length per force unit of the descent step (a gain, not the contact's 1/kn)
+    f_lo: float = 2.0  # sensed: a finger pressing less than this is told to press harder (the least grip)
+    f_hi: float = 5.0  # sensed: a finger pressing harder than this is told to ease off
+    step_max: float = 0.05  # sensed: the descent step's length is clipped to this
+    margin_min: float = 0.2  # sensed: the friction-cone margin (force units) a finger keeps
+    pre_reached: float = 0.1  # sensed: within this of its pre-grasp point a finger turns towards the face
 
 
 @dataclass(frozen=True)
@@ -163,6 +179,27 @@ def balance_targets(
             x = x + max(alpha, 0.0) * v
         x = np.maximum(x, f_grip)
     return {t: float(x[j]) for j, t in enumerate(tips)}
+
+
+def balance_step(obs: Contacts, tip: str, center: Vec, L: float, p: GraspParams) -> tuple[float, float]:
+    """(dfn, dft): how finger `tip`'s contact forces should change to lower the sensed balance error
+    E = (|F|^2 + (tau/L)^2)/2 (the negative gradient of E in its own normal and tangential force; the other
+    fingers' forces held), with its normal force kept in [f_lo, f_hi] and its tangential force inside the
+    friction cone (the sensed margin at least margin_min). Everything read here is sensed: the net wrench on
+    the object and the finger's own contact; nothing is planned."""
+    fx, fy, tau = obs.net
+    (px, py), (nx, ny) = obs.point[tip], obs.normal[tip]
+    tx, ty = -ny, nx
+    rx, ry = px - center[0], py - center[1]
+    # f_i = -fn n + ft t: dF/dfn = -n, dtau/dfn = r x (-n); dF/dft = t, dtau/dft = r x t
+    dfn = (fx * nx + fy * ny) + tau / L**2 * (rx * ny - ry * nx)
+    dft = -(fx * tx + fy * ty) - tau / L**2 * (rx * ty - ry * tx)
+    fn = obs.fn[tip]
+    dfn += max(0.0, p.f_lo - fn) - max(0.0, fn - p.f_hi)
+    shortfall = p.margin_min - obs.margin[tip]
+    if shortfall > 0.0:  # near or over the cone's edge: ease the tangential spring
+        dft -= math.copysign(shortfall, obs.ft[tip])
+    return dfn, dft
 
 
 def face_normal(point: Vec, center: Vec, half_extents: Vec) -> Vec:
@@ -269,6 +306,15 @@ def contact_goals(
     return goals, fn_t, ft_t
 
 
+def _towards(tip: Vec, goal: Sequence[float], most: float) -> Vec:
+    """`goal`, or the point `most` from `tip` towards it if it is farther (a goal always within fine reach)."""
+    dx, dy = goal[0] - tip[0], goal[1] - tip[1]
+    d = math.hypot(dx, dy)
+    if d <= most:
+        return (float(goal[0]), float(goal[1]))
+    return (tip[0] + dx * most / d, tip[1] + dy * most / d)
+
+
 def _in_front(tip: Sequence[float], point: Vec, normal: Vec, center: Vec, half_extents: Vec) -> bool:
     """Whether `tip` lies outside the face through `point` (outward `normal`) and within its extent."""
     nx, ny = normal
@@ -290,13 +336,15 @@ class GraspReward:
         kn: float = 20.0,
         kt: float = 20.0,
         fine_action: float = 1.0,
+        detour: bool = False,
     ) -> None:
         """kn, kt: the contact stiffnesses (the scene's), to turn forces into displacements; fine_action: the
-        fingers' action scale within D_fine of their goal (the grasp task's fine_action), for the k term."""
+        fingers' action scale within D_fine of their goal (the grasp task's fine_action), for the k term;
+        detour (sensed): a finger touching another face than its own goes round the corner between the two."""
         if mode not in GRASP_REWARDS:
             raise ValueError(f"unknown grasp reward {mode!r}; allowed: {', '.join(GRASP_REWARDS)}")
         self.mode, self.grasp, self.center, self.fine_action = mode, dict(grasp), center, fine_action
-        self.kn, self.kt = kn, kt
+        self.kn, self.kt, self.detour = kn, kt, detour
         self.tips, self.half_extents = tuple(grasp), half_extents
         self.normals = {t: face_normal(g, center, half_extents) for t, g in grasp.items()}
         self.p = params or GraspParams()
@@ -308,6 +356,8 @@ class GraspReward:
         self._target: dict[str, float] | None = None
         self._tips: dict[str, Vec] | None = None
         self._fine: dict[str, bool] = dict.fromkeys(self.tips, False)
+        self._pressing: dict[str, bool] = dict.fromkeys(self.tips, False)  # sensed: past the pre-grasp point
+        self._via: dict[str, Vec | None] = dict.fromkeys(self.tips, None)  # sensed, detour: the corner to go round
         self.goals: dict[str, Vec] = {t: (float(g[0]), float(g[1])) for t, g in self.grasp.items()}
 
     def step(
@@ -316,7 +366,7 @@ class GraspReward:
         """(reward per fingertip for the transition into this step, or None at an epoch's first step;
         context per fingertip for the finger's state: force_error, and with `shaped` the flag "fine").
         `goals` then holds each fingertip's goal for this step (its grasp point except with `shaped`)."""
-        if self.mode == "shaped":
+        if self.mode in ("shaped", "sensed"):
             return self._step_goals(tips, sense)
         p = self.p
         obs = Contacts.from_sense(sense, self.tips)
@@ -358,9 +408,22 @@ class GraspReward:
                 D = math.hypot(now[t][0] - gx, now[t][1] - gy)
                 scale = self.fine_action if self._fine[t] else 1.0
                 rewards[t] = -min(1.0, D / p.D_tol) + p.k * (D_prev - D) / scale
-        goals, target, self.ft_target = contact_goals(
-            obs, self.grasp, self.normals, self.center, p.f_grip, self.kn, self.kt, tips, self.half_extents, p.approach
-        )
+        if self.mode == "sensed":
+            goals = self._sensed_goals(obs, now)
+            target = {t: obs.fn[t] for t in self.tips}  # no force target: the force error sent down is 0
+        else:
+            goals, target, self.ft_target = contact_goals(
+                obs,
+                self.grasp,
+                self.normals,
+                self.center,
+                p.f_grip,
+                self.kn,
+                self.kt,
+                tips,
+                self.half_extents,
+                p.approach,
+            )
         self.goals, self._tips, self._target = goals, now, target
         cap = p.err_cap
         context = {}
@@ -370,6 +433,43 @@ class GraspReward:
             e = (obs.fn[t] - target[t]) / p.f_grip
             context[t] = {"force_error": max(-cap, min(cap, e)), "fine": 1.0 if self._fine[t] else 0.0}
         return rewards, context
+
+    def _sensed_goals(self, obs: Contacts, now: Mapping[str, Vec]) -> dict[str, Vec]:
+        """`sensed`: a finger touching its grasp point's face goes one descent step of the sensed balance
+        error (balance_step) from its tip; any other finger to its grasp point or pre-grasp point."""
+        p, on_face = self.p, contact_on_face(obs, self.normals)
+        L = max(self.half_extents)
+        goals: dict[str, Vec] = {}
+        for t, g in self.grasp.items():
+            n = self.normals[t]
+            pre = (g[0] + p.approach * n[0], g[1] + p.approach * n[1])
+            if self.detour and obs.contact[t] and not on_face[t]:
+                # on another face: the straight way to the pre-grasp point cuts through the object
+                self._via[t], self._pressing[t] = self._corner(t, obs.normal[t], now[t]), False
+            via = self._via[t]
+            if via is not None:
+                if math.hypot(now[t][0] - via[0], now[t][1] - via[1]) >= p.pre_reached:
+                    goals[t] = via
+                    continue
+                self._via[t] = None  # round the corner: on to the pre-grasp point
+            if not self._pressing[t] and math.hypot(now[t][0] - pre[0], now[t][1] - pre[1]) < p.pre_reached:
+                self._pressing[t] = True  # at the pre-grasp point: from now on towards the face
+            if not on_face[t]:
+                goals[t] = (float(g[0]), float(g[1])) if self._pressing[t] else pre
+                continue
+            dfn, dft = balance_step(obs, t, self.center, L, p)
+            (nx, ny), (tx, ty) = obs.normal[t], (-obs.normal[t][1], obs.normal[t][0])
+            dx, dy = p.compliance * (-dfn * nx + dft * tx), p.compliance * (-dfn * ny + dft * ty)
+            goals[t] = _towards(now[t], (now[t][0] + dx, now[t][1] + dy), p.step_max)
+        return goals
+
+    def _corner(self, t: str, touched: Vec, tip: Vec) -> Vec:
+        """The point `approach` out along both faces' normals from the object's corner between the face the
+        finger touches (its sensed normal) and its own face (opposite faces: the corner on the tip's side)."""
+        n, c, h, a = self.normals[t], self.center, self.half_extents, self.p.approach
+        s = [n[i] + touched[i] for i in (0, 1)]
+        side = [math.copysign(1.0, s[i]) if abs(s[i]) > 0.5 else math.copysign(1.0, tip[i] - c[i]) for i in (0, 1)]
+        return (c[0] + side[0] * (h[0] + a), c[1] + side[1] * (h[1] + a))
 
     def _finger(self, t: str, obs: Contacts, D: float, D_prev: float, err: float, err_prev: float) -> float:
         p = self.p

@@ -26,6 +26,13 @@ link of a finger deeper than `max_depth` into the object is not executed for tha
 hold, the sim counts it as blocked). Penetration, and so every contact force, is bounded: fn <= kn
 max_depth + cn max_depth. Only the fingertip (link or sphere) makes contact forces; an inner link touching
 the object is blocked the same way but pushes nothing.
+
+`solid = "pad"` (with contact = "tip"): only the fingertip pad may sink in. With "links" a finger could reach a
+face through the face next to it, its distal link sunk up to max_depth across the object's corner (measured:
+docs/notebook/grasp.md), a penetration no rigid finger makes. With "pad" no link may be deeper than the
+fingertip sphere (by more than PAD_TOL), so a finger presses a face with its tip and cannot cut a corner; and a
+finger whose move is refused is not frozen whole: its joints' moves are tried one by one (root first), each kept
+if the finger stays out, so one joint pushing in does not hold the other three.
 """
 
 from __future__ import annotations
@@ -41,6 +48,8 @@ Vec = tuple[float, float]
 
 # Distance within which getClosestPoints reports a pair; beyond it a finger is simply out of contact.
 _QUERY_DISTANCE = 0.05
+# solid = "pad": how much deeper than its fingertip sphere a link may be (the distal capsule ends in that sphere)
+PAD_TOL = 0.01
 
 
 @dataclass(frozen=True)
@@ -209,10 +218,22 @@ class GraspScene:
         return float(best[8]), (pos_b[0], pos_b[1]), (normal_b[0], normal_b[1])
 
     def too_deep(self) -> list[str]:
-        """The fingers with a link deeper than max_depth in the current configuration."""
+        """The fingers with a link deeper than max_depth in the current configuration (solid = "pad": or deeper
+        than its fingertip sphere)."""
         self.pb.performCollisionDetection(physicsClientId=self.client)
-        limit = self.spec.max_depth
-        return [leaf for leaf, links in self._links.items() if any(-self._closest(k)[0] > limit for k in links)]
+        limit, pad = self.spec.max_depth, self.spec.solid == "pad"
+        poses = self.world.tip_poses() if pad else {}  # type: ignore[attr-defined]
+        out = []
+        for leaf, links in self._links.items():
+            depths = [-self._closest(k)[0] for k in links]
+            if pad:
+                tip = max(0.0, -self._closest_tip(poses[leaf])[0])
+                if any(d > 0.0 and d > tip + PAD_TOL for d in depths):
+                    out.append(leaf)
+                    continue
+            if any(d > limit for d in depths):
+                out.append(leaf)
+        return out
 
     # -- the step --------------------------------------------------------------------------------
     def reset(self) -> None:

@@ -4,7 +4,8 @@ The object is solid: after the step's moves, a finger with a link deeper than ma
 counted as blocked); then the contact model advances one time unit. Each fingertip agent senses its own contact
 ("contact", "fn", "ft", "margin"); the root's task observation carries the net wrench and every contact
 (GraspScene.task_sense); the error is the fingertips' mean distance to their grasp points; the metrics keep the
-forces per step.
+forces per step. Every joint agent senses "collided": its own move of the step was refused by the object (asked
+for, not executed), what the corridor's walls report the same way (walls.py).
 """
 
 from __future__ import annotations
@@ -27,10 +28,12 @@ class ObjectScene(Scene):
         assert spec.object is not None
         self.contacts = GraspScene(world, spec.object)
         self.rows: dict[str, list[float]] = {}
+        self.refused: frozenset[str] = frozenset()  # the agents whose own move of the last step was refused
 
     def reset(self) -> None:
         self.contacts.reset()
         self.rows = {}
+        self.refused = frozenset()
 
     def move(self, deltas: Mapping[str, float]) -> dict[str, float]:
         g, world = self.contacts, self.world
@@ -45,6 +48,10 @@ class ObjectScene(Scene):
                     applied[a] = 0.0
             world.reset(q)
             g.blocked += len(deep)
+            if g.spec.solid == "pad":  # the joints whose own move keeps the finger out still move
+                self._one_by_one(deep, deltas, applied)
+        # refused by the object (not by a joint limit): a finger's joint whose asked move was undone
+        self.refused = frozenset(a for leaf in deep for a in g.fingers[leaf] if deltas.get(a) and not applied.get(a))
         g.sense_contacts()
         fx, fy, tau = g.wrench
         row = {"net_fx": fx, "net_fy": fy, "net_torque": tau}
@@ -57,8 +64,25 @@ class ObjectScene(Scene):
             self.rows.setdefault(name, []).append(round(v, 5))
         return applied
 
+    def _one_by_one(self, deep: list[str], deltas: Mapping[str, float], applied: dict[str, float]) -> None:
+        """Each refused finger's joints, root first: a joint's move is kept if the finger then stays out."""
+        g, world = self.contacts, self.world
+        for leaf in deep:
+            for a in g.fingers[leaf]:
+                if not deltas.get(a):
+                    continue
+                q = world.joint_positions()
+                step = world.apply_increments({a: deltas[a]})
+                if leaf in g.too_deep():
+                    world.reset(q)
+                else:
+                    applied[a] = step.get(a, 0.0)
+
     def agent_sense(self, agent: str) -> Readings:
-        return self.contacts.tip_sense(agent) if agent in self.contacts.readings else {}
+        out: Readings = {"collided": 1.0 if agent in self.refused else 0.0}
+        if agent in self.contacts.readings:
+            out.update(self.contacts.tip_sense(agent))
+        return out
 
     def task_sense(self) -> Readings:
         return self.contacts.task_sense()
