@@ -89,8 +89,8 @@ def agent_readings(spec: SceneSpec, topo: Topology, agent: str) -> tuple[str, ..
     if spec.kind == "walls":
         clearance = ("clearance",) if topo.agents[agent].link_length > 0 else ()
         return ("collided", *clearance, *(("shield-", "shield+") if spec.shield > 0.0 else ()))
-    if spec.kind == "object" and agent in topo.end_effectors:
-        return ("contact", "fn", "ft", "margin")
+    if spec.kind == "object":  # every joint: its own move refused by the object; a fingertip: its contact too
+        return ("collided", *(("contact", "fn", "ft", "margin") if agent in topo.end_effectors else ()))
     return ()
 
 
