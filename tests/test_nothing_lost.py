@@ -118,7 +118,7 @@ def test_from_a_run_of_another_robot(tmp_path, capsys):
 
 def test_ctrl_c_while_starting_is_a_clean_exit(tmp_path):
     """Case 4: Ctrl-C in the first tenths of a second (while the imports run): no traceback, no process left."""
-    for delay in (0.15, 0.3, 0.6):
+    for delay in (0.15, 0.2, 0.3, 0.45, 0.6):
         out = tmp_path / f"c{delay}"
         p = subprocess.Popen(
             [*KINSWARM, "run", CHAIN4, *SMALL, "--out", str(out), "--listen", f"tcp/127.0.0.1:{free_port()}"],

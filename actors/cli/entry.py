@@ -6,13 +6,19 @@ is Python's."""
 
 from __future__ import annotations
 
+import os
 import signal
 import sys
 
 
 def _interrupted_while_starting(signum: int, frame: object) -> None:
-    print("kinswarm: interrupted", file=sys.stderr)
-    raise SystemExit(130)
+    """Only imports run while this handler is in place (the CLI's main replaces it before it makes anything): there is
+    nothing to undo, so the process ends here. An exception raised from a signal handler lands wherever the
+    interpreter is, and there it can be swallowed: in importlib's module-lock callback it was printed as "Exception
+    ignored ... Traceback" and the start went on."""
+    sys.stderr.write("kinswarm: interrupted\n")
+    sys.stderr.flush()
+    os._exit(130)
 
 
 signal.signal(signal.SIGINT, _interrupted_while_starting)  # from the moment this module is imported
