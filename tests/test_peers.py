@@ -29,6 +29,7 @@ def test_quick_peers_report(tmp_path: Path) -> None:
         "## A wrong model",
         "### Live",
         "## The shared policy in ONNX",
+        "## The iiwa's points",
     ):
         assert heading in report
     assert "](curves.png)" in report and (out / "curves.png").stat().st_size > 1000
@@ -55,6 +56,12 @@ def test_quick_peers_report(tmp_path: Path) -> None:
             for row in s["live"].values():  # the next goals after the one reached intact
                 assert len(row["frozen"]["errors"]) == len(row["learning"]["errors"]) == res["size"]["live_next"]
         assert res["curves"][method]["seeds"] == 2
+        # the iiwa's points: every peer on every seed, the same training set and both test sets
+        assert [s["seed"] for s in r["iiwa"]] == [0, 1], method
+        assert len({s["env_steps"] for s in r["iiwa"]}) == 1
+        for name in ("A", "B"):
+            assert len(r["iiwa_sets"][name]["within"]) == 2
+            assert all(0.0 <= w <= 1.0 for w in r["iiwa_sets"][name]["within"])
     assert res["swarm_training_cpu_seconds"] > 0
     onnx = res["peers"]["ppo-shared"]["seeds"][0]["onnx"]
     assert (out / onnx["file"]).stat().st_size > 0

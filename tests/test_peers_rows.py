@@ -53,3 +53,17 @@ def test_live_rows_are_the_adapt_reports_sequence(adapt: dict) -> None:
         for who, robot, label in ADAPT_LIVE:
             w = seq[cond][who]["within"]
             assert got[(robot, label)]["within"] == f"{_pct(np.mean(w))} ± {_pct(np.std(w, ddof=1))} %"
+
+
+def test_iiwa_rows_are_the_reach3d_reports() -> None:
+    from kinswarm.experiments.peers.iiwa import RESULTS as REACH3D
+    from kinswarm.experiments.peers.iiwa import SWARM_ROWS, swarm_rows
+
+    if not REACH3D.is_file():
+        pytest.skip("no committed reach3d results")
+    points = json.loads(REACH3D.read_text())["points"]
+    rows = swarm_rows()
+    assert set(rows) == {label for _, label in SWARM_ROWS}
+    for key, label in SWARM_ROWS:
+        for name in ("A", "B"):
+            assert rows[label][name] == [w / 100 for w in points[f"{key} | {name}"]["within_pct"]], (label, name)

@@ -115,24 +115,35 @@ def evaluate(
     SUCCESSIVE in `sets`: from where the last ended); the faults from episode `faults_from` on."""
     faults = faults or []
     if method == "ppo-shared":
-        venv = goals_env(goals, steps, faults, sets, faults_from)
-        obs = venv.reset()
-        while len(venv.final_errors) < len(goals):
+        env: Any = goals_env(goals, steps, faults, sets, faults_from)
+    else:
+        env = central_goals_env(method, goals, steps, faults, sets, faults_from)
+    return episodes(model, method, env, len(goals))
+
+
+def episodes(model: Any, method: str, env: Any, n: int) -> list[float]:
+    """Final errors of n episodes of the frozen, deterministic policy in an env whose resets choose each episode's
+    goal and start (the shared policy: a JointsVecEnv; a central one: a Gymnasium env, its info["error"] at each
+    episode's end); the env closed after."""
+    if method == "ppo-shared":
+        obs = env.reset()
+        while len(env.final_errors) < n:
             actions, _ = model.predict(obs, deterministic=True)
-            venv.step_async(actions)
-            obs, *_ = venv.step_wait()
-        venv.close()
-        return venv.final_errors
-    env = central_goals_env(method, goals, steps, faults, sets, faults_from)
-    for _ in goals:
+            env.step_async(actions)
+            obs, *_ = env.step_wait()
+        env.close()
+        return env.final_errors[:n]
+    errors = []
+    for _ in range(n):
         obs, _ = env.reset()
         over = False
         while not over:
             action, _ = model.predict(obs, deterministic=True)
-            obs, _, term, trunc, _ = env.step(action)
+            obs, _, term, trunc, info = env.step(action)
             over = term or trunc
+        errors.append(float(info["error"]))
     env.close()
-    return env.final_errors
+    return errors
 
 
 def within(errors: Sequence[float], tol: float = 0.5) -> float:
@@ -190,19 +201,13 @@ def train(
 ) -> tuple[Any, Curve, float]:
     """One peer trained for `budget` env steps on the training goals; its curve on `check_goals` (200-step
     episodes); the CPU-seconds of training alone."""
-    torch.set_num_threads(1)  # two shared cores: one for us
-    small = {"n_steps": 64, "batch_size": 32} if quick else {}  # the quick version: seconds, not a 2048-step rollout
     if method == "ppo-shared":
         env: Any = joints_env(goals, steps, seed)
         per_step = env.n
-        model: Any = PPO("MlpPolicy", env, seed=seed, verbose=0, device="cpu", **small)
     else:
         env = central_env(goals, steps, method == "sac", seed)
         per_step = 1
-        if method == "sac":  # sbx (SB3's JAX port) when installed: measured ~1.7x SB3's env steps per CPU-second here
-            model = sac_class()("MlpPolicy", env, seed=seed, verbose=0, **({"learning_starts": 64} if quick else {}))
-        else:
-            model = PPO("MlpPolicy", env, seed=seed, verbose=0, device="cpu", **small)
+    model = new_model(method, env, seed, quick)
 
     def check(m: Any) -> list[float]:
         return evaluate(m, method, check_goals, 20 if quick else 200)
@@ -218,6 +223,15 @@ def train(
         [0, *c.env_steps], [0.0, *c.cpu_seconds], [within(errors), *c.within], [float(np.mean(errors)), *c.mean]
     )
     return model, curve, cpu
+
+
+def new_model(method: str, env: Any, seed: int, quick: bool = False) -> Any:
+    """A peer with library defaults (the quick version: a 64-step rollout, seconds rather than a 2,048-step one)."""
+    torch.set_num_threads(1)  # two shared cores: one for us
+    if method == "sac":  # sbx (SB3's JAX port) when installed: measured ~1.7x SB3's env steps per CPU-second here
+        return sac_class()("MlpPolicy", env, seed=seed, verbose=0, **({"learning_starts": 64} if quick else {}))
+    small = {"n_steps": 64, "batch_size": 32} if quick else {}
+    return PPO("MlpPolicy", env, seed=seed, verbose=0, device="cpu", **small)
 
 
 def sac_class() -> Any:

@@ -18,6 +18,7 @@ PEER_STUDY = ("ppo-shared", "sac")  # peers the curves study ran too (its seeds 
 PLASTIC_ADAPT = "trained + direction + sensed tip, learning"  # adapt's row: today's recipe, learning on
 LIVE_RECIPE = "swarm, today's recipe, learning"
 LIVE_ANY_POSE = "swarm, the any-pose recipe (+ direction + sensed tip), learning"
+SETS_IIWA = ("A", "B")  # reach3d's test sets
 
 
 def _pct(x: float | None) -> str:
@@ -79,6 +80,9 @@ def write(
     onnx_row: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
     from ..research._curves_report import _figure, over_seeds
+    from .iiwa import swarm_rows
+
+    iiwa_ref = swarm_rows()
 
     swarm_cpu, swarm_steps = swarm["cpu_seconds"], int(swarm["env_steps"])
     rep = report_cls(ctx, "The deep-RL peers on the same work", "§5.2 and the adapt experiment's faults")
@@ -124,7 +128,7 @@ def write(
             key = f"{m} (curves study)"
             per_seed[key], labels[key] = study["per_seed"][m], f"{study['curves'][m]['label']} (curves study)"
     agg = {m: over_seeds(labels[m], cs) for m, cs in per_seed.items()}
-    rep.text("## In short", *in_short(peers, per_seed, ref, z))
+    rep.text("## In short", *in_short(peers, per_seed, ref, z, iiwa_ref))
     rep.text("## Generalisation: unseen goals, frozen, from the start pose")
     rows = []
     for r in peers.values():
@@ -225,6 +229,7 @@ def write(
     )
 
     _successive(rep, z, peers, ref)
+    _iiwa(rep, peers, iiwa_ref)
     _wrong(rep, z, peers, ref)
 
     first0 = next((s for s in peers.get("ppo-shared", {}).get("seeds", []) if s["seed"] == 0), None)
@@ -255,11 +260,20 @@ def write(
             if fewer
             else ""
         )
-        + "The iiwa's points (reach3d within 5 cm) for the peers and a tuning sweep of the shared PPO: not run "
-        "within this report's CPU budget (the curves study has the sweep's code: KINSWARM_CURVES_METHODS=sweep).",
+        + "A tuning sweep of the shared PPO: not run within this report's CPU budget (the curves study has the "
+        "sweep's code: KINSWARM_CURVES_METHODS=sweep).",
     )
     slim = {
-        m: {**r, "seeds": [{k: v for k, v in s.items() if k != "errors"} for s in r["seeds"]]} for m, r in peers.items()
+        m: {
+            **r,
+            "seeds": [{k: v for k, v in s.items() if k != "errors"} for s in r["seeds"]],
+            "iiwa": [{k: v for k, v in s.items() if k not in SETS_IIWA} for s in r.get("iiwa", [])],
+            "iiwa_sets": {
+                name: {k: [s[name][k] for s in r.get("iiwa", [])] for k in ("within", "mean", "median")}
+                for name in SETS_IIWA
+            },
+        }
+        for m, r in peers.items()
     }
     rep.results = {
         "size": z,
@@ -288,7 +302,13 @@ def _mean_first(curves: list[dict[str, list]], bar: float) -> tuple[float, float
     return float(np.mean([h[0] for h in hits])), float(np.mean([h[1] for h in hits])), len(hits)
 
 
-def in_short(peers: dict[str, Any], per_seed: dict[str, list], ref: dict[str, Any], z: dict[str, int]) -> list[str]:
+def in_short(
+    peers: dict[str, Any],
+    per_seed: dict[str, list],
+    ref: dict[str, Any],
+    z: dict[str, int],
+    iiwa_ref: dict[str, dict[str, list[float]]],
+) -> list[str]:
     """Where the swarm wins and where it loses, by how much, on how many seeds: each line from the tables below."""
     if not peers:
         return ["No peer ran."]
@@ -332,6 +352,16 @@ def in_short(peers: dict[str, Any], per_seed: dict[str, list], ref: dict[str, An
             f"{_pct(succ.get('succ', {}).get('within'))}, the best peer ({label_c}) {_ms(vals_c)}; on the free chain "
             f"the any-pose recipe's swarm {_pct(succ.get('any pose', {}).get('within'))}, the swarm trained from the "
             f"start pose {_pct(succ.get('succ free', {}).get('within'))}, the best peer ({label_f}) {_ms(vals_f)}."
+        )
+    iiwa = {m: r["iiwa"] for m, r in peers.items() if r.get("iiwa")}
+    swarm_iiwa = iiwa_ref.get("swarm, fuzzy (the paper's), frozen", {})
+    if iiwa and swarm_iiwa:
+        best = max(iiwa, key=lambda m: float(np.mean([s["A"]["within"] for s in iiwa[m]])))
+        lines.append(
+            "- The iiwa's points (3D, 7 joints, random starts; reach3d's test set A within 5 cm, frozen): the swarm "
+            f"{_ms(swarm_iiwa['A'])} ({_n(len(swarm_iiwa['A']))}), the best peer ({peers[best]['label']}) "
+            f"{_ms([s['A']['within'] for s in iiwa[best]])} ({_n(len(iiwa[best]))}); the rule "
+            f"{_ms(iiwa_ref.get('rule on g_perp', {}).get('A', [float('nan')]))}."
         )
     wrong = ref.get("wrong", {})
     if wrong:
@@ -399,6 +429,55 @@ def _successive(rep: Any, z: dict[str, int], peers: dict[str, Any], ref: dict[st
             rows.append([robot, label, str(t0.get("seeds", 1)), _pct(t0["within"]), f"{t0['mean']:.3f}"])
     rows.sort(key=lambda row: row[0] != "chain4, ±180°")
     rep.table(["robot", "method", "seeds", "test set 0 within 0.5", "mean final error"], rows)
+
+
+def _iiwa(rep: Any, peers: dict[str, Any], ref: dict[str, dict[str, list[float]]]) -> None:
+    """reach3d's points: every peer trained and tested here (iiwa.py), the swarm's and the references' rows from
+    docs/results/reach3d."""
+    ran = {m: r["iiwa"] for m, r in peers.items() if r.get("iiwa")}
+    if not ran:
+        return
+    steps = next(iter(ran.values()))[0]["env_steps"]
+    rep.text(
+        "## The iiwa's points: 3D, seven joints, random start poses",
+        "reach3d's protocol (docs/results/reach3d): examples/iiwa.toml (PyBullet's KUKA iiwa, 7 joints, 1° moves, "
+        f"the task's own reward), trained on its 96 goals x 4 passes, each from its random start pose ({steps:,} env "
+        "steps, the swarm's budget there), with library defaults; then frozen and deterministic on its test sets A "
+        "and B (100 unseen goals, each from an unseen start pose, 400 steps): the share within 5 cm. The swarm's, "
+        "the rule's and the pseudo-inverse's rows are that report's, not rerun.",
+    )
+    rows = []
+    for m, ss in ran.items():
+        rows.append(
+            [
+                peers[m]["label"],
+                f"{steps:,}",
+                str(len(ss)),
+                *(_ms([s[k]["within"] for s in ss]) for k in SETS_IIWA),
+                _ms([s["A"]["mean"] for s in ss], pct=False),
+                f"{np.mean([s['train_cpu_seconds'] for s in ss]):.0f}",
+            ]
+        )
+    from ..reach3d import PASSES, STEPS, TRAIN_GOALS
+
+    for label, r in ref.items():
+        seeds = len(r.get("A", []))
+        trained = {"swarm, untrained, frozen": "0"}.get(label, f"{TRAIN_GOALS * PASSES * STEPS:,}")
+        rows.append(
+            [
+                label,
+                trained if label.startswith("swarm") else "no learning",
+                str(seeds),
+                *(_ms(r[k]) if k in r else "—" for k in SETS_IIWA),
+                _ms(r["A mean"], pct=False) if "A mean" in r else "—",
+                "—",
+            ]
+        )
+    rep.table(
+        ["method", "training env steps", "seeds", "set A within 5 cm", "set B within 5 cm", "set A mean (m)",
+         "training CPU-s"],
+        rows,
+    )  # fmt: skip
 
 
 def _wrong(rep: Any, z: dict[str, int], peers: dict[str, Any], ref: dict[str, Any]) -> None:
