@@ -10,16 +10,9 @@ import pytest
 from conftest import run_config
 from kinswarm.actors.files.runfile import task_of
 from kinswarm.actors.learning.state import goal_along_motion
-from kinswarm.actors.tasks.grasp_reward import (
-    Contacts,
-    GraspParams,
-    GraspReward,
-    balance_step,
-    balance_targets,
-    contact_goals,
-    eq12,
-    grip_forces,
-)
+from kinswarm.actors.tasks.grasp_contacts import Contacts
+from kinswarm.actors.tasks.grasp_planned import balance_targets, contact_goals, grip_forces
+from kinswarm.actors.tasks.grasp_reward import GraspParams, GraspReward, balance_step, eq12
 from kinswarm.protocol.robots import parse_robot
 from kinswarm.protocol.scene import ObjectSpec, parse_scene
 from kinswarm.protocol.spec import SpecError

@@ -53,12 +53,10 @@ import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
-import numpy as np
+from .grasp_contacts import Contacts, Vec, contact_on_face, face_normal, towards
+from .grasp_planned import balance_targets, contact_goals
 
 GRASP_REWARDS: tuple[str, ...] = ("shaped", "sensed", "paper", "contact", "global", "force")
-
-
-Vec = tuple[float, float]
 
 
 @dataclass(frozen=True)
@@ -85,44 +83,6 @@ class GraspParams:
     pre_reached: float = 0.1  # sensed: within this of its pre-grasp point a finger turns towards the face
 
 
-@dataclass(frozen=True)
-class Contacts:
-    """What the task observation tells the grasp agent about one step (Task.sense, parsed)."""
-
-    contact: dict[str, bool]
-    fn: dict[str, float]
-    ft: dict[str, float]
-    margin: dict[str, float]
-    point: dict[str, Vec]  # contact points (only for fingertips in contact)
-    normal: dict[str, Vec]
-    net: tuple[float, float, float]  # F_x, F_y, tau
-    depth: dict[str, float] | None = None  # penetration (only for fingertips in contact)
-    anchor: dict[str, Vec] | None = None  # the tangential spring's anchor (only for fingertips in contact)
-
-    @classmethod
-    def from_sense(cls, sense: Mapping[str, float], tips: Sequence[str]) -> Contacts:
-        c = {t: sense.get(f"contact/{t}", 0.0) > 0.5 for t in tips}
-        return cls(
-            contact=c,
-            fn={t: sense.get(f"fn/{t}", 0.0) for t in tips},
-            ft={t: sense.get(f"ft/{t}", 0.0) for t in tips},
-            margin={t: sense.get(f"margin/{t}", 0.0) for t in tips},
-            point={t: (sense[f"px/{t}"], sense[f"py/{t}"]) for t in tips if c[t] and f"px/{t}" in sense},
-            normal={t: (sense[f"nx/{t}"], sense[f"ny/{t}"]) for t in tips if c[t] and f"nx/{t}" in sense},
-            net=(sense.get("net_fx", 0.0), sense.get("net_fy", 0.0), sense.get("net_torque", 0.0)),
-            depth={t: sense[f"depth/{t}"] for t in tips if c[t] and f"depth/{t}" in sense},
-            anchor={t: (sense[f"ax/{t}"], sense[f"ay/{t}"]) for t in tips if c[t] and f"ax/{t}" in sense},
-        )
-
-    @property
-    def all_touch(self) -> bool:
-        return all(self.contact.values())
-
-    def cone_violation(self) -> float:
-        """FC(t): the summed amount by which contacts leave their friction cones (0 inside)."""
-        return sum(max(0.0, -self.margin[t]) for t in self.contact if self.contact[t])
-
-
 def reach_cases(D: float, D_prev: float, D_min: float, c: float) -> float:
     """The reaching part of Eq. 12 (Eq. 10's three cases) on D_goal."""
     dD = D - D_prev
@@ -145,42 +105,6 @@ def eq12(D: float, D_prev: float, obs: Contacts, p: GraspParams, only_with_conta
     return base + R_f + R_tau + R_s
 
 
-def balance_targets(
-    obs: Contacts, grasp: Mapping[str, Vec], normals: Mapping[str, Vec], center: Vec, f_grip: float
-) -> dict[str, float]:
-    """fn*: the normal forces nearest (least squares) to the present ones that cancel the net wrench,
-    with at least f_grip each. A fingertip out of contact is placed at its grasp point with that face's
-    outward normal and no force. Internal forces (the null space of the grasp matrix) raise the smallest
-    to f_grip when they can; otherwise the result is clipped at f_grip."""
-    tips = list(obs.contact)
-    G = np.zeros((3, len(tips)))  # wrench of a unit normal force at each contact: [-n; (p - c) x (-n)]
-    w_t = np.zeros(3)  # wrench of the tangential forces
-    fn = np.zeros(len(tips))
-    for j, t in enumerate(tips):
-        if obs.contact[t] and t in obs.point:
-            (px, py), (nx, ny) = obs.point[t], obs.normal[t]
-            fn[j] = obs.fn[t]
-        else:
-            (px, py), (nx, ny) = grasp[t], normals[t]
-        rx, ry = px - center[0], py - center[1]
-        G[:, j] = (-nx, -ny, -(rx * ny - ry * nx))
-        if obs.contact[t]:
-            tx, ty = -ny, nx
-            ft = obs.ft[t]
-            w_t += (ft * tx, ft * ty, ft * (rx * ty - ry * tx))
-    x = fn - np.linalg.pinv(G) @ (G @ fn + w_t)
-    if x.min() < f_grip:
-        _, sv, vt = np.linalg.svd(G)
-        rank = int((sv > 1e-9 * max(1.0, sv.max())).sum())
-        null = vt[rank:]
-        v = next((v * np.sign(v.sum()) for v in null if np.all(v * np.sign(v.sum()) > 1e-9)), None)
-        if v is not None:
-            alpha = max((f_grip - xi) / vi for xi, vi in zip(x, v, strict=True))
-            x = x + max(alpha, 0.0) * v
-        x = np.maximum(x, f_grip)
-    return {t: float(x[j]) for j, t in enumerate(tips)}
-
-
 def balance_step(obs: Contacts, tip: str, center: Vec, L: float, p: GraspParams) -> tuple[float, float]:
     """(dfn, dft): how finger `tip`'s contact forces should change to lower the sensed balance error
     E = (|F|^2 + (tau/L)^2)/2 (the negative gradient of E in its own normal and tangential force; the other
@@ -200,127 +124,6 @@ def balance_step(obs: Contacts, tip: str, center: Vec, L: float, p: GraspParams)
     if shortfall > 0.0:  # near or over the cone's edge: ease the tangential spring
         dft -= math.copysign(shortfall, obs.ft[tip])
     return dfn, dft
-
-
-def face_normal(point: Vec, center: Vec, half_extents: Vec) -> Vec:
-    """Outward normal of the rectangle's face that `point` (on its boundary) lies on."""
-    dx, dy = point[0] - center[0], point[1] - center[1]
-    if abs(abs(dx) - half_extents[0]) <= abs(abs(dy) - half_extents[1]):
-        return (math.copysign(1.0, dx), 0.0)
-    return (0.0, math.copysign(1.0, dy))
-
-
-def contact_on_face(obs: Contacts, normals: Mapping[str, Vec]) -> dict[str, bool]:
-    """Per fingertip: in contact on its grasp point's face (the contact normal within ~25 degrees of the
-    face's), with the depth and anchor the goals need."""
-    return {
-        t: obs.contact[t]
-        and t in obs.point
-        and t in (obs.depth or {})
-        and t in (obs.anchor or {})
-        and obs.normal[t][0] * n[0] + obs.normal[t][1] * n[1] > 0.9
-        for t, n in normals.items()
-    }
-
-
-def grip_forces(
-    points: Mapping[str, Vec],
-    normals: Mapping[str, Vec],
-    center: Vec,
-    fn0: Mapping[str, float],
-    f_grip: float,
-    lam: float = 1.0,
-) -> tuple[dict[str, float], dict[str, float]]:
-    """(fn*, ft*): contact forces at `points` (outward `normals`) with zero net force and torque, the
-    normal ones nearest to the preferred `fn0` and the tangential ones small: minimise
-    |fn - fn0|^2 + lam |ft|^2 subject to G_n fn + G_t ft = 0 (a linear KKT system), then scaled up (a
-    balanced set stays balanced) until the least normal force is f_grip. Tangential forces are along
-    t = (-n_y, n_x), as the contact model's."""
-    tips = list(points)
-    n = len(tips)
-    A = np.zeros((3, 2 * n))  # wrench on the object of a unit normal push / unit tangential force
-    for j, t in enumerate(tips):
-        (px, py), (nx, ny) = points[t], normals[t]
-        rx, ry = px - center[0], py - center[1]
-        tx, ty = -ny, nx
-        A[:, j] = (-nx, -ny, -(rx * ny - ry * nx))
-        A[:, n + j] = (tx, ty, rx * ty - ry * tx)
-    h_inv = np.concatenate([np.ones(n), np.full(n, 1.0 / lam)])
-    g = np.concatenate([[fn0[t] for t in tips], np.zeros(n)])
-    AH = A * h_inv
-    x = g - h_inv * (A.T @ (np.linalg.pinv(AH @ A.T) @ (A @ g)))
-    least = x[:n].min()
-    if least > 1e-9 and least < f_grip:
-        x *= f_grip / least
-    return {t: float(x[j]) for j, t in enumerate(tips)}, {t: float(x[n + j]) for j, t in enumerate(tips)}
-
-
-def contact_goals(
-    obs: Contacts,
-    grasp: Mapping[str, Vec],
-    normals: Mapping[str, Vec],
-    center: Vec,
-    f_grip: float,
-    kn: float,
-    kt: float,
-    tips: Mapping[str, Sequence[float]],
-    half_extents: Vec | None = None,
-    approach: float = 0.0,
-) -> tuple[dict[str, Vec], dict[str, float], dict[str, float]]:
-    """(goal per fingertip, fn*, ft*) of the `shaped` reward: where each tip must be for its contact to
-    carry (fn_i*, ft_i*). The forces balance the object at the present contact points (grip_forces: normal
-    forces nearest to the planned grip, the least normal force of the grasp points' balanced set at
-    f_grip; tangential ones only as needed), with the planned grasp point and face normal for a finger out
-    of contact or touching another face than its grasp point's; such a finger is sent to its grasp point
-    when its tip is in front of that face (outside it, within its extent; `half_extents` given), else to the
-    pre-grasp point `approach` out along the face normal. In contact: goal = tip + n (depth - fn*/kn) +
-    (ft*/kt - u) t, u the tangential spring's stretch."""
-    on_face = contact_on_face(obs, normals)
-    planned = Contacts(
-        contact=dict.fromkeys(grasp, False),
-        fn=dict.fromkeys(grasp, 0.0),
-        ft=dict.fromkeys(grasp, 0.0),
-        margin=dict.fromkeys(grasp, 0.0),
-        point={},
-        normal={},
-        net=(0.0, 0.0, 0.0),
-    )
-    fn0 = balance_targets(planned, grasp, normals, center, f_grip)  # the planned grip, least force f_grip
-    points = {t: obs.point[t] if on_face[t] else grasp[t] for t in grasp}
-    nrm = {t: obs.normal[t] if on_face[t] else normals[t] for t in grasp}
-    fn_t, ft_t = grip_forces(points, nrm, center, fn0, f_grip)
-    goals: dict[str, Vec] = {}
-    for t, g in grasp.items():
-        if not on_face[t]:
-            goals[t] = (float(g[0]), float(g[1]))
-            if half_extents is not None and not _in_front(tips[t], g, normals[t], center, half_extents):
-                goals[t] = (g[0] + approach * normals[t][0], g[1] + approach * normals[t][1])
-            continue
-        assert obs.depth is not None and obs.anchor is not None
-        (nx, ny), (px, py), (ax, ay) = obs.normal[t], obs.point[t], obs.anchor[t]
-        tx, ty = -ny, nx
-        u = (px - ax) * tx + (py - ay) * ty  # the tangential spring's stretch
-        dn = obs.depth[t] - fn_t[t] / kn  # > 0: too deep, the goal is outwards
-        du = ft_t[t] / kt - u
-        goals[t] = (tips[t][0] + dn * nx + du * tx, tips[t][1] + dn * ny + du * ty)
-    return goals, fn_t, ft_t
-
-
-def _towards(tip: Vec, goal: Sequence[float], most: float) -> Vec:
-    """`goal`, or the point `most` from `tip` towards it if it is farther (a goal always within fine reach)."""
-    dx, dy = goal[0] - tip[0], goal[1] - tip[1]
-    d = math.hypot(dx, dy)
-    if d <= most:
-        return (float(goal[0]), float(goal[1]))
-    return (tip[0] + dx * most / d, tip[1] + dy * most / d)
-
-
-def _in_front(tip: Sequence[float], point: Vec, normal: Vec, center: Vec, half_extents: Vec) -> bool:
-    """Whether `tip` lies outside the face through `point` (outward `normal`) and within its extent."""
-    nx, ny = normal
-    outside = (tip[0] - point[0]) * nx + (tip[1] - point[1]) * ny >= 0.0
-    along = abs((tip[0] - center[0]) * -ny + (tip[1] - center[1]) * nx)
-    return outside and along < (half_extents[1] if abs(nx) > abs(ny) else half_extents[0])
 
 
 class GraspReward:
@@ -460,7 +263,7 @@ class GraspReward:
             dfn, dft = balance_step(obs, t, self.center, L, p)
             (nx, ny), (tx, ty) = obs.normal[t], (-obs.normal[t][1], obs.normal[t][0])
             dx, dy = p.compliance * (-dfn * nx + dft * tx), p.compliance * (-dfn * ny + dft * ty)
-            goals[t] = _towards(now[t], (now[t][0] + dx, now[t][1] + dy), p.step_max)
+            goals[t] = towards(now[t], (now[t][0] + dx, now[t][1] + dy), p.step_max)
         return goals
 
     def _corner(self, t: str, touched: Vec, tip: Vec) -> Vec:
