@@ -63,6 +63,11 @@ def test_quick_peers_report(tmp_path: Path) -> None:
             assert len(r["iiwa_sets"][name]["within"]) == 2
             assert all(0.0 <= w <= 1.0 for w in r["iiwa_sets"][name]["within"])
     assert res["swarm_training_cpu_seconds"] > 0
+    # the shared PPO's tuning sweep: 2x2, seed 0, each its curve at the same points as the defaults'
+    assert len(res["sweep"]) == 4 and "### The shared PPO tuned" in report
+    default_points = res["peers"]["ppo-shared"]["seeds"][0]["curve"]["env_steps"]
+    assert all(r["curve"]["env_steps"] == default_points for r in res["sweep"].values())
+    assert len({json.dumps(r["hp"], sort_keys=True) for r in res["sweep"].values()}) == 4
     onnx = res["peers"]["ppo-shared"]["seeds"][0]["onnx"]
     assert (out / onnx["file"]).stat().st_size > 0
     if onnx["checked"]:  # onnxruntime installed: the exported file chooses as the torch policy does

@@ -64,6 +64,9 @@ METHODS = {
     "ppo": "PPO, central (MultiDiscrete)",
     "ppo-shared": "PPO, one policy shared by the joints",
 }
+# the shared PPO's tuning sweep, seed 0, curve only: learning rate x n_steps (per joint row) over SB3's defaults
+# (lr 3e-4, n_steps 2048); `sweep` in KINSWARM_PEERS_METHODS (in the default set)
+SWEEP_LR, SWEEP_N_STEPS = (1e-4, 1e-3), (512, 2048)
 LEVEL, REPS, TRAIN_STEPS, EVAL_STEPS = 3, 2, 500, 200
 BUDGET = REPS * 4**LEVEL * TRAIN_STEPS  # the swarm's 64k env steps: every peer's budget too
 EVERY = 8_000  # the frozen test of test set 0 every 8k env steps from 0, as the curves study tests the swarm
@@ -131,12 +134,22 @@ def _versions() -> dict[str, str]:
     return out
 
 
-def train_seed(method: str, seed: int, quick: bool, out: str) -> dict[str, Any]:
-    """One peer, one seed: trained with library defaults for the budget on Level-3's goals in the seed's order, its
-    frozen test of test set 0 every `every` env steps from 0 (its curve), the model saved. Cached in OUT by method
-    and seed: an interrupted call resumes, a second one retrains nothing."""
+def sweep_points(quick: bool) -> dict[str, dict[str, Any]]:
+    """The sweep's settings by name (the quick version's n_steps a 32nd)."""
+    return {
+        f"lr {lr:g}, n_steps {n // 32 if quick else n}": {"learning_rate": lr, "n_steps": n // 32 if quick else n}
+        for lr in SWEEP_LR
+        for n in SWEEP_N_STEPS
+    }
+
+
+def train_seed(method: str, seed: int, quick: bool, out: str, hp: dict[str, Any] | None = None) -> dict[str, Any]:
+    """One peer, one seed: trained with library defaults (`hp` over them: the sweep) for the budget on Level-3's goals
+    in the seed's order, its frozen test of test set 0 every `every` env steps from 0 (its curve), the model saved.
+    Cached in OUT by method, settings and seed: an interrupted call resumes, a second one retrains nothing."""
     z = _size(quick)
-    cached = Path(out) / f"{method}-s{seed}.json"
+    tag = "".join(f"-{k}{v:g}" for k, v in sorted((hp or {}).items()))
+    cached = Path(out) / f"{method}{tag}-s{seed}.json"
     if cached.is_file():
         return {**json.loads(cached.read_text()), "reused": True}
     learners = _learners()
@@ -145,9 +158,9 @@ def train_seed(method: str, seed: int, quick: bool, out: str) -> dict[str, Any]:
         goals = goals[:4]
     w0 = time.time()
     model, curve, cpu = learners.train(
-        method, goals, z["train_steps"], z["budget"], seed, z["every"], halton(0)[: z["tests"]], quick
+        method, goals, z["train_steps"], z["budget"], seed, z["every"], halton(0)[: z["tests"]], quick, hp
     )
-    model.save(str(Path(out) / f"{method}-s{seed}-model"))
+    model.save(str(Path(out) / f"{method}{tag}-s{seed}-model"))
     res = {
         "label": METHODS[method],
         "seed": seed,
@@ -158,8 +171,9 @@ def train_seed(method: str, seed: int, quick: bool, out: str) -> dict[str, Any]:
         "load": os.getloadavg()[0],
         "versions": _versions(),
         "curve": curve.__dict__,
+        "hp": hp or {},
     }
-    print(f"  {METHODS[method]}, seed {seed}: {cpu:.0f} training CPU-s, curve {curve.within}", flush=True)
+    print(f"  {METHODS[method]}{tag}, seed {seed}: {cpu:.0f} training CPU-s, curve {curve.within}", flush=True)
     cached.write_text(json.dumps(res, default=float))
     return res
 
@@ -357,10 +371,11 @@ def _methods(seeds: int) -> dict[str, int]:
     """The peers named in KINSWARM_PEERS_METHODS (default: all) and their seeds: `name` (--seeds) or `name:N` (seeds
     0..N-1, where the machine's CPU budget allows fewer); what ran is said in the report."""
     chosen: dict[str, int] = {}
-    for item in os.environ.get("KINSWARM_PEERS_METHODS", ",".join(METHODS)).split(","):
+    known = [*METHODS, "sweep"]
+    for item in os.environ.get("KINSWARM_PEERS_METHODS", ",".join(known)).split(","):
         name, _, n = item.strip().partition(":")
-        if name not in METHODS:
-            raise ValueError(f"KINSWARM_PEERS_METHODS: unknown method {name!r} (choose from {', '.join(METHODS)})")
+        if name not in known:
+            raise ValueError(f"KINSWARM_PEERS_METHODS: unknown method {name!r} (choose from {', '.join(known)})")
         if n and not (n.isdigit() and int(n) > 0):
             raise ValueError(f"KINSWARM_PEERS_METHODS: {item!r}: the seeds after ':' must be a whole number >= 1")
         chosen[name] = int(n) if n else seeds
@@ -390,13 +405,22 @@ def run(ctx: Context) -> dict[str, Any]:
         peers[m]["seeds"].append({**t, **r, "seed": seed})
     from .iiwa import seed_row
 
-    if ctx.jobs > 1:  # the iiwa's points (reach3d's protocol), each seed cached as it ends
+    if ctx.jobs > 1 and jobs:  # the iiwa's points (reach3d's protocol), each seed cached as it ends
         with ProcessPoolExecutor(min(ctx.jobs, 2)) as pool:
             on_iiwa = list(pool.map(seed_row, *zip(*jobs, strict=True)))
     else:
         on_iiwa = [seed_row(*a) for a in jobs]
     for (m, *_), r in zip(jobs, on_iiwa, strict=True):
         peers[m].setdefault("iiwa", []).append(r)
+    sweep = {}
+    if "sweep" in methods:  # the shared PPO's tuning sweep: seed 0, its curve (the tests of every protocol: defaults)
+        points = sweep_points(ctx.quick)
+        args = [("ppo-shared", 0, ctx.quick, str(ctx.out), hp) for hp in points.values()]
+        if ctx.jobs > 1:
+            with ProcessPoolExecutor(min(ctx.jobs, 2)) as pool:
+                sweep = dict(zip(points, pool.map(train_seed, *zip(*args, strict=True)), strict=True))
+        else:
+            sweep = {name: train_seed(*a) for name, a in zip(points, args, strict=True)}
     swarm_cpu = swarm_training_cpu(ctx.quick)
     onnx_row = None
     if "ppo-shared" in peers and 0 in ctx.seed_list:
@@ -410,4 +434,4 @@ def run(ctx: Context) -> dict[str, Any]:
     ref = committed(z["online"])
     from .report import write
 
-    return write(ctx, z, peers, ref, swarm_cpu, Report, plt_module, onnx_row)
+    return write(ctx, z, peers, ref, swarm_cpu, Report, plt_module, onnx_row, sweep)

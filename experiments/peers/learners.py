@@ -198,16 +198,17 @@ def train(
     every: int,
     check_goals: Sequence[Goal],
     quick: bool = False,
+    hp: dict[str, Any] | None = None,
 ) -> tuple[Any, Curve, float]:
-    """One peer trained for `budget` env steps on the training goals; its curve on `check_goals` (200-step
-    episodes); the CPU-seconds of training alone."""
+    """One peer trained for `budget` env steps on the training goals (`hp` over the library's defaults); its curve on
+    `check_goals` (200-step episodes); the CPU-seconds of training alone."""
     if method == "ppo-shared":
         env: Any = joints_env(goals, steps, seed)
         per_step = env.n
     else:
         env = central_env(goals, steps, method == "sac", seed)
         per_step = 1
-    model = new_model(method, env, seed, quick)
+    model = new_model(method, env, seed, quick, hp)
 
     def check(m: Any) -> list[float]:
         return evaluate(m, method, check_goals, 20 if quick else 200)
@@ -225,13 +226,15 @@ def train(
     return model, curve, cpu
 
 
-def new_model(method: str, env: Any, seed: int, quick: bool = False) -> Any:
-    """A peer with library defaults (the quick version: a 64-step rollout, seconds rather than a 2,048-step one)."""
+def new_model(method: str, env: Any, seed: int, quick: bool = False, hp: dict[str, Any] | None = None) -> Any:
+    """A peer with library defaults, `hp` over them (the tuning sweep); the quick version: a 64-step rollout, seconds
+    rather than a 2,048-step one."""
     torch.set_num_threads(1)  # two shared cores: one for us
     if method == "sac":  # sbx (SB3's JAX port) when installed: measured ~1.7x SB3's env steps per CPU-second here
-        return sac_class()("MlpPolicy", env, seed=seed, verbose=0, **({"learning_starts": 64} if quick else {}))
+        small = {"learning_starts": 64} if quick else {}
+        return sac_class()("MlpPolicy", env, seed=seed, verbose=0, **{**small, **(hp or {})})
     small = {"n_steps": 64, "batch_size": 32} if quick else {}
-    return PPO("MlpPolicy", env, seed=seed, verbose=0, device="cpu", **small)
+    return PPO("MlpPolicy", env, seed=seed, verbose=0, device="cpu", **{**small, **(hp or {})})
 
 
 def sac_class() -> Any:

@@ -1,5 +1,5 @@
-"""The curves' report: the figure (over env steps, over CPU-seconds), the table of every point, time to skill and
-PPO's sweep. (A leading underscore: the research runner lists modules without one as studies.)"""
+"""The curves' report: the figure (over env steps, over CPU-seconds), the table of every point, time to skill. (A
+leading underscore: the research runner lists modules without one as studies.)"""
 
 from __future__ import annotations
 
@@ -109,7 +109,6 @@ def write(
     z: dict[str, int],
     agg: dict[str, dict[str, Any]],
     curves: dict[str, list[dict[str, Any]]],
-    sweep: dict[str, dict[str, Any]],
     report_cls: Any,
     plt_module: Any,
     runs: list[Any] | None = None,
@@ -175,28 +174,6 @@ def write(
         ],
         rows,
     )
-    if sweep:
-        rep.text(
-            "## PPO's sweep (the shared policy, seed 0)",
-            "Learning rate x n_steps (per joint row of the vector env), the rest SB3's defaults, the same budget "
-            "and tests; beside it the defaults' seed 0 (lr 3e-4, n_steps 2048).",
-        )
-        rows = []
-        tried = dict(sweep)
-        if "ppo-shared" in curves:
-            n_steps = z["sweep_default_n_steps"]
-            tried = {f"defaults: lr 0.0003, n_steps {n_steps}": curves["ppo-shared"][0], **tried}
-        for name, r in tried.items():
-            best = max(range(len(r["within"])), key=lambda i: r["within"][i])
-            rows.append(
-                [
-                    name,
-                    *(f"{100 * r['within'][i]:.0f}" for i in range(len(steps))),
-                    f"{100 * r['within'][best]:.0f} % at {r['env_steps'][best]:,}",
-                    f"{r['cpu_seconds'][-1]:.0f}",
-                ]
-            )
-        rep.table(["PPO, seed 0", *(f"{s:,}" for s in steps), "best point", "training CPU-s"], rows)
-    rep.results = {"size": z, "curves": agg, "per_seed": curves, "sweep": sweep}
+    rep.results = {"size": z, "curves": agg, "per_seed": curves}
     rep.write({"run_file": "examples/reach-generalise.toml", "size": z}, runs or [])
     return rep.results

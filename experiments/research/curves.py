@@ -18,8 +18,8 @@ deterministic policy on the first 100 goals of Halton test set 0, 200 steps each
   sac        SAC (sbx when installed, else SB3; library defaults) on gym_env's Box
 
 SAC is not run unless named: its env steps cost ~15x PPO's here. KINSWARM_CURVES_METHODS picks methods by name
-(fuzzy, independent, tabular, ppo-shared, sac, sweep), each with its own number of seeds as `name:N`; `sweep` is
-PPO's 2x2 of learning rate x n_steps on seed 0.
+(fuzzy, independent, tabular, ppo-shared, sac), each with its own number of seeds as `name:N`. The shared PPO's
+tuning sweep is the peers experiment's (`kinswarm experiment peers`).
 Every method's results are cached by their spec (the swarm's runs in OUT/runs, the peers' in OUT/curves/peers/),
 so a second call redoes nothing and an interrupted one resumes.
 """
@@ -64,8 +64,6 @@ KINDS = {
 }
 PEERS = {"ppo-shared": "PPO, one policy shared by the joints", "sac": "SAC, central (Box)"}
 DEFAULT_METHODS = ("fuzzy", "independent", "tabular", "ppo-shared")
-# PPO's sweep: SB3's defaults are lr 3e-4, n_steps 2048 (per env; the shared policy has a row per joint)
-SWEEP_LR, SWEEP_N_STEPS = (1e-4, 1e-3), (512, 2048)
 BARS = (0.90, 0.95)
 
 
@@ -79,7 +77,7 @@ def _methods(seeds: int) -> dict[str, int]:
     """The methods named in KINSWARM_CURVES_METHODS and their seeds: `name` (--seeds seeds) or `name:N` (seeds
     0..N-1, e.g. `sac:1` where the CPU budget allows one)."""
     chosen: dict[str, int] = {}
-    known = [*KINDS, *PEERS, "sweep"]
+    known = [*KINDS, *PEERS]
     for item in os.environ.get("KINSWARM_CURVES_METHODS", ",".join(DEFAULT_METHODS)).split(","):
         name, _, n = item.partition(":")
         if name not in known:
@@ -308,16 +306,8 @@ def run(ctx: Context) -> dict[str, Any]:
     for method in (m for m in ("ppo-shared", "sac") if m in methods):
         print(f"{PEERS[method]}: {methods[method]} seed(s)", flush=True)
         curves[method] = [peer_curve(ctx, method, seed, z, {}) for seed in range(methods[method])]
-    sweep: dict[str, dict[str, Any]] = {}
-    if "sweep" in methods:
-        for lr in SWEEP_LR:
-            for n_steps in SWEEP_N_STEPS:
-                hp = {"learning_rate": lr, "n_steps": n_steps // 32 if ctx.quick else n_steps}
-                print(f"PPO sweep {hp}: seed 0", flush=True)
-                sweep[f"lr {lr:g}, n_steps {hp['n_steps']}"] = peer_curve(ctx, "ppo-shared", 0, z, hp)
     labels = {**KINDS, **PEERS}
     agg = {m: over_seeds(labels[m], cs) for m, cs in curves.items()}
     from ._curves_report import write
 
-    z = {**z, "sweep_default_n_steps": 64 if ctx.quick else 2048}
-    return write(ctx, z, agg, curves, sweep, Report, plt_module, used)
+    return write(ctx, z, agg, curves, Report, plt_module, used)
