@@ -106,13 +106,18 @@ def write(
         "(its S_i and a one-hot of its index) and moves one joint."
         + (" Versions: " + ", ".join(f"{k} {v}" for k, v in versions.items()) + "." if versions else ""),
     )
-    reused = [f"{r['label']} seed {s['seed']}" for r in peers.values() for s in r["seeds"] if s.get("reused")]
+    earlier = [  # (what, its cached result) trained by an earlier call with this --out
+        *((f"{r['label']} seed {s['seed']}", s) for r in peers.values() for s in r["seeds"]),
+        *((f"{r['label']} on the iiwa, seed {s['seed']}", s) for r in peers.values() for s in r.get("iiwa", [])),
+        *((f"the sweep's {name}", s) for name, s in (sweep or {}).items()),
+    ]
+    reused = [(what, s) for what, s in earlier if s.get("reused")]
     if reused:
-        wall = sum(s["wall_seconds"] for r in peers.values() for s in r["seeds"] if s.get("reused"))
+        wall = sum(s.get("wall_seconds", 0.0) for _, s in reused)
         rep.text(
-            f"Trained by an earlier call with this --out (`OUT/peers/<method>-s<seed>.json` and the model beside it; "
-            f"their CPU-seconds measured then, {wall:.0f} s of wall time for those trainings and their curves): "
-            f"{'; '.join(reused)}. This call's wall time is the rest."
+            "Trained by an earlier call with this --out (`OUT/peers/`: each seed's results and its model; their "
+            f"CPU-seconds measured then, {wall:.0f} s of wall time for those trainings, their curves and the iiwa's "
+            f"tests): {'; '.join(what for what, _ in reused)}. This call's wall time is the rest."
         )
 
     study = _curves_study()
@@ -129,7 +134,7 @@ def write(
             key = f"{m} (curves study)"
             per_seed[key], labels[key] = study["per_seed"][m], f"{study['curves'][m]['label']} (curves study)"
     agg = {m: over_seeds(labels[m], cs) for m, cs in per_seed.items()}
-    rep.text("## In short", *in_short(peers, per_seed, ref, z, iiwa_ref))
+    rep.text("## In short", *in_short(peers, per_seed, ref, z, iiwa_ref, sweep or {}))
     rep.text("## Generalisation: unseen goals, frozen, from the start pose")
     rows = []
     for r in peers.values():
@@ -357,6 +362,7 @@ def in_short(
     ref: dict[str, Any],
     z: dict[str, int],
     iiwa_ref: dict[str, dict[str, list[float]]],
+    sweep: dict[str, dict[str, Any]] | None = None,
 ) -> list[str]:
     """Where the swarm wins and where it loses, by how much, on how many seeds: each line from the tables below."""
     if not peers:
@@ -391,6 +397,15 @@ def in_short(
             + f". Training CPU-seconds for {z['budget']:,} env steps (the swarm's: the curves study's): "
             f"the swarm {cpu_s:.0f}, "
             f"{peers[best]['label']} {cpu_p:.0f} ({cpu_p / max(cpu_s, 1e-9):.1f}x the swarm's)."
+        )
+    default0 = next((s for s in peers.get("ppo-shared", {}).get("seeds", []) if s["seed"] == 0), None)
+    if sweep and default0:
+        end = {name: r["curve"]["within"][-1] for name, r in sweep.items()}
+        best = max(end, key=lambda k: end[k])
+        lines.append(
+            f"- Tuning the shared PPO (seed 0, {len(sweep)} settings of learning rate x n_steps): at "
+            f"{z['budget']:,} env steps the best, {best}, {_pct(end[best])}; the defaults "
+            f"{_pct(default0['curve']['within'][-1])}; the range {_pct(min(end.values()))}-{_pct(max(end.values()))}."
         )
     succ = ref.get("successive", {})
     label_c, vals_c = _best(peers, lambda s: s["successive"]["chain4"]["within"])
