@@ -116,8 +116,9 @@ def write(
         wall = sum(s.get("wall_seconds", 0.0) for _, s in reused)
         rep.text(
             "Trained by an earlier call with this --out (`OUT/peers/`: each seed's results and its model; their "
-            f"CPU-seconds measured then, {wall:.0f} s of wall time for those trainings, their curves and the iiwa's "
-            f"tests): {'; '.join(what for what, _ in reused)}. This call's wall time is the rest."
+            f"CPU-seconds measured then; {wall:.0f} s of wall time summed over those trainings, their curves and the "
+            f"iiwa's tests, some of them side by side): {'; '.join(what for what, _ in reused)}. This call's wall time "
+            "is the rest."
         )
 
     study = _curves_study()
