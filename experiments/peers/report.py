@@ -92,7 +92,9 @@ def write(
     rep.text(
         "SAC and PPO from Stable-Baselines3 ("
         + ("SAC: its JAX port sbx" if "sbx-rl" in versions else "SAC: SB3's own on torch, sbx not being installed")
-        + ") with library defaults (no tuning for any method), on `kinswarm.env` built from "
+        + ") with library defaults"
+        + (" (the shared PPO also tuned, in a small sweep below)" if sweep else " (no tuning for any method)")
+        + ", on `kinswarm.env` built from "
         "examples/reach-generalise.toml (the generalisation recipe's chain4, 1° moves, reward `graded`, the start "
         "pose each episode), each seed trained on Level-3's 64 "
         f"quad-tree goals twice each in that seed's order, {z['train_steps']}-step episodes, for "
@@ -260,18 +262,23 @@ def write(
         _swarm_row(rep, onnx_row, first0, z["eval_steps"])
     missing = [METHOD_NAMES[m] for m in METHOD_NAMES if m not in peers]
     fewer = [f"{r['label']} ({len(r['seeds'])})" for r in peers.values() if len(r["seeds"]) < ctx.seeds]
-    rep.text(
-        "## Not done here",
-        (f"Not run for this report: {', '.join(missing)} (the machine's CPU budget). " if missing else "")
-        + (
-            f"On fewer than {ctx.seeds} seeds (the machine's CPU budget; KINSWARM_PEERS_METHODS=NAME:N): "
-            f"{', '.join(fewer)}; the rows marked 'curves study' are a peer's seeds at the same budget and test. "
+    not_done = [
+        *([f"Not run for this report: {', '.join(missing)} (the machine's CPU budget)."] if missing else []),
+        *(
+            [
+                f"On fewer than {ctx.seeds} seeds (the machine's CPU budget; KINSWARM_PEERS_METHODS=NAME:N): "
+                f"{', '.join(fewer)}; the rows marked 'curves study' are a peer's seeds at the same budget and test."
+            ]
             if fewer
-            else ""
-        )
-        + ("" if sweep else "The shared PPO's tuning sweep: not run by this call (KINSWARM_PEERS_METHODS without "
-           "`sweep`)."),
-    )  # fmt: skip
+            else []
+        ),
+        *(
+            []
+            if sweep
+            else ["The shared PPO's tuning sweep: not run by this call (KINSWARM_PEERS_METHODS without it)."]
+        ),
+    ]
+    rep.text("## Not done here", " ".join(not_done) or "Nothing: every peer on every seed, the sweep too.")
     slim = {
         m: {
             **r,
