@@ -59,9 +59,8 @@ def seed_row(method: str, seed: int, quick: bool, out: str) -> dict[str, Any]:
         return {**json.loads(cached.read_text()), "reused": True}
     from kinswarm.protocol.robots import load_robot
 
-    from . import _learners
+    from . import learners  # torch and SB3: run() has said, in one line, if the peers extra is missing
 
-    learners = _learners()
     topo = load_robot(ROBOT)
     steps, n_test = (60, 5) if quick else (STEPS, TEST)
     goals, starts = training_set(topo, False, *(QUICK_TRAINING if quick else ()))
