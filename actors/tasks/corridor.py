@@ -37,10 +37,10 @@ from kinswarm.protocol.topology import Topology
 
 from .base import AgentTask, StepView, Vec2
 from .reach import REWARD_MODES, ReachAgent, ReachSettings, ReachTask, path_distance, reach_reward
+from .refusal import COLLIDED, collided, penalised, refused, tabu
 
 CLEARANCE_OF: tuple[str, ...] = ("link", "subtree")
 CLEARANCE = StateVariable("clearance", 5, (0.0, 1.0))
-COLLIDED = StateVariable("collided", 2, (0.0, 1.0))
 #: Eq. 11's constants (paper §5.4: c1, c2 in (0, 1)); D_MIN as Eq. 10's default.
 CORRIDOR_C1 = 0.5
 CORRIDOR_C2 = 0.5
@@ -116,7 +116,7 @@ class CorridorAgent(ReachAgent):
         clearance = _subtree_clearance(view)
         out: Readings = {} if clearance is None else {"clearance": clearance}
         if self.c.blame_penalty < 0.0:
-            out["refused"] = max(view.sense.get("collided", 0.0), _refused_below(view))
+            out["refused"] = max(collided(view), _refused_below(view))
         return out
 
     def _clearance(self, view: StepView) -> float:
@@ -127,15 +127,14 @@ class CorridorAgent(ReachAgent):
 
     def state(self, view: StepView) -> list[float]:
         c = self.c
-        return [self._clearance(view)] * c.clearance_state + [view.sense.get("collided", 0.0)] * c.collision_state
+        return [self._clearance(view)] * c.clearance_state + [collided(view)] * c.collision_state
 
     def reward(self, view: StepView, reward: float | None) -> float | None:
         c = self.c
-        if reward is not None and view.sense.get("collided", 0.0) > 0.5:
-            reward += c.collision_penalty
+        reward = penalised(view, reward, c.collision_penalty)
         # a compound refusal: my move was applied, one below me (which mine carried towards the wall) was refused
         moved = view.last_action is not None and view.last_action != HOLD
-        if reward is not None and c.blame_penalty < 0.0 and moved and view.sense.get("collided", 0.0) < 0.5:
+        if reward is not None and c.blame_penalty < 0.0 and moved and not refused(view):
             if _refused_below(view) > 0.5:
                 reward += c.blame_penalty
         if self.behind is not None:  # + w (D_i(t-1) - D_i(t)) for my link end's distance to its place on the axis
@@ -150,9 +149,7 @@ class CorridorAgent(ReachAgent):
     def avoid(self, view: StepView) -> list[int]:
         """The tabu (my move the wall just refused; a refused move left the state unchanged, so choosing it again
         is futile unless others moved) and the scene's shield (moves that alone would come too near a wall)."""
-        out = []
-        if self.c.collision_tabu and view.sense.get("collided", 0.0) > 0.5 and view.last_action is not None:
-            out.append(view.last_action)
+        out = tabu(view, self.c.collision_tabu)
         if view.sense.get("shield-", 0.0) > 0.5:
             out.append(0)
         if view.sense.get("shield+", 0.0) > 0.5:

@@ -26,8 +26,8 @@ from kinswarm.actors.learning.state import goal_along_motion
 from kinswarm.protocol.messages import Task
 
 from .base import AgentTask, Head, StepView, TaskDef, Vec2
-from .corridor import COLLIDED
 from .grasp_reward import GRASP_REWARDS, GraspParams, GraspReward
+from .refusal import COLLIDED, collided, penalised, tabu
 
 #: the finger agents' extra state variable: the goal's component along the direction the agent's joint moves the tip
 G_PERP = StateVariable("g_perp", 7, (-GraspParams.g_perp, GraspParams.g_perp))
@@ -131,18 +131,14 @@ class GraspFinger(AgentTask):
 
     def state(self, view: StepView) -> list[float]:
         g = goal_along_motion(view.frame, view.tip, view.goal)
-        return [g] + [view.sense.get("collided", 0.0)] * self.c.collision_state
+        return [g] + [collided(view)] * self.c.collision_state
 
     def reward(self, view: StepView, reward: float | None) -> float | None:
-        if reward is not None and view.sense.get("collided", 0.0) > 0.5:
-            reward += self.c.collision_penalty
-        return reward
+        return penalised(view, reward, self.c.collision_penalty)
 
     def avoid(self, view: StepView) -> list[int]:
         """The tabu: a refused move left the state unchanged, so a frozen table would choose it again."""
-        if self.c.collision_tabu and view.sense.get("collided", 0.0) > 0.5 and view.last_action is not None:
-            return [view.last_action]
-        return []
+        return tabu(view, self.c.collision_tabu)
 
     def scale(self, view: StepView) -> float:
         """Fine steps while the grasp agent says "fine" (within D_fine of the contact goal)."""
