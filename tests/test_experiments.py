@@ -404,6 +404,7 @@ def test_quick_adapt_experiment(tmp_path):
         "corridor_compound",
         "successive_training",
         "grasp_epsilon_decay",
+        "grasp_anneal",
         "fleet_reach3d",
         "sensed_tip3d",
         "coordination",

@@ -6,6 +6,7 @@ that every number in docs/notebook/ can be made again. Nothing in actors/, sim/ 
     python -m kinswarm.experiments.research successive_training --out runs/research   # ~13 min on 2 cores
     python -m kinswarm.experiments.research beat_the_rule --out runs/full   # shares the generalisation runs
     python -m kinswarm.experiments.research grasp_epsilon_decay --out runs/research   # ~6 min on 2 cores
+    python -m kinswarm.experiments.research grasp_anneal --seeds 5 --out runs/research   # ~15 min on 2 cores
     python -m kinswarm.experiments.research fleet_generalise --out runs/full   # fleets on §5.2's protocol; ~25 min
     python -m kinswarm.experiments.research fleet_reach3d --out runs/full   # a fleet training the iiwa; ~5 min
     python -m kinswarm.experiments.research sensed_tip3d --out runs/research   # the iiwa's encoder offsets; ~5 min
