@@ -263,6 +263,14 @@ def test_a_kind_given_a_setting_it_does_not_take_is_one_line_naming_both(tmp_pat
     assert f"learner.{field}" in err and f"the {name} learner does not take it" in err, err
 
 
+def test_a_setting_at_its_default_asks_nothing_of_a_kind():
+    """`count_freeze = 0` (never) in a file run with the independent kind: nothing is asked of it, so it is taken
+    (examples/grasp3-sensed.toml freezes the counts; the grasp experiment runs it with each kind)."""
+    kind = KINDS["independent"]
+    assert kind.refused({"count_freeze": 0, "lr": 0.5}) is None
+    assert kind.refused({"count_freeze": 50}) is not None and "count_freeze" in kind.refused({"count_freeze": 50})
+
+
 def test_a_checkpoint_of_another_kind_is_refused(tmp_path, capsys):
     _run(tmp_path, "fz", "--placement", "single", "--epochs", "1", "--steps", "20")
     err = _refused(tmp_path, capsys, "--from", str(tmp_path / "fz"), "--set", "learner.kind=tabular")

@@ -16,7 +16,7 @@ here, above actors/learning, so that naming a kind of this package makes no arro
 
 from __future__ import annotations
 
-from collections.abc import Collection, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, fields
 from importlib import import_module
 from typing import Any
@@ -26,6 +26,8 @@ from kinswarm.actors.learning.settings import OBSERVATION_FIELDS, LearnerSetting
 
 #: the kind a run has when its [learner] table names none: the paper's
 DEFAULT = "fuzzy"
+_NO_DEFAULT = object()
+_DEFAULTS = {f.name: f.default for f in fields(LearnerSettings)}
 
 
 @dataclass(frozen=True)
@@ -65,10 +67,12 @@ class LearnerKind:
         if self.takes:
             self._module().check(settings, order, options)
 
-    def refused(self, given: Collection[str]) -> str | None:
-        """`field: why` for the first field in `given` this kind does not take, else None."""
+    def refused(self, given: Mapping[str, Any]) -> str | None:
+        """`field: why` for the first field in `given` this kind does not take, else None. A field given at its
+        default asks nothing of the kind (`count_freeze = 0`: never freeze), so a run file that sets it can be run
+        with another kind by `--set learner.kind=K --set learner.FIELD=<default>`."""
         for field, why in self.refuses:
-            if field in given:
+            if field in given and given[field] != _DEFAULTS.get(field, _NO_DEFAULT):
                 return f"{field}: the {self.name} learner does not take it ({why})"
         for field in given:
             if field in OWN_FIELDS and field not in self.takes:
