@@ -9,6 +9,7 @@ then replays each swarm frozen (`--learn off --explore off`) for one epoch:
   anneal     + fade + lr annealed to 0 over the last epochs and the fictitious-play counts frozen as it starts, so
              the last epochs run the table the frozen swarm runs
   anneal-120 the same over 120 epochs: 60 at the full rate, the anneal over 60-100
+  anneal-independent  anneal with independent learners (no model of the children, so no counts to freeze)
 
   GRASP_PROBES=fade,anneal python -m kinswarm.experiments.research grasp_anneal --seeds 5 --jobs 2 --out runs/g59
 (GRASP_PROBES: a comma-separated subset; unset, all of them.)
@@ -27,15 +28,19 @@ from kinswarm.experiments.swarm import Spec, resolved
 
 SEEDS = 5
 STEPS = 400
-# name: (epochs, the learner's settings over the recipe's)
+# name: (epochs, the learner's settings over the recipe file's, which carries `anneal` since study 5: every probe
+# sets all three, so it runs what it ran before the file changed)
+OFF = {"epsilon_decay": 0.0, "lr_anneal": (0, 0), "count_freeze": 0}
+ANNEAL = {"epsilon_decay": 0.05, "lr_anneal": (50, 80), "count_freeze": 50}
 PROBES: dict[str, tuple[int, dict[str, Any]]] = {
-    "long": (90, {}),
-    "fade": (90, {"epsilon_decay": 0.05}),
-    "anneal": (90, {"epsilon_decay": 0.05, "lr_anneal": (50, 80), "count_freeze": 50}),
+    "long": (90, OFF),
+    "fade": (90, {**OFF, "epsilon_decay": 0.05}),
+    "anneal": (90, ANNEAL),
     "anneal-120": (120, {"epsilon_decay": 0.05, "lr_anneal": (60, 100), "count_freeze": 60}),
+    "anneal-independent": (90, {**ANNEAL, "kind": "independent", "count_freeze": 0}),
 }
 QUICK_EPOCHS, QUICK_STEPS = 4, 60
-QUICK_ANNEAL = {"lr_anneal": (1, 3), "count_freeze": 1}
+QUICK_ANNEAL = {"lr_anneal": (1, 3)}
 
 
 def run(ctx: Context) -> dict[str, Any]:
@@ -47,7 +52,9 @@ def run(ctx: Context) -> dict[str, Any]:
     specs = []
     for name, (epochs, learner) in probes.items():
         if ctx.quick:
-            epochs, learner = QUICK_EPOCHS, {**learner, **(QUICK_ANNEAL if "lr_anneal" in learner else {})}
+            epochs, learner = QUICK_EPOCHS, {**learner}
+            if learner.get("lr_anneal", (0, 0)) != (0, 0):
+                learner.update(QUICK_ANNEAL, count_freeze=1 if learner.get("count_freeze") else 0)
         for s in ctx.seed_list:
             specs.append(
                 Spec(
