@@ -242,7 +242,8 @@ def run(ctx: Context) -> dict[str, Any]:
     assert obj is not None
     epochs, steps = (3, 60) if ctx.quick else (30, 400)
     recipe = resolved(SENSED)  # the sensed recipe trains as long as its file says (the anneal needs 90 epochs)
-    sensed = _sensed(ctx, epochs if ctx.quick else recipe.epochs, steps if ctx.quick else recipe.steps, topo, obj)
+    sensed_epochs, sensed_steps = (epochs, steps) if ctx.quick else (recipe.epochs, recipe.steps)
+    sensed = _sensed(ctx, sensed_epochs, sensed_steps, topo, obj)
     base = {"file": str(GRASP3), "epochs": epochs, "steps": steps}
     specs = [
         Spec(name=f"grasp-shaped-s{s}", seed=s, reward="shaped", checkpoint=True, **base)  # type: ignore[arg-type]
@@ -263,8 +264,7 @@ def run(ctx: Context) -> dict[str, Any]:
     frozen_q = {o.spec.seed: epoch_quality(o.rows[-1], topo, obj) for o in frozen if not o.spec.learn}
     greedy_q = {o.spec.seed: epoch_quality(o.rows[-1], topo, obj) for o in frozen if o.spec.learn}
     rep = Report(ctx, "Three-finger grasp by 13 nested agents", "5.5 (Figs. 24-29)")
-    n_sensed = sensed["outcomes"][0].spec
-    _sensed_section(rep, sensed, frozen_q, _schedule(recipe, n_sensed.epochs, n_sensed.steps))
+    _sensed_section(rep, sensed, frozen_q, _schedule(recipe, sensed_epochs, sensed_steps))
     rep.text(
         "## The model-based reference: `shaped` (planned contact goals) and Eq. 12's variants (examples/grasp3.toml)"
     )
@@ -391,7 +391,7 @@ def run(ctx: Context) -> dict[str, Any]:
             "steps": steps,
             "topology": "examples/grasp3.toml",
             "sensed": "examples/grasp3-sensed.toml",
-            "sensed_epochs": n_sensed.epochs,
+            "sensed_epochs": sensed_epochs,
             "kinds": _kinds(ctx),
             "variants": variants,
         },
