@@ -585,3 +585,73 @@ def test_blame_falls_on_an_agent_that_moved_when_a_move_below_was_refused():
     assert "refused" not in _agent("a5", []).up(view(1.0, 1.0, last=2))  # off: nothing more on the wire
     with pytest.raises(SpecError, match="task.blame_penalty: must be <= 0"):
         run_config(GUIDED, ["task.blame_penalty=2.0"])
+
+
+def test_proximity_readings_by_hand(tmp_path):
+    """The walls' proximity readings of a link under a wall: its nearest point is on the capsule's top (y = its
+    radius) and the wall's normal there points down, from the wall towards the link."""
+    path = _one_wall_topology(tmp_path, gap=0.2)
+    with World(load_robot(path)) as world:
+        near = _wall(world, path).nearest()
+    for a in ("a1", "a2"):
+        assert near[a].clearance == pytest.approx(0.2, abs=1e-4)
+        assert near[a].point[1] == pytest.approx(RADIUS, abs=1e-4) and -1e-4 <= near[a].point[0] <= 2.0 + 1e-4
+        assert near[a].normal == pytest.approx((0.0, -1.0), abs=1e-4)
+
+
+def test_approach_says_which_way_my_turn_meets_the_wall():
+    """approach_state: +1 when my joint's + turn (counter-clockwise) drives the nearest link point straight at the
+    wall, -1 straight away, 0 along it; with clearance_of "subtree" the point is the nearest of my subtree's (my
+    children's `Up` carry theirs, and only when the setting is on)."""
+    sets = ["task.clearance_state=true", 'task.clearance_of="subtree"', "task.approach_state=true"]
+    a = _agent("a6", sets)
+
+    def near(clearance: float, x: float, y: float, nx: float, ny: float) -> dict[str, float]:
+        return {"clearance": clearance, "near_x": x, "near_y": y, "wall_nx": nx, "wall_ny": ny}
+
+    def approach(own: dict, below: dict | None = None) -> float:
+        ups = {} if below is None else {"a7": Up(epoch=0, step=3, tips={"a7": (5.0, 2.0, 0.0)}, action=1, sense=below)}
+        *_, value = a.state(_view(3, {**own, "collided": 0.0}, ups=ups))  # my joint at the origin
+        return value
+
+    assert approach(near(0.2, 1.0, 0.0, 0.0, -1.0)) == pytest.approx(1.0)  # the wall above a point ahead: + lifts it
+    assert approach(near(0.2, 1.0, 0.0, 0.0, 1.0)) == pytest.approx(-1.0)  # the wall below it: + turns away
+    assert approach(near(0.2, 1.0, 0.0, -1.0, 0.0)) == pytest.approx(0.0)  # the wall ahead: + slides along it
+    assert approach(near(0.2, 0.0, 1.0, 1.0, 0.0)) == pytest.approx(1.0)  # a point above, the wall to its left
+    # the subtree's nearest link decides: a7's point (0.05) is nearer than mine (0.2)
+    assert approach(near(0.2, 1.0, 0.0, 0.0, -1.0), near(0.05, 1.0, 0.0, 0.0, 1.0)) == pytest.approx(-1.0)
+    assert approach({"clearance": 0.2}) == 0.0  # nothing sensed of where: no direction
+    up = a.up(_view(3, {**near(0.2, 1.0, 0.0, 0.0, -1.0), "collided": 0.0}))
+    assert up == near(0.2, 1.0, 0.0, 0.0, -1.0)
+    assert _agent("a6", sets[:2]).up(_view(3, near(0.2, 1.0, 0.0, 0.0, -1.0))) == {"clearance": 0.2}  # off
+
+
+def test_approach_penalty_falls_on_a_move_towards_a_near_wall():
+    """approach_penalty: my applied move went towards the wall (by my approach reading) and the wall is now within
+    approach_margin; a move away, a far wall, a hold or a refused move (which pays collision_penalty) do not pay it."""
+    sets = [
+        "task.clearance_state=true",
+        "task.approach_state=true",
+        "task.approach_penalty=-4",
+        "task.collision_penalty=-5",
+    ]
+    a = _agent("a6", sets)
+
+    def reward(clearance: float, last: int, collided: float = 0.0) -> float:
+        sense = {"clearance": clearance, "near_x": 1.0, "near_y": 0.0, "wall_nx": 0.0, "wall_ny": -1.0}  # + heads at it
+        out = a.reward(_view(3, {**sense, "collided": collided}, last=last), 1.0)
+        assert out is not None
+        return out
+
+    assert reward(0.05, last=2) == pytest.approx(1.0 - 4.0)  # + towards the wall above, now 0.05 from it
+    assert reward(0.05, last=0) == pytest.approx(1.0)  # - turns away
+    assert reward(0.3, last=2) == pytest.approx(1.0)  # outside the margin
+    assert reward(0.05, last=1) == pytest.approx(1.0)  # held
+    assert reward(0.05, last=2, collided=1.0) == pytest.approx(1.0 - 5.0)  # refused: the collision penalty only
+    for bad, why in [
+        ("task.approach_penalty=-1", "task.approach_penalty: needs approach_state"),
+        ("task.approach_penalty=1", "task.approach_penalty: must be <= 0"),
+        ("task.approach_margin=0", "task.approach_margin: must be a distance > 0"),
+    ]:
+        with pytest.raises(SpecError, match=why):
+            run_config(GUIDED, [bad] if "needs" in why else ["task.approach_state=true", bad])
