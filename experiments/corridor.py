@@ -66,7 +66,6 @@ class Config:
     continues: str | None = None
     seeds: int = SEEDS
     text: str = ""
-    steps: int | None = None  # an epoch's steps, if not STEPS (a curriculum's short epochs); evaluation runs STEPS
     untrained: bool = False  # a control: the swarm as it starts (one epoch, learning and exploration off)
 
 
@@ -152,8 +151,7 @@ def run_configs(ctx: Context, rep: Report, configs: dict[str, Config], intro: tu
 
     def spec(label: str, seed: int, **kw: Any) -> Spec:
         c = configs[label]
-        own = steps if ctx.quick or c.steps is None else c.steps
-        base = dict(seed=seed, steps=own, reward=c.reward, file=str(c.file))
+        base = dict(seed=seed, steps=steps, reward=c.reward, file=str(c.file))
         base |= dict(task=tuple(sorted(c.task.items())), learner=tuple(sorted(c.learner.items())))
         return Spec(**{**base, **kw})
 
@@ -170,7 +168,7 @@ def run_configs(ctx: Context, rep: Report, configs: dict[str, Config], intro: tu
         for seed in seeds_of[label]
     }
     trained = dict(zip(train, run_specs(ctx, list(train.values()), "train"), strict=True))
-    while more := {  # the continuations whose base is trained, in waves (a stage may continue a continuation)
+    more = {
         (label, seed): spec(
             label,
             seed,
@@ -182,18 +180,16 @@ def run_configs(ctx: Context, rep: Report, configs: dict[str, Config], intro: tu
         for label, c in configs.items()
         if c.continues is not None
         for seed in seeds_of[label]
-        if (label, seed) not in trained and (c.continues, seed) in trained
-    }:
-        for key, out in zip(more, run_specs(ctx, list(more.values()), "continue"), strict=True):
-            prior = trained[(configs[key[0]].continues, key[1])]  # type: ignore[index]
-            trained[key] = dataclasses.replace(out, rows=prior.rows + out.rows)  # the whole history, base's and own
-        train |= more
+    }
+    for key, out in zip(more, run_specs(ctx, list(more.values()), "continue"), strict=True):
+        prior = trained[(configs[key[0]].continues, key[1])]  # type: ignore[index]
+        trained[key] = dataclasses.replace(out, rows=prior.rows + out.rows)  # the whole history, base's and its own
+    train |= more
     frozen_specs = {  # an untrained swarm (no checkpoint: it learned nothing) starts as a fresh one
         key: dataclasses.replace(
             s,
             name=f"{s.name}-frozen",
             epochs=1,
-            steps=steps,
             from_dir=None if configs[key[0]].untrained else str(trained[key].out),
             learn=False,
             explore=False,

@@ -87,8 +87,7 @@ def agent_readings(spec: SceneSpec, topo: Topology, agent: str) -> tuple[str, ..
     extra state variable may name besides its own geometry's. Each scene's `agent_sense` (sim/scenes/) sends these
     and no others (tests/test_runfile.py holds them to it)."""
     if spec.kind == "walls":
-        link = ("clearance", "near_x", "near_y", "wall_nx", "wall_ny")
-        clearance = link if topo.agents[agent].link_length > 0 else ()
+        clearance = ("clearance",) if topo.agents[agent].link_length > 0 else ()
         return ("collided", *clearance, *(("shield-", "shield+") if spec.shield > 0.0 else ()))
     if spec.kind == "object":  # every joint: its own move refused by the object; a fingertip: its contact too
         return ("collided", *(("contact", "fn", "ft", "margin") if agent in topo.end_effectors else ()))

@@ -17,10 +17,6 @@ settle_radius = 0.15
 clearance_state = true       # + "clearance": the agent's link's clearance to the walls (5 sets over [0, 1])
 clearance_of = "subtree"     #   ... "link": its own link's; "subtree": the smallest of the links its joint moves
 collision_state = true       # + "collided": its own move of the step before was refused (2 sets over [0, 1])
-approach_state = true        # + "approach": whether my joint's + turn brings the (subtree's) nearest link point
-                             #   nearer the wall (+1), along it (0) or away (-1) (3 sets over [-1, 1])
-approach_penalty = -5.0      # added when my move went towards a wall (by "approach") now nearer than ...
-approach_margin = 0.1        # ... this clearance (needs approach_state)
 collision_penalty = -5.0     # added to its reward when its own move was refused
 collision_tabu = true        # the move the wall just refused is left out of the next choice
 follow_leader = 40.0         # weight of each of the last follow_leader_links agents' own progress along the axis
@@ -45,17 +41,7 @@ from .refusal import COLLIDED, collided, penalised, refused, tabu
 
 CLEARANCE_OF: tuple[str, ...] = ("link", "subtree")
 CLEARANCE = StateVariable("clearance", 5, (0.0, 1.0))
-#: the cosine between where my joint's + turn moves the nearest link point and the direction to the wall there
-APPROACH = StateVariable("approach", 3, (-1.0, 1.0))
-#: approach_penalty: a move "went towards" the wall when the approach of its direction exceeds this (about 60 deg)
-APPROACH_TOWARDS = 0.5
-#: the proximity readings of a link (sim/scenes/walls.py): its point nearest a wall and the wall's normal there
-NEAR = (
-    "near_x",
-    "near_y",
-    "wall_nx",
-    "wall_ny",
-)  #: Eq. 11's constants (paper §5.4: c1, c2 in (0, 1)); D_MIN as Eq. 10's default.
+#: Eq. 11's constants (paper §5.4: c1, c2 in (0, 1)); D_MIN as Eq. 10's default.
 CORRIDOR_C1 = 0.5
 CORRIDOR_C2 = 0.5
 #: C_ai = 1, "agent a_i is close to collide", when its link's clearance is below this (the capsule radius)
@@ -71,9 +57,6 @@ class CorridorSettings(ReachSettings):
     clearance_state: bool = False  # + the agent's clearance to the walls as a state variable
     clearance_of: str = "link"  # ... of its own link, or the smallest of the links its joint moves ("subtree")
     collision_state: bool = False  # + "my move of the step before was refused" as a state variable
-    approach_state: bool = False  # + which way my + turn moves the nearest link point, towards the wall or away
-    approach_penalty: float = 0.0  # (<= 0) when my move went towards a wall now within approach_margin
-    approach_margin: float = 0.1
     collision_penalty: float = 0.0  # (<= 0) added to the reward of an agent whose own move was refused
     collision_tabu: bool = False  # leave the move the wall just refused out of the next choice
     follow_leader: float = 0.0  # weight w of each of the last agents' own progress towards its place on the axis
@@ -94,12 +77,6 @@ class CorridorSettings(ReachSettings):
             raise ValueError("follow_leader: needs via (the corridor's axis)")
         if not (math.isfinite(self.blame_penalty) and self.blame_penalty <= 0.0):
             raise ValueError(f"blame_penalty: must be <= 0, got {self.blame_penalty}")
-        if not (math.isfinite(self.approach_penalty) and self.approach_penalty <= 0.0):
-            raise ValueError(f"approach_penalty: must be <= 0, got {self.approach_penalty}")
-        if self.approach_penalty < 0.0 and not self.approach_state:
-            raise ValueError("approach_penalty: needs approach_state = true (the reading says which way the wall is)")
-        if not (math.isfinite(self.approach_margin) and self.approach_margin > 0.0):
-            raise ValueError(f"approach_margin: must be a distance > 0, got {self.approach_margin}")
         if self.follow_leader_links < 1:
             raise ValueError(f"follow_leader_links: must be >= 1, got {self.follow_leader_links}")
 
@@ -112,7 +89,7 @@ class CorridorTask(ReachTask):
 
     def state_variables(self, agent: str) -> tuple[StateVariable, ...]:
         s = self.settings
-        return (CLEARANCE,) * s.clearance_state + (COLLIDED,) * s.collision_state + (APPROACH,) * s.approach_state
+        return (CLEARANCE,) * s.clearance_state + (COLLIDED,) * s.collision_state
 
     def agent(self, agent: str, observation: Observation | None) -> AgentTask:
         return CorridorAgent(self.settings, self.topo, agent)
@@ -138,8 +115,6 @@ class CorridorAgent(ReachAgent):
         with the blame, whether a move in my subtree (mine or below) was refused, for my parent's reward."""
         clearance = _subtree_clearance(view)
         out: Readings = {} if clearance is None else {"clearance": clearance}
-        if self.c.approach_state and (near := _subtree_nearest(view)) is not None:
-            out |= {k: near[k] for k in NEAR}
         if self.c.blame_penalty < 0.0:
             out["refused"] = max(collided(view), _refused_below(view))
         return out
@@ -152,22 +127,7 @@ class CorridorAgent(ReachAgent):
 
     def state(self, view: StepView) -> list[float]:
         c = self.c
-        out = [self._clearance(view)] * c.clearance_state + [collided(view)] * c.collision_state
-        return out + [self._approach(view)] * c.approach_state
-
-    def _approach(self, view: StepView) -> float:
-        """The cosine between the velocity my joint's + turn gives the nearest link point (of my link, or of the
-        links my joint moves with clearance_of "subtree") and the direction from it to the wall: +1 the turn drives
-        it straight at the wall, -1 straight away, 0 along it (or nothing sensed). A revolute joint in the plane:
-        the point r from my joint moves along (-r_y, r_x) per radian; the wall lies along -normal."""
-        near = _subtree_nearest(view) if self.c.clearance_of == "subtree" else _own_nearest(view)
-        if near is None:
-            return 0.0
-        rx, ry = near["near_x"] - view.frame[0], near["near_y"] - view.frame[1]
-        r = math.hypot(rx, ry)
-        if r < 1e-9:
-            return 0.0
-        return max(-1.0, min(1.0, (ry * near["wall_nx"] - rx * near["wall_ny"]) / r))
+        return [self._clearance(view)] * c.clearance_state + [collided(view)] * c.collision_state
 
     def reward(self, view: StepView, reward: float | None) -> float | None:
         c = self.c
@@ -177,11 +137,6 @@ class CorridorAgent(ReachAgent):
         if reward is not None and c.blame_penalty < 0.0 and moved and not refused(view):
             if _refused_below(view) > 0.5:
                 reward += c.blame_penalty
-        if reward is not None and c.approach_penalty < 0.0 and moved and not refused(view):
-            # my applied move went towards a wall that is now within the margin (approach > 0: my + turn heads at it)
-            towards = self._approach(view) * (1.0 if view.last_action == HOLD + 1 else -1.0)
-            if towards > APPROACH_TOWARDS and self._clearance(view) < c.approach_margin:
-                reward += c.approach_penalty
         if self.behind is not None:  # + w (D_i(t-1) - D_i(t)) for my link end's distance to its place on the axis
             assert self.c.via is not None
             end = (view.end[0], view.end[1])
@@ -208,20 +163,6 @@ def _subtree_clearance(view: StepView) -> float | None:
     own = view.sense.get("clearance")
     known = [c for c in (own, *(up.sense.get("clearance") for up in view.ups.values())) if c is not None]
     return min(known) if known else None
-
-
-def _own_nearest(view: StepView) -> Readings | None:
-    """My link's proximity readings (its clearance and NEAR), if the scene sends them."""
-    return dict(view.sense) if all(k in view.sense for k in ("clearance", *NEAR)) else None
-
-
-def _subtree_nearest(view: StepView) -> Readings | None:
-    """The proximity readings of the link nearest a wall among mine and those below me (my live children's `Up`
-    carry their subtree's): the one with the smallest clearance."""
-    known = [
-        r for r in (view.sense, *(up.sense for up in view.ups.values())) if all(k in r for k in ("clearance", *NEAR))
-    ]
-    return dict(min(known, key=lambda r: r["clearance"])) if known else None
 
 
 def _refused_below(view: StepView) -> float:

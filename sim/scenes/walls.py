@@ -8,10 +8,8 @@ configuration would make a link penetrate a wall it takes back, joint by joint (
 that cause the penetration; those joints hold and are reported as collisions.
 
 What the agents sense (WallsScene): each its own link's "clearance" and "collided" (its move of the step before was
-refused), where its link is nearest a wall ("near_x", "near_y": a proximity sensor's reading) and which way the wall
-faces there ("wall_nx", "wall_ny": the unit normal from the wall towards the link), and with the scene's shield the
-look-ahead vetoes "shield-" / "shield+" (protocol/scene.py); the root's task observation the smallest "clearance" and
-the refused moves ("collisions"); the metrics per step the same two.
+refused), and with the scene's shield the look-ahead vetoes "shield-" / "shield+" (protocol/scene.py); the root's
+task observation the smallest "clearance" and the refused moves ("collisions"); the metrics per step the same two.
 """
 
 from __future__ import annotations
@@ -37,29 +35,12 @@ _HALF_HEIGHT = 1.0  # z half-extent of the wall boxes: the links lie in z = 0
 
 
 @dataclass(frozen=True)
-class Nearest:
-    """A link's nearest wall point: the signed clearance, the point of the link nearest the wall and the wall's unit
-    normal there (from the wall towards the link), in the plane."""
-
-    clearance: float
-    point: tuple[float, float] = (0.0, 0.0)
-    normal: tuple[float, float] = (0.0, 0.0)
-
-
-FAR = Nearest(MAX_CLEARANCE)
-
-
-@dataclass(frozen=True)
 class Moved:
     """What `Scene.move` did: the increment applied per DOF joint, the joints refused, the clearances after."""
 
     applied: dict[str, float]
     refused: tuple[str, ...]
-    nearest: dict[str, Nearest]
-
-    @property
-    def clearance(self) -> dict[str, float]:
-        return {a: n.clearance for a, n in self.nearest.items()}
+    clearance: dict[str, float]
 
 
 class SceneError(ValueError):
@@ -95,22 +76,17 @@ class Walls:
 
     def clearances(self) -> dict[str, float]:
         """Signed clearance of every agent's link to the nearest obstacle (MAX_CLEARANCE if none is near)."""
-        return {agent: n.clearance for agent, n in self.nearest().items()}
+        return {agent: self._clearance(agent) for agent in self.links}
 
-    def nearest(self) -> dict[str, Nearest]:
-        return {agent: self._nearest(agent) for agent in self.links}
-
-    def _nearest(self, agent: str) -> Nearest:
+    def _clearance(self, agent: str) -> float:
         cid, robot, link = self.world.client, self.world.body, self.links[agent]
-        best = FAR
+        best = MAX_CLEARANCE
         for body in self.bodies:
             pts = pb.getClosestPoints(
                 bodyA=robot, bodyB=body, distance=MAX_CLEARANCE, linkIndexA=link, physicsClientId=cid
             )
             for p in pts:
-                if float(p[8]) < best.clearance:  # contactDistance: negative in penetration
-                    # positionOnA, contactNormalOnB (pointing from the wall towards the link)
-                    best = Nearest(float(p[8]), (float(p[5][0]), float(p[5][1])), (float(p[7][0]), float(p[7][1])))
+                best = min(best, float(p[8]))  # contactDistance: negative in penetration
         return best
 
     def ahead(self, agent: str, step: float, clearance: Mapping[str, float]) -> tuple[float, float]:
@@ -127,7 +103,7 @@ class Walls:
         out = []
         for d in (-step, step):
             world.apply_increments({agent: d})
-            out.append(min(self._nearest(b).clearance for b in self.moved_by[agent]))
+            out.append(min(self._clearance(b) for b in self.moved_by[agent]))
             world.reset(before)
         return out[0], out[1]
 
@@ -151,13 +127,13 @@ class Walls:
         world = self.world
         before = world.joint_positions()
         applied = world.apply_increments(deltas)
-        nearest = self.nearest()
-        if not self.penetrating({a: n.clearance for a, n in nearest.items()}):
-            return Moved(applied, (), nearest)
+        clearance = self.clearances()
+        if not self.penetrating(clearance):
+            return Moved(applied, (), clearance)
         world.reset(before)
         applied = dict.fromkeys(applied, 0.0)
         refused: list[str] = []
-        nearest_now: dict[str, Nearest] | None = None
+        clearance_now: dict[str, float] | None = None
         for a in world.topo.dof_agents:
             d = deltas.get(a, 0.0)
             if d == 0.0:
@@ -166,16 +142,16 @@ class Walls:
             step = world.apply_increments({a: d})[a]
             if step == 0.0:  # at a joint limit: nothing to test
                 continue
-            n = self.nearest()
-            if self.penetrating({b: m.clearance for b, m in n.items()}):
+            c = self.clearances()
+            if self.penetrating(c):
                 world.reset(keep)
                 refused.append(a)
             else:
                 applied[a] = step
-                nearest_now = n
-        if nearest_now is None:
-            nearest_now = self.nearest()
-        return Moved(applied, tuple(refused), nearest_now)
+                clearance_now = c
+        if clearance_now is None:
+            clearance_now = self.clearances()
+        return Moved(applied, tuple(refused), clearance_now)
 
 
 class WallsScene(Scene):
@@ -185,31 +161,26 @@ class WallsScene(Scene):
         super().__init__(world, spec, action_rad)
         self.walls = Walls(world, spec.obstacles)
         self.walls.check_start(world.topo.source)
-        self.near: dict[str, Nearest] = {}  # per link, after the last step's joint actions
-        self.clearance: dict[str, float] = {}  # ... its clearance
+        self.clearance: dict[str, float] = {}  # per link, after the last step's joint actions
         self.refused: tuple[str, ...] = ()  # joints whose increment of the last step was refused
         self.collisions: list[float] = []  # per step of the epoch: how many increments were refused
         self.min_clearance: list[float] = []  # per step of the epoch: the smallest link clearance
 
     def reset(self) -> None:
-        self.near, self.refused = self.walls.nearest(), ()
-        self.clearance = {a: n.clearance for a, n in self.near.items()}
+        self.clearance, self.refused = self.walls.clearances(), ()
         self.collisions, self.min_clearance = [], []
 
     def move(self, deltas: Mapping[str, float]) -> dict[str, float]:
         moved = self.walls.move(deltas)
-        self.near, self.clearance, self.refused = moved.nearest, moved.clearance, moved.refused
+        self.clearance, self.refused = moved.clearance, moved.refused
         self.collisions.append(float(len(moved.refused)))
         self.min_clearance.append(min(moved.clearance.values()) if moved.clearance else 0.0)
         return moved.applied
 
     def agent_sense(self, agent: str) -> Readings:
         out: Readings = {"collided": 1.0 if agent in self.refused else 0.0}
-        if agent in self.near:
-            near = self.near[agent]
-            out["clearance"] = near.clearance
-            out["near_x"], out["near_y"] = near.point
-            out["wall_nx"], out["wall_ny"] = near.normal
+        if agent in self.clearance:
+            out["clearance"] = self.clearance[agent]
         if self.spec.shield > 0.0:
             ahead = self.walls.ahead(agent, self.action_rad, self.clearance)
             out["shield-"], out["shield+"] = (1.0 if c < self.spec.shield else 0.0 for c in ahead)
