@@ -9,7 +9,8 @@ setting of the corridor task added or changed:
   blame-10, -20  both penalties (collision, blame) at -10 or -20
   blame-notabu   the blame with the tabu off in training, so the lr-0 epochs are the frozen epoch
   blame-polish   100 epochs: full rate with the counts frozen to 240, then the anneal over 240-280
-  long-400, long-blame   the recipe's two stages with a first stage of 400 epochs (the second over 400-460)
+  long-400, long-400-blame   the recipe's two stages with a first stage of 400 epochs (the second over 400-460);
+                 long-800, long-800-blame the same with 800
   relaxed-200, relaxed-blame   the recipe's two stages at the relaxed set-up (walls 1.2 apart, target 1.0 deep:
                  corridor7-relaxed-inner200.toml and corridor7-relaxed-blame260.toml beside this file)
 
@@ -52,14 +53,23 @@ PROBES: dict[str, Config] = {
         {"lr_anneal": [240, 280]},
         blame_penalty=-5.0,
     ),
-    "long-400": Config(STAGE1, 400, text="the recipe's first stage trained 400 epochs"),
-    "long-blame": Config(
-        RECIPE,
-        60,
-        learner={"lr_anneal": [400, 440], "count_freeze": 400},
-        continues="long-400",
-        text="blame-260's second stage on long-400 (lr annealed over 400-440, counts frozen from 400)",
-    ),
+    **{
+        label: config
+        for n in (400, 800)
+        for label, config in (
+            (f"long-{n}", Config(STAGE1, n, text=f"the recipe's first stage trained {n} epochs")),
+            (
+                f"long-{n}-blame",
+                Config(
+                    RECIPE,
+                    60,
+                    learner={"lr_anneal": [n, n + 40], "count_freeze": n},
+                    continues=f"long-{n}",
+                    text=f"blame-260's second stage on long-{n} (lr annealed over {n}-{n + 40}, counts frozen at {n})",
+                ),
+            ),
+        )
+    },
     "relaxed-200": Config(HERE / "corridor7-relaxed-inner200.toml", 200, text="inner-200 at the relaxed set-up"),
     "relaxed-blame": Config(
         HERE / "corridor7-relaxed-blame260.toml", 60, continues="relaxed-200", text="blame-260 at the relaxed set-up"
