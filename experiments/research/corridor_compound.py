@@ -57,7 +57,7 @@ PROBES: dict[str, Config] = {
         label: config
         for n in (400, 800)
         for label, config in (
-            (f"long-{n}", Config(STAGE1, n, text=f"the recipe's first stage trained {n} epochs")),
+            (f"long-{n}", Config(STAGE1, n, seeds=CONFIRM, text=f"the recipe's first stage trained {n} epochs")),
             (
                 f"long-{n}-blame",
                 Config(
@@ -65,6 +65,7 @@ PROBES: dict[str, Config] = {
                     60,
                     learner={"lr_anneal": [n, n + 40], "count_freeze": n},
                     continues=f"long-{n}",
+                    seeds=CONFIRM,
                     text=f"blame-260's second stage on long-{n} (lr annealed over {n}-{n + 40}, counts frozen at {n})",
                 ),
             ),
