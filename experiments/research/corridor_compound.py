@@ -40,6 +40,20 @@ def _stage2(text: str, epochs: int = 60, learner: dict[str, Any] | None = None, 
     return Config(STAGE2, epochs, task=task, learner=learner or {}, continues="inner-200", text=text)
 
 
+def _long(n: int) -> dict[str, Config]:
+    """The recipe's two stages with a first stage of n epochs: `long-n`, and `long-n-blame` on its swarms."""
+    first = Config(STAGE1, n, seeds=CONFIRM, text=f"the recipe's first stage trained {n} epochs")
+    second = Config(
+        RECIPE,
+        60,
+        learner={"lr_anneal": [n, n + 40], "count_freeze": n},
+        continues=f"long-{n}",
+        seeds=CONFIRM,
+        text=f"blame-260's second stage on long-{n} (lr annealed over {n}-{n + 40}, counts frozen at {n})",
+    )
+    return {f"long-{n}": first, f"long-{n}-blame": second}
+
+
 PROBES: dict[str, Config] = {
     "inner-200": dataclasses.replace(CONFIGS["inner-200"], seeds=CONFIRM),
     "freeze-260": CONFIGS["freeze-260"],
@@ -53,24 +67,24 @@ PROBES: dict[str, Config] = {
         {"lr_anneal": [240, 280]},
         blame_penalty=-5.0,
     ),
-    **{
-        label: config
-        for n in (400, 800)
-        for label, config in (
-            (f"long-{n}", Config(STAGE1, n, seeds=CONFIRM, text=f"the recipe's first stage trained {n} epochs")),
-            (
-                f"long-{n}-blame",
-                Config(
-                    RECIPE,
-                    60,
-                    learner={"lr_anneal": [n, n + 40], "count_freeze": n},
-                    continues=f"long-{n}",
-                    seeds=CONFIRM,
-                    text=f"blame-260's second stage on long-{n} (lr annealed over {n}-{n + 40}, counts frozen at {n})",
-                ),
-            ),
-        )
-    },
+    **_long(400),
+    **_long(800),
+    # the first stage changed, the second stage the recipe's (blame-260) on its swarms
+    "via-left-200": Config(STAGE1, 200, task={"via": [1.0, 2.0]}, text="inner-200 with the via 1 further left"),
+    "via-left-blame": Config(
+        RECIPE, 60, task={"via": [1.0, 2.0]}, continues="via-left-200", text="blame-260 on via-left-200"
+    ),
+    "blame-200": Config(STAGE1, 200, task={"blame_penalty": -5.0}, text="inner-200 with the blame from epoch 0"),
+    "blame-200-blame": Config(RECIPE, 60, continues="blame-200", text="blame-260 on blame-200"),
+    "forfeit-200": Config(
+        STAGE1,
+        200,
+        task={"forfeit_progress": True, "blame_penalty": -5.0},
+        text="blame-200, and a step with a refused move pays no progress",
+    ),
+    "forfeit-blame": Config(
+        RECIPE, 60, task={"forfeit_progress": True}, continues="forfeit-200", text="blame-260 on forfeit-200"
+    ),
     "relaxed-200": Config(HERE / "corridor7-relaxed-inner200.toml", 200, text="inner-200 at the relaxed set-up"),
     "relaxed-blame": Config(
         HERE / "corridor7-relaxed-blame260.toml", 60, continues="relaxed-200", text="blame-260 at the relaxed set-up"
