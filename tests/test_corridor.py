@@ -585,26 +585,3 @@ def test_blame_falls_on_an_agent_that_moved_when_a_move_below_was_refused():
     assert "refused" not in _agent("a5", []).up(view(1.0, 1.0, last=2))  # off: nothing more on the wire
     with pytest.raises(SpecError, match="task.blame_penalty: must be <= 0"):
         run_config(GUIDED, ["task.blame_penalty=2.0"])
-
-
-def test_forfeit_progress_pays_a_touching_step_its_collision_term_alone():
-    """forfeit_progress: a step with a refused move earns no progress. The root's reward is the collision term
-    alone (the settle mode otherwise adds it to the progress), and an agent following the leader is not paid its
-    link end's progress when its own move or one below it was refused."""
-    far, near = 8.0, 7.7  # outside D_min: progress pays -2 + k (D_prev - D)
-    kept = corridor_reward(near, far, 0.0, 1.0, "settle")
-    gone = corridor_reward(near, far, 0.0, 1.0, "settle", forfeit=True)
-    assert kept == pytest.approx(-2.0 + 20.0 * 0.3 - 5.0) and gone == pytest.approx(-5.0)
-    assert corridor_reward(near, far, 0.0, 0.0, "settle", forfeit=True) == pytest.approx(kept + 5.0)  # clear step
-    a = _agent("a6", ["task.follow_leader=40.0", "task.forfeit_progress=true"])
-    a.start_epoch()
-
-    def view(step: int, end: tuple[float, float], collided: float, below: float) -> StepView:
-        ups = {"a7": Up(epoch=0, step=step, tips={"a7": (5.0, 2.0, 0.0)}, action=1, sense={"refused": below})}
-        return StepView(0, step, (0.0, 0.0, 0.0), (*end, 0.0), (5.0, 2.0), (5.5, 2.0), {"collided": collided}, ups, 1)
-
-    assert a.reward(view(1, (1.0, 0.0), 0.0, 0.0), None) is None
-    assert a.reward(view(2, (1.2, 0.5), 0.0, 1.0), 0.0) == 0.0  # a move below me refused: no progress paid
-    assert a.reward(view(3, (1.4, 1.0), 1.0, 0.0), 0.0) == 0.0  # mine refused: none either
-    assert a.reward(view(4, (1.6, 1.5), 0.0, 0.0), 0.0) > 0.0  # a clear step is paid
-    assert a.up(view(4, (1.6, 1.5), 0.0, 1.0))["refused"] == 1.0  # my parent learns of it without the blame

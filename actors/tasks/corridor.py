@@ -62,9 +62,6 @@ class CorridorSettings(ReachSettings):
     follow_leader: float = 0.0  # weight w of each of the last agents' own progress towards its place on the axis
     follow_leader_links: int = 4  # ... how many agents, counted from the end effector
     blame_penalty: float = 0.0  # (<= 0) when I moved and a move below me was refused (its `Up` says so)
-    # a step with a refused move pays no progress: the root's reward is the collision term alone, and an agent
-    # following the leader is not paid its link end's progress when its move or one below it was refused
-    forfeit_progress: bool = False
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -111,22 +108,14 @@ class CorridorAgent(ReachAgent):
 
     def global_reward(self, D: float, D_prev: float, obs: Task) -> float:
         clearance, collisions = obs.sense.get("clearance", math.inf), obs.sense.get("collisions", 0.0)
-        return corridor_reward(
-            D,
-            D_prev,
-            clearance,
-            collisions,
-            self.c.reward,
-            settle_radius=self.c.settle_radius,
-            forfeit=self.c.forfeit_progress,
-        )
+        return corridor_reward(D, D_prev, clearance, collisions, self.c.reward, settle_radius=self.c.settle_radius)
 
     def up(self, view: StepView) -> Readings:
         """My subtree's smallest clearance (my link's and my live children's subtrees'), for my parent's state;
         with the blame, whether a move in my subtree (mine or below) was refused, for my parent's reward."""
         clearance = _subtree_clearance(view)
         out: Readings = {} if clearance is None else {"clearance": clearance}
-        if self.c.blame_penalty < 0.0 or self.c.forfeit_progress:
+        if self.c.blame_penalty < 0.0:
             out["refused"] = max(collided(view), _refused_below(view))
         return out
 
@@ -152,8 +141,7 @@ class CorridorAgent(ReachAgent):
             assert self.c.via is not None
             end = (view.end[0], view.end[1])
             D_i = follow_leader_distance(end, view.goal, self.c.via, self.behind, self.c.via_width)
-            touched = c.forfeit_progress and (refused(view) or _refused_below(view) > 0.5)
-            if reward is not None and self.fl_prev is not None and not touched:
+            if reward is not None and self.fl_prev is not None:
                 reward += self.c.follow_leader * (self.fl_prev - D_i)
             self.fl_prev = D_i
         return reward
@@ -213,7 +201,6 @@ def corridor_reward(
     weight: float = CORRIDOR_WEIGHT,
     k: float = 20.0,
     settle_radius: float = 0.3,
-    forfeit: bool = False,
 ) -> float:
     """R(t) of the corridor task (paper §5.4, Eq. 11) from D = D_goal(t), D_prev = D_goal(t-1), the smallest
     link clearance min_i D_corridor^{a_i}(t) and the number of joint increments the walls refused at t-1.
@@ -239,7 +226,6 @@ def corridor_reward(
     settle: Eq. 10 settle, and the collision term for a refused move only, not for a link nearer a wall than d_safe:
       the success bar counts refusals, and an arrived chain has some link that near in 4-99 % of its steps (study 5
       of docs/notebook/corridor.md), where shaped then pays about -4 for sitting at the target.
-    forfeit (strict's rule in the other modes): when close to collide, the collision term alone, no progress term.
     """
     if mode not in REWARD_MODES:
         raise ValueError(f"unknown reward mode {mode!r}; allowed modes: {', '.join(REWARD_MODES)}")
@@ -255,8 +241,6 @@ def corridor_reward(
         if not close:
             return math.exp(-c1 * D)
         return -penalty
-    if close and forfeit:
-        return -weight * penalty
     reach = reach_reward(D, D_prev, mode, D_min=D_min, c=c1, k=k, settle_radius=settle_radius)
     if mode == "strict":
         return -weight * penalty if close else reach

@@ -1,4 +1,4 @@
-"""Research (docs/notebook/corridor.md, studies 12-13): the corridor's compound refusals, taught in the recipe's
+"""Research (docs/notebook/corridor.md, studies 12-14): the corridor's compound refusals, taught in the recipe's
 second stage. Each probe continues the product's `inner-200` swarms (the run cache of `kinswarm experiment corridor`)
 as examples/corridor7-freeze260.toml does (lr annealed to 0 over 200-240, counts frozen from 200, 60 epochs), with a
 setting of the corridor task added or changed:
@@ -11,14 +11,19 @@ setting of the corridor task added or changed:
   blame-polish   100 epochs: full rate with the counts frozen to 240, then the anneal over 240-280
   long-400, long-400-blame   the recipe's two stages with a first stage of 400 epochs (the second over 400-460);
                  long-800, long-800-blame the same with 800
+  via-left-200, via-left-blame   the recipe's two stages with the via at (1, 2), 1 further left (study 14)
+  blame-200, blame-200-blame; blame-400, blame-400-blame   the recipe's two stages (a first stage of 200 or 400
+                 epochs) with the blame from epoch 0 (study 14); blame10-200, blame10-200-blame the same with both
+                 penalties at -10; blame-400-notabu   blame-400-blame with no tabu in the second stage
   relaxed-200, relaxed-blame   the recipe's two stages at the relaxed set-up (walls 1.2 apart, target 1.0 deep:
                  corridor7-relaxed-inner200.toml and corridor7-relaxed-blame260.toml beside this file)
 
   CORRIDOR_PROBES=blame python -m kinswarm.experiments.research corridor_compound --seeds 10 --jobs 2 --out runs/full
 (CORRIDOR_PROBES: a comma-separated subset, run with the configurations they continue; unset, all of them.) Study 12
 also measured a graded near-wall penalty, study 13 a reading of the wall's direction (`approach_state`, with a
-penalty for moves towards a near wall, and a stage of short epochs for the swing): not kept, deleted from the code
-(commit 0f900da has them); their numbers stay in the notebook.
+penalty for moves towards a near wall, and a stage of short epochs for the swing), study 14 `forfeit_progress` (a step
+with a refused move pays no progress): not kept, deleted from the code (commits 0f900da and 4cd4fa6 have them);
+their numbers stay in the notebook.
 """
 
 from __future__ import annotations
@@ -40,18 +45,20 @@ def _stage2(text: str, epochs: int = 60, learner: dict[str, Any] | None = None, 
     return Config(STAGE2, epochs, task=task, learner=learner or {}, continues="inner-200", text=text)
 
 
-def _long(n: int) -> dict[str, Config]:
-    """The recipe's two stages with a first stage of n epochs: `long-n`, and `long-n-blame` on its swarms."""
-    first = Config(STAGE1, n, seeds=CONFIRM, text=f"the recipe's first stage trained {n} epochs")
+def _long(n: int, prefix: str = "long", **task: Any) -> dict[str, Config]:
+    """The recipe's two stages with a first stage of n epochs: `{prefix}-n`, and `{prefix}-n-blame` on its swarms;
+    `task`: set over both stages."""
+    first = Config(STAGE1, n, task=task, seeds=CONFIRM, text=f"the recipe's first stage trained {n} epochs {task}")
     second = Config(
         RECIPE,
         60,
+        task=task,
         learner={"lr_anneal": [n, n + 40], "count_freeze": n},
-        continues=f"long-{n}",
+        continues=f"{prefix}-{n}",
         seeds=CONFIRM,
-        text=f"blame-260's second stage on long-{n} (lr annealed over {n}-{n + 40}, counts frozen at {n})",
+        text=f"blame-260's second stage on {prefix}-{n} (lr annealed over {n}-{n + 40}, counts frozen at {n})",
     )
-    return {f"long-{n}": first, f"long-{n}-blame": second}
+    return {f"{prefix}-{n}": first, f"{prefix}-{n}-blame": second}
 
 
 PROBES: dict[str, Config] = {
@@ -74,16 +81,17 @@ PROBES: dict[str, Config] = {
     "via-left-blame": Config(
         RECIPE, 60, task={"via": [1.0, 2.0]}, continues="via-left-200", text="blame-260 on via-left-200"
     ),
-    "blame-200": Config(STAGE1, 200, task={"blame_penalty": -5.0}, text="inner-200 with the blame from epoch 0"),
-    "blame-200-blame": Config(RECIPE, 60, continues="blame-200", text="blame-260 on blame-200"),
-    "forfeit-200": Config(
-        STAGE1,
-        200,
-        task={"forfeit_progress": True, "blame_penalty": -5.0},
-        text="blame-200, and a step with a refused move pays no progress",
-    ),
-    "forfeit-blame": Config(
-        RECIPE, 60, task={"forfeit_progress": True}, continues="forfeit-200", text="blame-260 on forfeit-200"
+    **_long(200, "blame", blame_penalty=-5.0),  # the blame from epoch 0
+    **_long(400, "blame", blame_penalty=-5.0),
+    **_long(200, "blame10", blame_penalty=-10.0, collision_penalty=-10.0),  # both penalties -10 from epoch 0
+    "blame-400-notabu": Config(
+        RECIPE,
+        60,
+        task={"blame_penalty": -5.0, "collision_tabu": False},
+        learner={"lr_anneal": [400, 440], "count_freeze": 400},
+        continues="blame-400",
+        seeds=CONFIRM,
+        text="blame-400-blame with no tabu in the second stage, so its lr-0 epochs are the frozen epoch",
     ),
     "relaxed-200": Config(HERE / "corridor7-relaxed-inner200.toml", 200, text="inner-200 at the relaxed set-up"),
     "relaxed-blame": Config(
