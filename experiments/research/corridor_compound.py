@@ -48,7 +48,8 @@ def _stage2(text: str, epochs: int = 60, learner: dict[str, Any] | None = None, 
 def _long(n: int, prefix: str = "long", **task: Any) -> dict[str, Config]:
     """The recipe's two stages with a first stage of n epochs: `{prefix}-n`, and `{prefix}-n-blame` on its swarms;
     `task`: set over both stages."""
-    first = Config(STAGE1, n, task=task, seeds=CONFIRM, text=f"the recipe's first stage trained {n} epochs {task}")
+    also = f" with {task}" if task else ""
+    first = Config(STAGE1, n, task=task, seeds=CONFIRM, text=f"the recipe's first stage trained {n} epochs{also}")
     second = Config(
         RECIPE,
         60,
@@ -84,13 +85,9 @@ PROBES: dict[str, Config] = {
     **_long(200, "blame", blame_penalty=-5.0),  # the blame from epoch 0
     **_long(400, "blame", blame_penalty=-5.0),
     **_long(200, "blame10", blame_penalty=-10.0, collision_penalty=-10.0),  # both penalties -10 from epoch 0
-    "blame-400-notabu": Config(
-        RECIPE,
-        60,
+    "blame-400-notabu": dataclasses.replace(
+        _long(400, "blame", blame_penalty=-5.0)["blame-400-blame"],
         task={"blame_penalty": -5.0, "collision_tabu": False},
-        learner={"lr_anneal": [400, 440], "count_freeze": 400},
-        continues="blame-400",
-        seeds=CONFIRM,
         text="blame-400-blame with no tabu in the second stage, so its lr-0 epochs are the frozen epoch",
     ),
     "relaxed-200": Config(HERE / "corridor7-relaxed-inner200.toml", 200, text="inner-200 at the relaxed set-up"),
