@@ -126,14 +126,16 @@ class Spec:
         d = {f: getattr(cfg, f) for f in ("robot", "scene", "task", "learner", *_RUN_FIELDS)}
         # every agent's learner as the run builds it: the overrides on the task's and the state kind's defaults, so a
         # changed default (a kind's lr, a task's scale) is another run, not a cached one
-        d["learner"] = {a: dataclasses.asdict(s) for a, s in learner_settings(task_of(cfg), cfg.learner).items()}
+        task = task_of(cfg)
+        d["learner"] = {a: dataclasses.asdict(s) for a, s in learner_settings(task, cfg.learner).items()}
         # the learner kind is not among its settings; the paper's is left out, so the runs made before there were
         # other kinds keep their identity (and their cache entries)
         if (kind := cfg.learner.get("kind", DEFAULT_KIND)) != DEFAULT_KIND:
             d["learner_kind"] = kind
-        # likewise a reach task's tip as the agents compute it (the default): the runs made before `tip` keep theirs
-        if d["task"].get("tip") == "computed":
-            d["task"] = {k: v for k, v in d["task"].items() if k != "tip"}
+        # the task's settings at their defaults are left out: a setting added later (off by default) leaves the
+        # runs made before it their identity and their cache entries
+        defaults = _defaults(type(task.settings))
+        d["task"] = {k: v for k, v in d["task"].items() if k not in defaults or _plain(v) != defaults[k]}
         if self.from_dir is not None:
             d["from_dir"] = Path(self.from_dir).name  # itself "<name>-<identity>": portable
         if self.scenario is not None:
@@ -143,6 +145,22 @@ class Spec:
         if not with_epochs:
             d.pop("epochs")
         return hashlib.sha256(json.dumps(d, sort_keys=True, default=json_default).encode()).hexdigest()[:16]
+
+
+def _plain(value: Any) -> str:
+    return json.dumps(value, sort_keys=True, default=json_default)
+
+
+@functools.cache
+def _defaults(settings: type) -> dict[str, str]:
+    """A settings dataclass's default values, as `_plain` spells them."""
+    out = {}
+    for f in dataclasses.fields(settings):
+        if f.default is not dataclasses.MISSING:
+            out[f.name] = _plain(f.default)
+        elif f.default_factory is not dataclasses.MISSING:
+            out[f.name] = _plain(f.default_factory())
+    return out
 
 
 _RUN_FIELDS = ("epochs", "steps", "seed", "learn", "explore", "successive", "controller", "action_deg", "from_dir")

@@ -233,9 +233,11 @@ def test_runs_that_need_no_messages_go_inprocess(tmp_path):
     assert said.identity() == plain.identity()
     others = {dataclasses.replace(plain, learner=(("kind", k),)).identity() for k in ("independent", "tabular")}
     assert len(others) == 2 and plain.identity() not in others
-    # likewise the reach task's tip: the default, said or not, keeps the identity runs had before there was `tip`
-    assert dataclasses.replace(plain, task=(("tip", "computed"),)).identity() == plain.identity()
-    assert dataclasses.replace(plain, task=(("tip", "sensed"),)).identity() != plain.identity()
+    # likewise any task setting at its default, said or not (the reach task's tip, its settle radius): a setting added
+    # later, off by default, keeps the identity runs had before it
+    for name, default, other in (("tip", "computed", "sensed"), ("settle_radius", 0.3, 0.2)):
+        assert dataclasses.replace(plain, task=((name, default),)).identity() == plain.identity()
+        assert dataclasses.replace(plain, task=((name, other),)).identity() != plain.identity()
     control = run_spec(dataclasses.replace(plain, learner=(("kind", "independent"),)), tmp_path / "a")
     assert control.out != fast.out and control.placement == "inprocess"
     assert json.loads((control.out / "config.json").read_text())["learner"] == {"kind": "independent"}
