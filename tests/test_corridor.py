@@ -323,6 +323,12 @@ def test_corridor_variants():
     assert r(0.2, 0.15, 0.05, 0, "settle", settle_radius=0.15) == -1.0
     assert r(0.1, 0.05, 0.05, 0, "settle", settle_radius=0.15) == pytest.approx(math.exp(-0.05))
     assert r(0.2, 0.15, 0.05, 0, "shaped", settle_radius=0.15) == r(0.2, 0.15, 0.05, 0, "shaped")  # settle's only
+    # swing_margin: outside D_min a link within the margin costs as a refusal does; inside D_min nothing changes
+    assert r(4.0, 4.1, 0.05, 0, "settle", swing_margin=0.1) == pytest.approx(r(4.0, 4.1, 0.05, 1, "settle"))
+    assert r(4.0, 4.1, 0.05, 0, "settle", swing_margin=0.1) == pytest.approx(-2.0 + 2.0 - 5.0 * math.exp(-0.025))
+    assert r(4.0, 4.1, 0.15, 0, "settle", swing_margin=0.1) == pytest.approx(-2.0 + 2.0)  # beyond the margin
+    assert r(1.0, 1.2, 0.05, 0, "settle", swing_margin=0.1) == r(1.0, 1.2, 0.05, 0, "settle")  # inside D_min
+    assert r(4.0, 4.1, 0.05, 0, "paper", swing_margin=0.1) == -2.0  # Eq. 11's case order: -2 outside D_min
     with pytest.raises(ValueError, match="unknown reward mode"):
         r(1.0, 1.0, 1.0, 0, "geodesic?")
 

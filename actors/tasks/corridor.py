@@ -22,6 +22,7 @@ collision_tabu = true        # the move the wall just refused is left out of the
 follow_leader = 40.0         # weight of each of the last follow_leader_links agents' own progress along the axis
 follow_leader_links = 4
 blame_penalty = -5.0         # added when I moved and a move of an agent below me was refused (a compound refusal)
+swing_margin = 0.25          # outside D_min (the swing down to the mouth) a link this near a wall costs as a refusal
 ```
 Measured and reasoned: docs/notebook/corridor.md.
 """
@@ -62,6 +63,7 @@ class CorridorSettings(ReachSettings):
     follow_leader: float = 0.0  # weight w of each of the last agents' own progress towards its place on the axis
     follow_leader_links: int = 4  # ... how many agents, counted from the end effector
     blame_penalty: float = 0.0  # (<= 0) when I moved and a move below me was refused (its `Up` says so)
+    swing_margin: float = 0.0  # (>= 0) outside D_min, a link clearance below it is close to collide (Eq. 11's C_ai)
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -77,6 +79,8 @@ class CorridorSettings(ReachSettings):
             raise ValueError("follow_leader: needs via (the corridor's axis)")
         if not (math.isfinite(self.blame_penalty) and self.blame_penalty <= 0.0):
             raise ValueError(f"blame_penalty: must be <= 0, got {self.blame_penalty}")
+        if not (math.isfinite(self.swing_margin) and self.swing_margin >= 0.0):
+            raise ValueError(f"swing_margin: must be >= 0, got {self.swing_margin}")
         if self.follow_leader_links < 1:
             raise ValueError(f"follow_leader_links: must be >= 1, got {self.follow_leader_links}")
 
@@ -108,7 +112,10 @@ class CorridorAgent(ReachAgent):
 
     def global_reward(self, D: float, D_prev: float, obs: Task) -> float:
         clearance, collisions = obs.sense.get("clearance", math.inf), obs.sense.get("collisions", 0.0)
-        return corridor_reward(D, D_prev, clearance, collisions, self.c.reward, settle_radius=self.c.settle_radius)
+        c = self.c
+        return corridor_reward(
+            D, D_prev, clearance, collisions, c.reward, settle_radius=c.settle_radius, swing_margin=c.swing_margin
+        )
 
     def up(self, view: StepView) -> Readings:
         """My subtree's smallest clearance (my link's and my live children's subtrees'), for my parent's state;
@@ -201,6 +208,7 @@ def corridor_reward(
     weight: float = CORRIDOR_WEIGHT,
     k: float = 20.0,
     settle_radius: float = 0.3,
+    swing_margin: float = 0.0,
 ) -> float:
     """R(t) of the corridor task (paper §5.4, Eq. 11) from D = D_goal(t), D_prev = D_goal(t-1), the smallest
     link clearance min_i D_corridor^{a_i}(t) and the number of joint increments the walls refused at t-1.
@@ -226,12 +234,15 @@ def corridor_reward(
     settle: Eq. 10 settle, and the collision term for a refused move only, not for a link nearer a wall than d_safe:
       the success bar counts refusals, and an arrived chain has some link that near in 4-99 % of its steps (study 5
       of docs/notebook/corridor.md), where shaped then pays about -4 for sitting at the target.
+    swing_margin (any mode but paper, whose case order pays -2 outside D_min whatever happens): outside D_min a link
+      nearer a wall than swing_margin is close to collide as well. There the chain swings down to the mouth and has
+      room to keep clear; inside, the corridor's band puts links that near by construction (study 15).
     """
     if mode not in REWARD_MODES:
         raise ValueError(f"unknown reward mode {mode!r}; allowed modes: {', '.join(REWARD_MODES)}")
     if d_safe is None:
         d_safe = 0.0 if mode == "settle" else CORRIDOR_D_SAFE
-    close = collisions > 0 or clearance < d_safe  # exists a_i with C_ai = 1
+    close = collisions > 0 or clearance < d_safe or (D > D_min and clearance < swing_margin)  # exists a_i, C_ai = 1
     penalty = math.exp(-c2 * max(clearance, 0.0))  # e^(-c2 min_i D_corridor)
     if mode == "paper":
         if D > D_min:

@@ -1,4 +1,4 @@
-"""Research (docs/notebook/corridor.md, studies 12-14): the corridor's compound refusals, taught in the recipe's
+"""Research (docs/notebook/corridor.md, studies 12-15): the corridor's compound refusals, taught in the recipe's
 second stage. Each probe continues the product's `inner-200` swarms (the run cache of `kinswarm experiment corridor`)
 as examples/corridor7-freeze260.toml does (lr annealed to 0 over 200-240, counts frozen from 200, 60 epochs), with a
 setting of the corridor task added or changed:
@@ -15,8 +15,17 @@ setting of the corridor task added or changed:
   blame-200, blame-200-blame; blame-400, blame-400-blame   the recipe's two stages (a first stage of 200 or 400
                  epochs) with the blame from epoch 0 (study 14); blame10-200, blame10-200-blame the same with both
                  penalties at -10; blame-400-notabu   blame-400-blame with no tabu in the second stage
+  swing-200, swing-200-blame   the recipe's two stages with swing_margin 0.1 from epoch 0: outside D_min (the swing
+                 down to the mouth) a link within 0.1 of a wall costs the root's reward what a refusal does (study 15);
+                 swing-400, swing-400-blame the same with a first stage of 400 epochs; swing25-200,
+                 swing25-200-blame with a margin of 0.25
   relaxed-200, relaxed-blame   the recipe's two stages at the relaxed set-up (walls 1.2 apart, target 1.0 deep:
-                 corridor7-relaxed-inner200.toml and corridor7-relaxed-blame260.toml beside this file)
+                 corridor7-relaxed-inner200.toml and corridor7-relaxed-blame260.toml beside this file);
+                 relaxed-swing-200, relaxed-swing-blame the same with swing_margin 0.1 (study 15);
+                 relaxed-swing25-200, relaxed-swing25-blame with 0.25 (examples/corridor7-relaxed-swing200.toml and
+                 -swing260.toml: the same runs)
+  shallow-swing25-200, -blame   swing25's two stages with the hard set-up's walls (0.8 apart) and the target 1.0 deep;
+  relaxed-deep-swing25-200, -blame   with the relaxed walls (1.2 apart) and the target 2.5 deep (study 15)
 
   CORRIDOR_PROBES=blame python -m kinswarm.experiments.research corridor_compound --seeds 10 --jobs 2 --out runs/full
 (CORRIDOR_PROBES: a comma-separated subset, run with the configurations they continue; unset, all of them.) Study 12
@@ -62,6 +71,23 @@ def _long(n: int, prefix: str = "long", **task: Any) -> dict[str, Config]:
     return {f"{prefix}-{n}": first, f"{prefix}-{n}-blame": second}
 
 
+def _relaxed(prefix: str, **task: Any) -> dict[str, Config]:
+    """The recipe's two stages at the relaxed set-up with `task` set over both: `relaxed-{prefix}-200` and
+    `relaxed-{prefix}-blame`."""
+    first = Config(
+        HERE / "corridor7-relaxed-inner200.toml", 200, task=task, seeds=CONFIRM, text=f"relaxed-200 with {task}"
+    )
+    second = Config(
+        HERE / "corridor7-relaxed-blame260.toml",
+        60,
+        task=task,
+        continues=f"relaxed-{prefix}-200",
+        seeds=CONFIRM,
+        text=f"relaxed-blame with {task}",
+    )
+    return {f"relaxed-{prefix}-200": first, f"relaxed-{prefix}-blame": second}
+
+
 PROBES: dict[str, Config] = {
     "inner-200": dataclasses.replace(CONFIGS["inner-200"], seeds=CONFIRM),
     "freeze-260": CONFIGS["freeze-260"],
@@ -85,15 +111,29 @@ PROBES: dict[str, Config] = {
     **_long(200, "blame", blame_penalty=-5.0),  # the blame from epoch 0
     **_long(400, "blame", blame_penalty=-5.0),
     **_long(200, "blame10", blame_penalty=-10.0, collision_penalty=-10.0),  # both penalties -10 from epoch 0
+    **_long(200, "swing", swing_margin=0.1),  # outside D_min a link within 0.1 of a wall costs as a refusal
+    **_long(400, "swing", swing_margin=0.1),
+    **_long(200, "swing25", swing_margin=0.25),  # a margin as wide as the clearance's sets are apart
     "blame-400-notabu": dataclasses.replace(
         _long(400, "blame", blame_penalty=-5.0)["blame-400-blame"],
         task={"blame_penalty": -5.0, "collision_tabu": False},
         text="blame-400-blame with no tabu in the second stage, so its lr-0 epochs are the frozen epoch",
     ),
-    "relaxed-200": Config(HERE / "corridor7-relaxed-inner200.toml", 200, text="inner-200 at the relaxed set-up"),
-    "relaxed-blame": Config(
-        HERE / "corridor7-relaxed-blame260.toml", 60, continues="relaxed-200", text="blame-260 at the relaxed set-up"
+    "relaxed-200": Config(
+        HERE / "corridor7-relaxed-inner200.toml", 200, seeds=CONFIRM, text="inner-200 at the relaxed set-up"
     ),
+    "relaxed-blame": Config(
+        HERE / "corridor7-relaxed-blame260.toml",
+        60,
+        continues="relaxed-200",
+        seeds=CONFIRM,
+        text="blame-260 at the relaxed set-up",
+    ),
+    **_relaxed("swing", swing_margin=0.1),
+    **_relaxed("swing25", swing_margin=0.25),
+    # which of the hard set-up's two differences from the relaxed one the margin does not get past (study 15)
+    **_long(200, "shallow-swing25", goal=[4.0, 2.0], swing_margin=0.25),  # walls 0.8 apart, the target 1.0 deep
+    **_relaxed("deep-swing25", goal=[5.5, 2.0], swing_margin=0.25),  # walls 1.2 apart, the target 2.5 deep
 }
 
 
