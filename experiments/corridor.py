@@ -1,5 +1,6 @@
 """§5.4, Fig. 23: a 7-DOF planar chain reaching a target 2.5 deep inside a narrow corridor (examples/corridor7.toml:
-links of length 1 and radius 0.1, walls 0.8 apart spanning x in [3, 6] around y = 2).
+links of length 1 and radius 0.1, walls 0.8 apart spanning x in [3, 6] around y = 2), and at the relaxed set-up
+(walls 1.2 apart, the target 1.0 deep).
 
 The product's corridor: Eq. 11 as printed (the paper's claim: its six state variables and the default learner) and
 the recommended recipe, run from its two files: examples/corridor7-inner200.toml (200 epochs) and
@@ -7,9 +8,11 @@ examples/corridor7-blame260.toml (60 more from that swarm, the learning rate ann
 counts frozen, so the last epochs run what a frozen swarm runs, and the blame: an agent whose move was applied while
 a move below it was refused pays too). The controls: the untrained swarm, and the second stage without the blame
 (examples/corridor7-freeze260.toml); the recipe's rows for the independent and tabular learner kinds (KINDS), each
-on its own first stage. Each trained swarm then runs one frozen epoch with nothing added (`--learn off --explore off
---set task.collision_tabu=false`); two more frozen epochs add decision rules that change nothing learned: the tabu,
-and the tabu and the shield (EVAL_SHIELD). The bars, per seed:
+on its own first stage. At the relaxed set-up the same two stages with the swing margin (RELAXED1, RELAXED2: outside
+D_min a link within 0.25 of a wall costs the root's reward what a refused move does), its untrained swarm, and the
+two stages without the margin as the control. Each trained swarm then runs one frozen epoch with nothing added
+(`--learn off --explore off --set task.collision_tabu=false`); two more frozen epochs add decision rules that change
+nothing learned: the tabu, and the tabu and the shield (EVAL_SHIELD). The bars, per seed:
 
   training  the share of the last TAIL training epochs that end within TOL of the target with no collision (refused
             penetrating increment) in the epoch's last LAST_STEPS steps; bar: >= 80 % over 5 seeds
@@ -38,6 +41,9 @@ TOPOLOGY = ROOT / "examples" / "corridor7.toml"
 STAGE1 = ROOT / "examples" / "corridor7-inner200.toml"
 STAGE2 = ROOT / "examples" / "corridor7-freeze260.toml"
 RECIPE = ROOT / "examples" / "corridor7-blame260.toml"  # the second stage as recommended: STAGE2 with the blame
+#: the recipe at the relaxed set-up (walls 1.2 apart, the target 1.0 deep) with the swing margin, its two stages
+RELAXED1 = ROOT / "examples" / "corridor7-relaxed-swing200.toml"
+RELAXED2 = ROOT / "examples" / "corridor7-relaxed-swing260.toml"
 TOL = 0.3  # "within 0.3 of the target"
 TAIL = 50  # the last 50 training epochs
 LAST_STEPS = 100  # no collision in the epoch's last 100 steps
@@ -117,9 +123,28 @@ CONFIGS: dict[str, Config] = {
             (f"blame-260-{kind}", _recipe_stage2(kind)),
         )
     },
+    "relaxed-untrained": Config(RELAXED1, 0, untrained=True, text="the swarm as it starts, at the relaxed set-up"),
+    "relaxed-200": Config(
+        RELAXED1, 200, text="the relaxed recipe's first stage: examples/corridor7-relaxed-swing200.toml"
+    ),
+    "relaxed-260": Config(
+        RELAXED2,
+        60,
+        continues="relaxed-200",
+        text="its second stage: examples/corridor7-relaxed-swing260.toml (as blame-260 continues inner-200)",
+    ),
+    # the control: the same two stages without the swing margin (study 13's relaxed-200 and relaxed-blame)
+    "relaxed-nomargin-200": Config(RELAXED1, 200, task={"swing_margin": 0.0}, text="relaxed-200 without the margin"),
+    "relaxed-nomargin-260": Config(
+        RELAXED2,
+        60,
+        task={"swing_margin": 0.0},
+        continues="relaxed-nomargin-200",
+        text="relaxed-260 without the margin",
+    ),
 }
 #: the configurations drawn in the report's figures (each figure has a panel per configuration)
-FIGURES = ("paper", "freeze-260", "blame-260", "blame-260-independent", "blame-260-tabular")
+FIGURES = ("paper", "freeze-260", "blame-260", "blame-260-independent", "blame-260-tabular", "relaxed-260")
 
 
 def run(ctx: Context) -> dict[str, Any]:
@@ -130,7 +155,8 @@ def run(ctx: Context) -> dict[str, Any]:
         f"`{TOPOLOGY.relative_to(ROOT)}`: 7 links of length 1 (capsules of radius 0.1), walls spanning x in [3, 6] "
         "with a gap of 0.8 around y = 2, target (5.5, 2.0) 2.5 deep, start angles (90, -5, ..., -5) deg. Walls are "
         "solid: an increment that would make a link penetrate a wall is refused (the joint holds) and counted as a "
-        "collision. Configurations: "
+        "collision. The relaxed set-up (`examples/corridor7-relaxed-swing200.toml`): walls 1.2 apart, target (4, 2) "
+        "1.0 deep, the same chain and start. Configurations: "
         + "; ".join(f"`{label}`: {c.text}" for label, c in CONFIGS.items())
         + ". Each trained swarm then runs one frozen epoch with nothing added (`--learn off --explore off --set "
         "task.collision_tabu=false`: no tabu even where training had it); a second adds the tabu "
@@ -138,7 +164,8 @@ def run(ctx: Context) -> dict[str, Any]:
         f"the shield (`--set scene.shield={EVAL_SHIELD}`: the walls veto a move that alone would bring the links "
         "it moves nearer a wall than that) — decision rules at evaluation only; nothing learned changes. The "
         "recipe: `kinswarm run examples/corridor7-inner200.toml --out runs/corridor7-inner200`, then `kinswarm "
-        "run examples/corridor7-blame260.toml`. A bar counts as met only with >= 5 seeds.",
+        "run examples/corridor7-blame260.toml`; at the relaxed set-up examples/corridor7-relaxed-swing200.toml, then "
+        "corridor7-relaxed-swing260.toml. A bar counts as met only with >= 5 seeds.",
     )
     return run_configs(ctx, rep, CONFIGS, intro)
 

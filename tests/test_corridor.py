@@ -7,6 +7,7 @@ from __future__ import annotations
 import asyncio
 import json
 import math
+import tomllib
 from pathlib import Path
 
 import numpy as np
@@ -61,6 +62,11 @@ def test_examples_parse():
     assert (relaxed[0].center[1] - relaxed[0].half_extents[1]) - (
         relaxed[1].center[1] + relaxed[1].half_extents[1]
     ) == pytest.approx(1.2)
+    # the relaxed recipe: the relaxed walls, the target 1.0 deep and the swing margin; its second stage trains on
+    cfg = run_config(EXAMPLES / "corridor7-relaxed-swing200.toml")
+    assert cfg.scene_spec.obstacles == relaxed and cfg.task["goal"] == [4.0, 2.0] and cfg.task["swing_margin"] == 0.25
+    stage2 = tomllib.loads((EXAMPLES / "corridor7-relaxed-swing260.toml").read_text())
+    assert stage2["base"] == "corridor7-relaxed-swing200.toml" and stage2["task"]["blame_penalty"] < 0.0
     assert run_config(EXAMPLES / "chain4.toml").scene_spec.obstacles == ()
 
 

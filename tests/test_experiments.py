@@ -273,8 +273,8 @@ def test_run_cache_serves_another_checkout(tmp_path):
     assert find_cached(specs(file_b, None)[0], two) is None
 
 
-@pytest.mark.slow  # nine configurations (the kinds' rows, the controls): 20-80 s, 3x the three it had
-@pytest.mark.timeout(300)
+@pytest.mark.slow  # 14 configurations (the kinds' rows, the controls, the relaxed set-up's): 30-120 s
+@pytest.mark.timeout(400)
 def test_quick_corridor_experiment(tmp_path):
     out = tmp_path / "x"
     assert kinswarm(["experiment", "corridor", "--quick", "--seeds", "1", "--out", str(out)]) == 0
@@ -288,7 +288,8 @@ def test_quick_corridor_experiment(tmp_path):
     res = json.loads((d / "results.json").read_text())
     assert res["experiment"] == "corridor" and res["quick"] is True and res["steps"] == 100
     kinds = {f"{stage}-{kind}" for stage in ("inner-200", "blame-260") for kind in ("independent", "tabular")}
-    assert set(res["configs"]) == {"untrained", "paper", "inner-200", "freeze-260", "blame-260", *kinds}
+    relaxed = {"relaxed-untrained", "relaxed-200", "relaxed-260", "relaxed-nomargin-200", "relaxed-nomargin-260"}
+    assert set(res["configs"]) == {"untrained", "paper", "inner-200", "freeze-260", "blame-260", *kinds, *relaxed}
     for per in res["configs"].values():
         seed = per["seeds"]["0"]
         assert 0.0 <= seed["success_last"] <= 1.0 and seed["frozen_collisions"] >= 0
@@ -316,6 +317,11 @@ def test_quick_corridor_experiment(tmp_path):
         assert cfg["learner"]["kind"] == kind and cfg["learner"]["lr_anneal"] == [200, 240]
         assert cfg["task"]["blame_penalty"] == recipe["task"]["blame_penalty"]
         assert Path(cfg["from_dir"]).name == res["configs"][f"inner-200-{kind}"]["seeds"]["0"]["train_run"]
+    # the relaxed recipe: its files, its margin, and the control without it on the same files
+    assert config_of("relaxed-260")["task"]["swing_margin"] == 0.25
+    assert Path(config_of("relaxed-260")["from_dir"]).name == res["configs"]["relaxed-200"]["seeds"]["0"]["train_run"]
+    assert config_of("relaxed-nomargin-260")["task"]["swing_margin"] == 0.0
+    assert res["configs"]["relaxed-nomargin-260"]["file"] == "examples/corridor7-relaxed-swing260.toml"
     # the untrained control learned nothing and started from nothing
     untrained = config_of("untrained")
     assert untrained["learn"] is False and untrained["from_dir"] is None
