@@ -124,27 +124,29 @@ CONFIGS: dict[str, Config] = {
         )
     },
     "relaxed-untrained": Config(RELAXED1, 0, untrained=True, text="the swarm as it starts, at the relaxed set-up"),
-    "relaxed-200": Config(
+    "relaxed-margin-200": Config(
         RELAXED1, 200, text="the relaxed recipe's first stage: examples/corridor7-relaxed-swing200.toml"
     ),
-    "relaxed-260": Config(
+    "relaxed-margin-260": Config(
         RELAXED2,
         60,
-        continues="relaxed-200",
+        continues="relaxed-margin-200",
         text="its second stage: examples/corridor7-relaxed-swing260.toml (as blame-260 continues inner-200)",
     ),
-    # the control: the same two stages without the swing margin (study 13's relaxed-200 and relaxed-blame)
-    "relaxed-nomargin-200": Config(RELAXED1, 200, task={"swing_margin": 0.0}, text="relaxed-200 without the margin"),
+    # the control: the same two stages without the swing margin (study 13's research probes relaxed-200, relaxed-blame)
+    "relaxed-nomargin-200": Config(
+        RELAXED1, 200, task={"swing_margin": 0.0}, text="relaxed-margin-200 without the margin"
+    ),
     "relaxed-nomargin-260": Config(
         RELAXED2,
         60,
         task={"swing_margin": 0.0},
         continues="relaxed-nomargin-200",
-        text="relaxed-260 without the margin",
+        text="relaxed-margin-260 without the margin",
     ),
 }
 #: the configurations drawn in the report's figures (each figure has a panel per configuration)
-FIGURES = ("paper", "freeze-260", "blame-260", "blame-260-independent", "blame-260-tabular", "relaxed-260")
+FIGURES = ("paper", "freeze-260", "blame-260", "blame-260-independent", "blame-260-tabular", "relaxed-margin-260")
 
 
 def run(ctx: Context) -> dict[str, Any]:

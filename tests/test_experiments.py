@@ -288,7 +288,7 @@ def test_quick_corridor_experiment(tmp_path):
     res = json.loads((d / "results.json").read_text())
     assert res["experiment"] == "corridor" and res["quick"] is True and res["steps"] == 100
     kinds = {f"{stage}-{kind}" for stage in ("inner-200", "blame-260") for kind in ("independent", "tabular")}
-    relaxed = {"relaxed-untrained", "relaxed-200", "relaxed-260", "relaxed-nomargin-200", "relaxed-nomargin-260"}
+    relaxed = {f"relaxed-{c}" for c in ("untrained", "margin-200", "margin-260", "nomargin-200", "nomargin-260")}
     assert set(res["configs"]) == {"untrained", "paper", "inner-200", "freeze-260", "blame-260", *kinds, *relaxed}
     for per in res["configs"].values():
         seed = per["seeds"]["0"]
@@ -318,8 +318,9 @@ def test_quick_corridor_experiment(tmp_path):
         assert cfg["task"]["blame_penalty"] == recipe["task"]["blame_penalty"]
         assert Path(cfg["from_dir"]).name == res["configs"][f"inner-200-{kind}"]["seeds"]["0"]["train_run"]
     # the relaxed recipe: its files, its margin, and the control without it on the same files
-    assert config_of("relaxed-260")["task"]["swing_margin"] == 0.25
-    assert Path(config_of("relaxed-260")["from_dir"]).name == res["configs"]["relaxed-200"]["seeds"]["0"]["train_run"]
+    margin = config_of("relaxed-margin-260")
+    assert margin["task"]["swing_margin"] == 0.25
+    assert Path(margin["from_dir"]).name == res["configs"]["relaxed-margin-200"]["seeds"]["0"]["train_run"]
     assert config_of("relaxed-nomargin-260")["task"]["swing_margin"] == 0.0
     assert res["configs"]["relaxed-nomargin-260"]["file"] == "examples/corridor7-relaxed-swing260.toml"
     # the untrained control learned nothing and started from nothing
