@@ -20,10 +20,10 @@ setting of the corridor task added or changed:
                  swing-400, swing-400-blame the same with a first stage of 400 epochs; swing25-200,
                  swing25-200-blame with a margin of 0.25
   relaxed-200, relaxed-blame   the recipe's two stages at the relaxed set-up (walls 1.2 apart, target 1.0 deep:
-                 corridor7-relaxed-inner200.toml and corridor7-relaxed-blame260.toml beside this file);
+                 examples/corridor7-relaxed-swing200.toml and -swing260.toml with swing_margin 0);
                  relaxed-swing-200, relaxed-swing-blame the same with swing_margin 0.1 (study 15);
-                 relaxed-swing25-200, relaxed-swing25-blame with 0.25 (examples/corridor7-relaxed-swing200.toml and
-                 -swing260.toml: the same runs)
+                 relaxed-swing25-200, relaxed-swing25-blame with 0.25 (the example files as they are: the same
+                 runs as the experiment's relaxed-margin-200 and -260)
   shallow-swing25-200, -blame   swing25's two stages with the hard set-up's walls (0.8 apart) and the target 1.0 deep;
   relaxed-deep-swing25-200, -blame   with the relaxed walls (1.2 apart) and the target 2.5 deep (study 15)
 
@@ -39,15 +39,14 @@ from __future__ import annotations
 
 import dataclasses
 import os
-from pathlib import Path
 from typing import Any
 
 from kinswarm.experiments.common import Context, Report
-from kinswarm.experiments.corridor import CONFIGS, RECIPE, STAGE1, STAGE2, Config, run_configs
+from kinswarm.experiments.corridor import CONFIGS, RECIPE, RELAXED1, RELAXED2, STAGE1, STAGE2, Config, run_configs
 
 SEEDS = 5
 CONFIRM = 10  # the configurations run on 5 more seeds (--seeds 10) to confirm what seeds 0-4 showed
-HERE = Path(__file__).parent
+NO_MARGIN = {"swing_margin": 0.0}  # the relaxed recipe's files without their swing margin: study 13's relaxed set-up
 
 
 def _stage2(text: str, epochs: int = 60, learner: dict[str, Any] | None = None, **task: Any) -> Config:
@@ -72,18 +71,12 @@ def _long(n: int, prefix: str = "long", **task: Any) -> dict[str, Config]:
 
 
 def _relaxed(prefix: str, **task: Any) -> dict[str, Config]:
-    """The recipe's two stages at the relaxed set-up with `task` set over both: `relaxed-{prefix}-200` and
-    `relaxed-{prefix}-blame`."""
-    first = Config(
-        HERE / "corridor7-relaxed-inner200.toml", 200, task=task, seeds=CONFIRM, text=f"relaxed-200 with {task}"
-    )
+    """The relaxed recipe's two stages (its example files) with `task` set over both, the margin off unless `task`
+    sets it: `relaxed-{prefix}-200` and `relaxed-{prefix}-blame`."""
+    task = {**NO_MARGIN, **task}
+    first = Config(RELAXED1, 200, task=task, seeds=CONFIRM, text=f"relaxed-200 with {task}")
     second = Config(
-        HERE / "corridor7-relaxed-blame260.toml",
-        60,
-        task=task,
-        continues=f"relaxed-{prefix}-200",
-        seeds=CONFIRM,
-        text=f"relaxed-blame with {task}",
+        RELAXED2, 60, task=task, continues=f"relaxed-{prefix}-200", seeds=CONFIRM, text=f"relaxed-blame with {task}"
     )
     return {f"relaxed-{prefix}-200": first, f"relaxed-{prefix}-blame": second}
 
@@ -120,14 +113,10 @@ PROBES: dict[str, Config] = {
         text="blame-400-blame with no tabu in the second stage, so its lr-0 epochs are the frozen epoch",
     ),
     "relaxed-200": Config(
-        HERE / "corridor7-relaxed-inner200.toml", 200, seeds=CONFIRM, text="inner-200 at the relaxed set-up"
+        RELAXED1, 200, task=NO_MARGIN, seeds=CONFIRM, text="inner-200 at the relaxed set-up (the margin off)"
     ),
     "relaxed-blame": Config(
-        HERE / "corridor7-relaxed-blame260.toml",
-        60,
-        continues="relaxed-200",
-        seeds=CONFIRM,
-        text="blame-260 at the relaxed set-up",
+        RELAXED2, 60, task=NO_MARGIN, continues="relaxed-200", seeds=CONFIRM, text="blame-260 at the relaxed set-up"
     ),
     **_relaxed("swing", swing_margin=0.1),
     **_relaxed("swing25", swing_margin=0.25),
